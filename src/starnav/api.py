@@ -1,0 +1,246 @@
+"""The public surface: ``solve()`` a star list into a verified attitude, and its results."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+from starnav.attitude import refine_attitude
+from starnav.camera import Camera
+from starnav.catalog import Catalog, load_catalog
+from starnav.errors import StarnavError
+from starnav.geometry import radec_roll_from_attitude
+from starnav.identify import (
+    ALGORITHMS,
+    DEFAULT_ALGORITHM,
+    MatchSettings,
+    PairDatabase,
+    build_database,
+)
+from starnav.identify.database import database_angle_deg
+from starnav.identify.verify import false_match_probability, match_catalog
+from starnav.starlist import check_star_list
+
+DEFAULT_SIGMA_PX = 1.0
+DEFAULT_MAX_FALSE_MATCH_PROBABILITY = 1e-6
+
+
+@dataclass(frozen=True)
+class StarMatch:
+    """One input point: its ``label``, position (px), the ``catalog_id`` it was identified as
+    (None: no catalog star) and the length of its residual after the fit (px, None if unmatched).
+    """
+
+    label: str
+    x: float
+    y: float
+    catalog_id: int | None
+    residual_px: float | None
+
+
+@dataclass(frozen=True, eq=False)
+class Solution:
+    """A verified attitude.
+
+    Angles in degrees: boresight ``ra_deg``/``dec_deg`` (ICRS, catalog epoch), ``roll_deg``
+    (position angle of image up from North through East), ``fov_deg`` (horizontal).
+    ``parity``: +1 the sky as seen, -1 mirrored. ``R_cam_from_icrs``: rows are the camera axes
+    in ICRS (determinant = parity). ``rms_px``: residual rms of matched stars;
+    ``sigma_*_arcsec``: 1-sigma from the fit; ``time_ms``: identification and fit, without
+    loading the catalog or database.
+    """
+
+    ra_deg: float
+    dec_deg: float
+    roll_deg: float
+    parity: int
+    focal_px: float
+    fov_deg: float
+    rms_px: float
+    sigma_boresight_arcsec: float
+    sigma_roll_arcsec: float
+    false_match_probability: float
+    time_ms: float
+    R_cam_from_icrs: np.ndarray
+    stars: tuple[StarMatch, ...]
+    n_matched: int
+    algorithm: str
+    catalog: str
+
+    def to_dict(self) -> dict:
+        """JSON-ready dict of every field (the matrix as nested lists)."""
+        out = {k: v for k, v in self.__dict__.items() if k not in ("stars", "R_cam_from_icrs")}
+        out["solved"] = True
+        out["R_cam_from_icrs"] = self.R_cam_from_icrs.tolist()
+        out["stars"] = [asdict(s) for s in self.stars]
+        return out
+
+
+@dataclass(frozen=True, eq=False)
+class SolveResult:
+    """The outcome of one solve: the ``solution`` or None with the ``reason``."""
+
+    solution: Solution | None
+    reason: str
+    time_ms: float
+    hypotheses: int
+    database: PairDatabase
+
+
+_DATABASES: dict[tuple[str, float], PairDatabase] = {}  # in-memory, per process
+
+
+def get_database(catalog: Catalog, camera: Camera) -> PairDatabase:
+    """The pair database for this catalog and field (memory, then disk cache, then built)."""
+    max_angle_deg = float(np.degrees(2.0 * camera.half_diagonal_rad))
+    key = (catalog.fingerprint, database_angle_deg(max_angle_deg))
+    if key not in _DATABASES:
+        _DATABASES[key] = build_database(catalog, max_angle_deg)
+    return _DATABASES[key]
+
+
+def make_camera(
+    *, width: float, height: float | None, fov_deg: float, focal_px: float | None = None
+) -> Camera:
+    """Camera from the user's numbers; ``focal_px`` overrides the one implied by the FOV."""
+    camera = Camera.from_fov(fov_deg, width, height)
+    return camera if focal_px is None else camera.with_focal(focal_px)
+
+
+def solve_verbose(
+    xy: np.ndarray,
+    *,
+    width: float,
+    height: float | None = None,
+    fov_deg: float,
+    brightness: np.ndarray | None = None,
+    labels: list[str] | tuple[str, ...] | None = None,
+    catalog: Catalog | str | Path | None = None,
+    mag_limit: float | None = None,
+    epoch_year: float | None = None,
+    parity: int | None = None,
+    sigma_px: float = DEFAULT_SIGMA_PX,
+    fit_focal: bool = False,
+    max_false_match_probability: float = DEFAULT_MAX_FALSE_MATCH_PROBABILITY,
+    algorithm: str = DEFAULT_ALGORITHM,
+) -> SolveResult:
+    """Like ``solve`` but always returns a ``SolveResult`` with the reason when unsolved."""
+    camera = make_camera(width=width, height=height, fov_deg=fov_deg)
+    stars = check_star_list(
+        xy, width=camera.width, height=camera.height, brightness=brightness, labels=labels
+    )
+    if not (np.isfinite(sigma_px) and sigma_px > 0):
+        raise StarnavError(f"sigma_px must be a positive number of pixels, got {sigma_px!r}")
+    if parity not in (None, 1, -1):
+        raise StarnavError(f"parity must be +1, -1 or None, got {parity!r}")
+    if algorithm not in ALGORITHMS:
+        raise StarnavError(f"unknown algorithm {algorithm!r}; known: {', '.join(ALGORITHMS)}")
+    if not 0.0 < max_false_match_probability < 1.0:
+        raise StarnavError(
+            f"max_false_match_probability must be in (0, 1), got {max_false_match_probability!r}"
+        )
+    cat = load_catalog(catalog, mag_limit=mag_limit, epoch_year=epoch_year)
+    database = get_database(cat, camera)
+
+    t0 = time.perf_counter()
+    bearings = camera.pixels_to_bearings(stars.xy)
+    settings = MatchSettings(
+        # a measured angle carries two centroid errors: 3 sigma of their sum, at least 1 px
+        pair_tol_rad=max(3.0 * np.sqrt(2.0) * sigma_px, 1.0) / camera.focal_px,
+        # radial distance of a 2-D Gaussian error: beyond 3.5 sigma in 0.2 % of cases
+        match_radius_rad=max(3.5 * sigma_px, 1.0) / camera.focal_px,
+        max_false_match_probability=max_false_match_probability,
+        parity=parity,
+    )
+    order = (
+        np.argsort(-stars.brightness, kind="stable")
+        if stars.brightness is not None
+        else np.arange(len(bearings))
+    )
+    outcome = ALGORITHMS[algorithm]().identify(bearings, order, database, settings)
+    found = outcome.identification
+    if found is None:
+        ms = (time.perf_counter() - t0) * 1e3
+        return SolveResult(None, outcome.reason, ms, outcome.hypotheses, database)
+
+    # least squares on the image, then take in any star the better attitude brings in range
+    obs, cat_rows = found.obs_index, found.cat_index
+    R = found.R_cam_from_icrs
+    for _ in range(3):
+        fit = refine_attitude(R, cat.vectors[cat_rows], stars.xy[obs], camera, fit_focal=fit_focal)
+        R = fit.R_cam_from_icrs
+        ver = match_catalog(
+            fit.camera.pixels_to_bearings(stars.xy), R, database, settings.match_radius_rad
+        )
+        same = np.array_equal(ver.obs_index, obs) and np.array_equal(ver.cat_index, cat_rows)
+        if same or len(ver.obs_index) < len(obs):
+            break
+        obs, cat_rows = ver.obs_index, ver.cat_index
+    p_false = false_match_probability(len(bearings), len(obs), 3, ver.p_chance, found.hypotheses)
+    residual = dict(
+        zip(obs.tolist(), np.linalg.norm(fit.residuals_px, axis=1).tolist(), strict=True)
+    )
+    catalog_id = dict(zip(obs.tolist(), cat.ids[cat_rows].tolist(), strict=True))
+    star_matches = tuple(
+        StarMatch(
+            label=stars.labels[n],
+            x=float(stars.xy[n, 0]),
+            y=float(stars.xy[n, 1]),
+            catalog_id=catalog_id.get(n),
+            residual_px=residual.get(n),
+        )
+        for n in range(len(stars.xy))
+    )
+    ra, dec, roll, par = radec_roll_from_attitude(R)
+    ms = (time.perf_counter() - t0) * 1e3
+    solution = Solution(
+        ra_deg=ra,
+        dec_deg=dec,
+        roll_deg=roll,
+        parity=par,
+        focal_px=fit.camera.focal_px,
+        fov_deg=fit.camera.fov_deg,
+        rms_px=fit.rms_px,
+        sigma_boresight_arcsec=fit.sigma_boresight_arcsec,
+        sigma_roll_arcsec=fit.sigma_roll_arcsec,
+        false_match_probability=p_false,
+        time_ms=ms,
+        R_cam_from_icrs=R,
+        stars=star_matches,
+        n_matched=len(obs),
+        algorithm=algorithm,
+        catalog=cat.name,
+    )
+    return SolveResult(solution, "", ms, outcome.hypotheses, database)
+
+
+def solve(
+    xy: np.ndarray,
+    *,
+    width: float,
+    height: float | None = None,
+    fov_deg: float,
+    brightness: np.ndarray | None = None,
+    catalog: Catalog | str | Path | None = None,
+    **options,
+) -> Solution | None:
+    """Identify the stars at pixel positions ``xy`` (n, 2) and return the verified attitude.
+
+    ``width``/``height``: image size (px; height defaults to width); ``fov_deg``: horizontal
+    field of view; ``brightness``: optional, larger is brighter (only the order is used);
+    ``catalog``: a ``Catalog``, a CSV path (``id,ra_deg,dec_deg,mag``) or None for the
+    embedded Hipparcos. Other keywords: see ``solve_verbose``. Returns None when no
+    identification is convincing. Raises ``StarnavError`` (a ``ValueError``) on bad input.
+    """
+    return solve_verbose(
+        xy,
+        width=width,
+        height=height,
+        fov_deg=fov_deg,
+        brightness=brightness,
+        catalog=catalog,
+        **options,
+    ).solution

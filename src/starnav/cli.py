@@ -1,0 +1,419 @@
+"""Command line: parse, call the API, print. Exit 0 solved / done, 1 not solved, 2 bad input."""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import math
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from starnav.api import (
+    DEFAULT_MAX_FALSE_MATCH_PROBABILITY,
+    DEFAULT_SIGMA_PX,
+    Solution,
+    get_database,
+    make_camera,
+    solve_verbose,
+)
+from starnav.catalog import DEFAULT_MAG_LIMIT, load_catalog
+from starnav.errors import StarnavError
+from starnav.geometry import attitude_difference_deg
+from starnav.identify import ALGORITHMS, DEFAULT_ALGORITHM
+from starnav.simulate import FALSE_STAR_ID, SimulatedFrame, simulate_frame
+from starnav.starlist import read_star_csv
+
+EXIT_OK, EXIT_NOT_SOLVED, EXIT_BAD_INPUT = 0, 1, 2
+_SOLUTION_KEYS = (
+    "ra_deg",
+    "dec_deg",
+    "roll_deg",
+    "parity",
+    "focal_px",
+    "fov_deg",
+    "rms_px",
+    "sigma_boresight_arcsec",
+    "sigma_roll_arcsec",
+    "false_match_probability",
+)
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse that reports a usage mistake in one line (exit 2), without the usage dump."""
+
+    def error(self, message: str) -> None:  # type: ignore[override]
+        self.exit(EXIT_BAD_INPUT, f"{self.prog}: error: {message} (see --help)\n")
+
+
+def _finite(text: str) -> float:
+    value = float(text)
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"not a finite number: {text!r}")
+    return value
+
+
+def _positive_int(text: str) -> int:
+    value = int(text)
+    if value <= 0:
+        raise argparse.ArgumentTypeError(f"must be a positive integer: {text!r}")
+    return value
+
+
+def _add_camera(p: argparse.ArgumentParser, *, required: bool = True) -> None:
+    p.add_argument("--fov-deg", type=_finite, required=required, help="horizontal field of view")
+    p.add_argument("--width", type=_positive_int, required=required, help="image width (px)")
+    p.add_argument("--height", type=_positive_int, help="image height (px; default: width)")
+
+
+def _add_catalog(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--catalog",
+        help="CSV catalog id,ra_deg,dec_deg,mag (default: embedded Hipparcos)",
+    )
+    p.add_argument(
+        "--mag-limit",
+        type=_finite,
+        help=f"faintest catalog magnitude used (default {DEFAULT_MAG_LIMIT:g} for Hipparcos, "
+        "all stars for a CSV)",
+    )
+    p.add_argument(
+        "--epoch",
+        type=_finite,
+        help="year to apply Hipparcos proper motion to (default: this year)",
+    )
+
+
+def _build_parser() -> argparse.ArgumentParser:
+    parser = _Parser(prog="starnav", description=__doc__)
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
+
+    p = sub.add_parser("identify", help="identify a star list (CSV) and solve the attitude")
+    p.add_argument("stars", help="CSV with header: x,y and optionally label, flux or mag")
+    _add_camera(p)
+    _add_catalog(p)
+    p.add_argument(
+        "--sigma-px",
+        type=_finite,
+        default=DEFAULT_SIGMA_PX,
+        help=f"centroid error, 1 sigma (px; default {DEFAULT_SIGMA_PX:g}): sets the tolerances",
+    )
+    p.add_argument("--parity", type=int, choices=(1, -1), help="force parity (default: find)")
+    p.add_argument("--fit-focal", action="store_true", help="fit the focal length too")
+    p.add_argument(
+        "--max-false-match-probability",
+        type=_finite,
+        default=DEFAULT_MAX_FALSE_MATCH_PROBABILITY,
+        help="refuse less certain answers (default %(default)g)",
+    )
+    p.add_argument("--algorithm", choices=sorted(ALGORITHMS), default=DEFAULT_ALGORITHM)
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+
+    p = sub.add_parser("simulate", help="simulate a frame of centroids from the catalog")
+    p.add_argument("--ra-deg", type=_finite, help="boresight RA (default: random)")
+    p.add_argument("--dec-deg", type=_finite, help="boresight Dec (default: random)")
+    p.add_argument("--roll-deg", type=_finite, help="roll (default: random)")
+    p.add_argument("--parity", type=int, choices=(1, -1), default=1)
+    _add_camera(p)
+    _add_catalog(p)
+    p.add_argument("--noise-px", type=_finite, default=0.0, help="centroid noise, 1 sigma")
+    p.add_argument("--false-stars", type=int, default=0, help="false stars added")
+    p.add_argument("--missing-frac", type=_finite, default=0.0, help="fraction of stars dropped")
+    p.add_argument("--mag-noise", type=_finite, default=0.0, help="magnitude noise, 1 sigma")
+    p.add_argument("--seed", type=int, help="random seed")
+    p.add_argument("-o", "--output", required=True, help="frame CSV to write")
+    p.add_argument("--json", action="store_true", help="print the truth as one JSON object")
+
+    p = sub.add_parser("demo", help="simulate a random frame, identify it, compare with truth")
+    p.add_argument("--seed", type=int, help="random seed (default: random)")
+    p.add_argument("--fov-deg", type=_finite, default=12.0)
+    p.add_argument("--width", type=_positive_int, default=512)
+    p.add_argument("--noise-px", type=_finite, default=0.5)
+    p.add_argument("--false-stars", type=int, default=2)
+    p.add_argument("--missing-frac", type=_finite, default=0.1)
+    p.add_argument("--json", action="store_true")
+
+    p = sub.add_parser("database", help="build (or load) the pair database and report it")
+    _add_camera(p)
+    _add_catalog(p)
+    p.add_argument("--json", action="store_true")
+    return parser
+
+
+def _unsolved_dict(reason: str, time_ms: float, labels, xy) -> dict:
+    out: dict = {"solved": False, "reason": reason}
+    out.update(dict.fromkeys(_SOLUTION_KEYS))
+    out["time_ms"] = time_ms
+    out["stars"] = [
+        {"label": lab, "x": float(x), "y": float(y), "catalog_id": None, "residual_px": None}
+        for lab, (x, y) in zip(labels, xy, strict=True)
+    ]
+    return out
+
+
+def _solution_dict(s: Solution) -> dict:
+    d = s.to_dict()
+    keys = ("solved", "reason", *_SOLUTION_KEYS, "time_ms", "n_matched", "algorithm", "catalog")
+    out = {k: d.get(k) for k in keys}
+    out["reason"] = None
+    out["R_cam_from_icrs"] = d["R_cam_from_icrs"]
+    out["stars"] = d["stars"]
+    return out
+
+
+def _print_solution(s: Solution, *, file=sys.stdout) -> None:
+    print(
+        f"solved: RA {s.ra_deg:.5f}°  Dec {s.dec_deg:+.5f}°  roll {s.roll_deg:.4f}°  "
+        f"parity {s.parity:+d}",
+        file=file,
+    )
+    print(
+        f"  {s.n_matched}/{len(s.stars)} stars matched, rms {s.rms_px:.3f} px, "
+        f"1σ boresight {s.sigma_boresight_arcsec:.2f}″ roll {s.sigma_roll_arcsec:.2f}″, "
+        f"focal {s.focal_px:.2f} px (FOV {s.fov_deg:.4f}°)",
+        file=file,
+    )
+    print(
+        f"  false-match probability {s.false_match_probability:.1e}, {s.time_ms:.1f} ms, "
+        f"catalog: {s.catalog}",
+        file=file,
+    )
+    print(f"{'label':>8} {'x':>9} {'y':>9} {'catalog_id':>10} {'residual_px':>11}", file=file)
+    for m in s.stars:
+        cid = "-" if m.catalog_id is None else str(m.catalog_id)
+        res = "-" if m.residual_px is None else f"{m.residual_px:.3f}"
+        print(f"{m.label:>8} {m.x:9.2f} {m.y:9.2f} {cid:>10} {res:>11}", file=file)
+
+
+def _cmd_identify(args) -> int:
+    stars = read_star_csv(args.stars)
+    result = solve_verbose(
+        stars.xy,
+        width=args.width,
+        height=args.height,
+        fov_deg=args.fov_deg,
+        brightness=stars.brightness,
+        labels=stars.labels,
+        catalog=args.catalog,
+        mag_limit=args.mag_limit,
+        epoch_year=args.epoch,
+        parity=args.parity,
+        sigma_px=args.sigma_px,
+        fit_focal=args.fit_focal,
+        max_false_match_probability=args.max_false_match_probability,
+        algorithm=args.algorithm,
+    )
+    s = result.solution
+    if args.json:
+        out = (
+            _solution_dict(s)
+            if s
+            else _unsolved_dict(result.reason, result.time_ms, stars.labels, stars.xy)
+        )
+        print(json.dumps(out))
+    elif s:
+        _print_solution(s)
+    else:
+        print(f"not solved: {result.reason} ({result.time_ms:.1f} ms)")
+    return EXIT_OK if s else EXIT_NOT_SOLVED
+
+
+def _write_frame(path: str, frame: SimulatedFrame) -> None:
+    try:
+        with Path(path).open("w", newline="") as fh:
+            w = csv.writer(fh)
+            w.writerow(["label", "x", "y", "mag", "true_catalog_id"])
+            for n, ((x, y), mag, cid) in enumerate(
+                zip(frame.xy, frame.mag, frame.true_id, strict=True)
+            ):
+                w.writerow(
+                    [
+                        n + 1,
+                        f"{x:.4f}",
+                        f"{y:.4f}",
+                        f"{mag:.3f}",
+                        "" if cid == FALSE_STAR_ID else int(cid),
+                    ]
+                )
+    except OSError as exc:
+        raise StarnavError(f"cannot write {path!r}: {exc.strerror}") from None
+
+
+def _truth_dict(frame: SimulatedFrame) -> dict:
+    ra, dec, roll, parity = frame.truth
+    return {
+        "ra_deg": ra,
+        "dec_deg": dec,
+        "roll_deg": roll,
+        "parity": parity,
+        "focal_px": frame.camera.focal_px,
+        "R_cam_from_icrs": frame.R_cam_from_icrs.tolist(),
+        "n_points": len(frame.xy),
+        "n_in_view": frame.n_in_view,
+        "n_false": int(np.sum(frame.true_id == FALSE_STAR_ID)),
+    }
+
+
+def _cmd_simulate(args) -> int:
+    camera = make_camera(width=args.width, height=args.height, fov_deg=args.fov_deg)
+    catalog = load_catalog(args.catalog, mag_limit=args.mag_limit, epoch_year=args.epoch)
+    frame = simulate_frame(
+        catalog,
+        camera,
+        ra_deg=args.ra_deg,
+        dec_deg=args.dec_deg,
+        roll_deg=args.roll_deg,
+        parity=args.parity,
+        noise_px=args.noise_px,
+        false_stars=args.false_stars,
+        missing_frac=args.missing_frac,
+        mag_noise=args.mag_noise,
+        seed=args.seed,
+    )
+    _write_frame(args.output, frame)
+    truth = _truth_dict(frame)
+    if args.json:
+        print(json.dumps({"output": args.output, **truth}))
+    else:
+        print(
+            f"wrote {truth['n_points']} points ({truth['n_false']} false) to {args.output}: "
+            f"RA {truth['ra_deg']:.4f}° Dec {truth['dec_deg']:+.4f}° roll "
+            f"{truth['roll_deg']:.3f}° parity {truth['parity']:+d}"
+        )
+    return EXIT_OK
+
+
+def _cmd_demo(args) -> int:
+    rng = np.random.default_rng(args.seed)
+    camera = make_camera(width=args.width, height=None, fov_deg=args.fov_deg)
+    t0 = time.perf_counter()
+    catalog = load_catalog(None)
+    database = get_database(catalog, camera)
+    setup_s = time.perf_counter() - t0
+    frame = simulate_frame(
+        catalog,
+        camera,
+        noise_px=args.noise_px,
+        false_stars=args.false_stars,
+        missing_frac=args.missing_frac,
+        seed=rng,
+    )
+    result = solve_verbose(
+        frame.xy,
+        width=camera.width,
+        fov_deg=args.fov_deg,
+        brightness=frame.brightness,
+        catalog=catalog,
+        sigma_px=max(args.noise_px, 0.1),
+    )
+    s = result.solution
+    truth = _truth_dict(frame)
+    right = None
+    if s is not None:
+        ids = np.array([-1 if m.catalog_id is None else m.catalog_id for m in s.stars])
+        boresight_deg, roll_deg = attitude_difference_deg(s.R_cam_from_icrs, frame.R_cam_from_icrs)
+        right = {
+            "boresight_error_arcsec": boresight_deg * 3600.0,
+            "roll_error_arcsec": roll_deg * 3600.0,
+            "ids_correct": int(np.sum((ids == frame.true_id) & (ids != -1))),
+            "ids_wrong": int(np.sum((ids != frame.true_id) & (ids != -1))),
+            "false_stars_refused": int(np.sum((ids == -1) & (frame.true_id == FALSE_STAR_ID))),
+        }
+    if args.json:
+        print(
+            json.dumps(
+                {
+                    "truth": truth,
+                    "solution": _solution_dict(s)
+                    if s
+                    else _unsolved_dict(
+                        result.reason,
+                        result.time_ms,
+                        [str(n + 1) for n in range(len(frame.xy))],
+                        frame.xy,
+                    ),
+                    "comparison": right,
+                    "database_bytes": database.nbytes,
+                    "setup_s": setup_s,
+                }
+            )
+        )
+        return EXIT_OK if s else EXIT_NOT_SOLVED
+    print(
+        f"catalog: {catalog.name} ({len(catalog)} stars); pair database "
+        f"{database.nbytes / 1e6:.1f} MB, built in {database.build_s:.2f} s"
+        f"{' (loaded from cache)' if database.from_cache else ''}; setup {setup_s:.2f} s"
+    )
+    print(
+        f"simulated {camera.fov_deg:g}° / {camera.width} px frame: {truth['n_points']} points "
+        f"({truth['n_false']} false), noise {args.noise_px:g} px, "
+        f"{args.missing_frac:.0%} of {truth['n_in_view']} stars dropped"
+    )
+    print(f"{'':10}{'RA (°)':>12}{'Dec (°)':>12}{'roll (°)':>12}{'parity':>8}")
+    print(
+        f"{'truth':10}{truth['ra_deg']:12.5f}{truth['dec_deg']:12.5f}"
+        f"{truth['roll_deg']:12.4f}{truth['parity']:8d}"
+    )
+    if s is None:
+        print(f"{'solved':10} not solved: {result.reason}")
+        return EXIT_NOT_SOLVED
+    print(f"{'solved':10}{s.ra_deg:12.5f}{s.dec_deg:12.5f}{s.roll_deg:12.4f}{s.parity:8d}")
+    print(
+        f"error: boresight {right['boresight_error_arcsec']:.1f}″ "
+        f"(1σ estimate {s.sigma_boresight_arcsec:.1f}″), roll {right['roll_error_arcsec']:.1f}″ "
+        f"(1σ {s.sigma_roll_arcsec:.1f}″); ids {right['ids_correct']} right, "
+        f"{right['ids_wrong']} wrong, {right['false_stars_refused']} false stars refused; "
+        f"{s.time_ms:.1f} ms"
+    )
+    return EXIT_OK
+
+
+def _cmd_database(args) -> int:
+    camera = make_camera(width=args.width, height=args.height, fov_deg=args.fov_deg)
+    catalog = load_catalog(args.catalog, mag_limit=args.mag_limit, epoch_year=args.epoch)
+    db = get_database(catalog, camera)
+    info = {
+        "catalog": catalog.name,
+        "stars": len(catalog),
+        "max_angle_deg": float(np.degrees(db.max_angle_rad)),
+        "pairs": len(db.pair_a),
+        "bytes": db.nbytes,
+        "build_s": db.build_s,
+        "from_cache": db.from_cache,
+        "path": str(db.path) if db.path else None,
+    }
+    if args.json:
+        print(json.dumps(info))
+    else:
+        print(
+            f"{info['catalog']}: {info['stars']} stars, {info['pairs']} pairs up to "
+            f"{info['max_angle_deg']:g}°, {info['bytes'] / 1e6:.2f} MB, built in "
+            f"{info['build_s']:.2f} s{' (loaded from cache)' if db.from_cache else ''}"
+            f"{'; ' + info['path'] if info['path'] else ''}"
+        )
+    return EXIT_OK
+
+
+_COMMANDS = {
+    "identify": _cmd_identify,
+    "simulate": _cmd_simulate,
+    "demo": _cmd_demo,
+    "database": _cmd_database,
+}
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of the ``starnav`` command."""
+    args = _build_parser().parse_args(argv)
+    try:
+        return _COMMANDS[args.command](args)
+    except StarnavError as exc:
+        print(f"starnav {args.command}: error: {exc}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+
+
+if __name__ == "__main__":
+    sys.exit(main())

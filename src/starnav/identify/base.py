@@ -1,0 +1,70 @@
+"""The identification interface: bearing vectors in, verified star matches out."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Protocol
+
+import numpy as np
+
+from starnav.identify.database import PairDatabase
+
+
+@dataclass(frozen=True)
+class MatchSettings:
+    """Tolerances of an identification, as angles in radians.
+
+    ``pair_tol_rad``: how far a measured inter-star angle may be from the catalog's;
+    ``match_radius_rad``: how close a reprojected catalog star must be to count as agreeing;
+    ``max_false_match_probability``: refuse any answer less certain than this;
+    ``parity``: +1 or -1 when known, None to find it.
+    """
+
+    pair_tol_rad: float
+    match_radius_rad: float
+    max_false_match_probability: float = 1e-6
+    parity: int | None = None
+    max_stars: int = 25
+    max_hypotheses: int = 20000
+
+
+@dataclass(frozen=True)
+class Identification:
+    """A verified identification.
+
+    ``obs_index``/``cat_index``: matched bearing rows and catalog rows; ``R_cam_from_icrs``:
+    the attitude from all matches (Wahba); ``false_match_probability``: the chance that a
+    random hypothesis would agree this well (corrected for the hypotheses tried).
+    """
+
+    obs_index: np.ndarray
+    cat_index: np.ndarray
+    R_cam_from_icrs: np.ndarray
+    parity: int
+    false_match_probability: float
+    hypotheses: int
+
+
+@dataclass(frozen=True)
+class IdentifyOutcome:
+    """What an identifier returns: an ``Identification`` or the reason there is none."""
+
+    identification: Identification | None
+    reason: str
+    hypotheses: int
+
+
+class Identifier(Protocol):
+    """Lost-in-space identification of camera-frame bearing vectors."""
+
+    name: str
+
+    def identify(
+        self,
+        bearings: np.ndarray,
+        order: np.ndarray,
+        database: PairDatabase,
+        settings: MatchSettings,
+    ) -> IdentifyOutcome:
+        """Identify ``bearings`` (n, 3); ``order`` lists rows best-first (e.g. brightest)."""
+        ...

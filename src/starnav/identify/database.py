@@ -1,0 +1,130 @@
+"""Star-pair database: every catalog pair closer than the field diagonal, sorted by angle.
+
+Built once per (catalog, largest angle) and cached on disk as ``.npz`` under
+``$STARNAV_CACHE_DIR`` (default ``~/.cache/starnav``), keyed by a hash of the catalog content,
+the angle and the format version. The catalog's KD-tree (for cone searches) is rebuilt on
+load: it takes a few milliseconds.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import tempfile
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from starnav.catalog import Catalog
+from starnav.geometry import angle_between, chord_from_angle
+
+_FORMAT_VERSION = 1
+_ANGLE_STEP_DEG = 0.5  # databases are built for max angles rounded up to this step
+
+
+def cache_dir() -> Path:
+    """Directory of cached databases (``$STARNAV_CACHE_DIR`` or ``~/.cache/starnav``)."""
+    env = os.environ.get("STARNAV_CACHE_DIR")
+    return Path(env) if env else Path.home() / ".cache" / "starnav"
+
+
+@dataclass(frozen=True, eq=False)
+class PairDatabase:
+    """Catalog star pairs with their angular separation, sorted by angle.
+
+    ``pair_a``, ``pair_b``: catalog row indices (a < b); ``pair_angle_rad`` ascending.
+    ``build_s``: seconds it took to build (0 stays the build time when loaded from cache);
+    ``from_cache``: whether it was loaded from disk; ``path``: the cache file, if any.
+    """
+
+    catalog: Catalog
+    max_angle_rad: float
+    pair_a: np.ndarray
+    pair_b: np.ndarray
+    pair_angle_rad: np.ndarray
+    tree: cKDTree
+    build_s: float
+    from_cache: bool
+    path: Path | None
+
+    @property
+    def nbytes(self) -> int:
+        """Size in bytes of the pair arrays and catalog vectors held in memory."""
+        return int(
+            self.pair_a.nbytes
+            + self.pair_b.nbytes
+            + self.pair_angle_rad.nbytes
+            + self.catalog.vectors.nbytes
+        )
+
+    def pairs_within(self, angle_rad: float, tol_rad: float) -> tuple[np.ndarray, np.ndarray]:
+        """Catalog pairs (a, b) whose separation is within ``tol_rad`` of ``angle_rad``."""
+        lo, hi = np.searchsorted(self.pair_angle_rad, [angle_rad - tol_rad, angle_rad + tol_rad])
+        return self.pair_a[lo:hi], self.pair_b[lo:hi]
+
+    def cone(self, axis: np.ndarray, radius_rad: float) -> np.ndarray:
+        """Catalog row indices within ``radius_rad`` of the unit vector ``axis``."""
+        return np.asarray(
+            self.tree.query_ball_point(axis, chord_from_angle(radius_rad)), dtype=np.intp
+        )
+
+
+def database_angle_deg(max_angle_deg: float) -> float:
+    """The largest pair angle a database for ``max_angle_deg`` is built with (rounded up)."""
+    return float(np.ceil(max_angle_deg / _ANGLE_STEP_DEG - 1e-9) * _ANGLE_STEP_DEG)
+
+
+def _build_pairs(vectors: np.ndarray, max_angle_rad: float):
+    tree = cKDTree(vectors)
+    pairs = tree.query_pairs(chord_from_angle(max_angle_rad), output_type="ndarray")
+    angles = angle_between(vectors[pairs[:, 0]], vectors[pairs[:, 1]])
+    order = np.argsort(angles, kind="stable")
+    return (
+        pairs[order, 0].astype(np.int32),
+        pairs[order, 1].astype(np.int32),
+        angles[order],
+        tree,
+    )
+
+
+def build_database(
+    catalog: Catalog, max_angle_deg: float, *, use_cache: bool = True
+) -> PairDatabase:
+    """The pair database of ``catalog`` for pairs up to ``max_angle_deg`` (rounded up).
+
+    Loaded from the disk cache when an identical one was built before.
+    """
+    max_angle_deg = database_angle_deg(max_angle_deg)
+    max_angle_rad = float(np.radians(max_angle_deg))
+    key = hashlib.sha1(
+        f"{_FORMAT_VERSION}|{catalog.fingerprint}|{max_angle_deg:.3f}".encode()
+    ).hexdigest()[:20]
+    path = cache_dir() / f"pairs-{key}.npz"
+    if use_cache and path.exists():
+        try:
+            with np.load(path) as data:
+                a, b, ang = data["a"], data["b"], data["angle"]
+                build_s = float(data["build_s"])
+            return PairDatabase(
+                catalog, max_angle_rad, a, b, ang, cKDTree(catalog.vectors), build_s, True, path
+            )
+        except (OSError, KeyError, ValueError):
+            pass  # a damaged cache file is rebuilt below
+    t0 = time.perf_counter()
+    a, b, ang, tree = _build_pairs(catalog.vectors, max_angle_rad)
+    build_s = time.perf_counter() - t0
+    saved: Path | None = None
+    if use_cache:
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            # write then rename, so a concurrent reader never sees half a file
+            with tempfile.NamedTemporaryFile(dir=path.parent, suffix=".npz", delete=False) as fh:
+                np.savez(fh, a=a, b=b, angle=ang, build_s=build_s)
+            os.replace(fh.name, path)
+            saved = path
+        except OSError:
+            saved = None  # a read-only home still works, just without the cache
+    return PairDatabase(catalog, max_angle_rad, a, b, ang, tree, build_s, False, saved)

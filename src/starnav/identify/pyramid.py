@@ -1,0 +1,189 @@
+"""Lost-in-space identification by star triangles on a pair database, verified by reprojection.
+
+The idea of Mortari's Pyramid: pick measured star triangles in an order that moves away from
+any one star quickly (so a false star cannot stall the search), look up the catalog pairs whose
+angles agree with each side, join them into catalog triangles, and test every catalog triangle
+as an attitude hypothesis. Where Pyramid confirms with a fourth star, this verifies with the
+whole field: the hypothesis's attitude reprojects the catalog, the agreeing stars are counted,
+and the answer is accepted only when the chance of a wrong hypothesis agreeing as well is below
+the threshold. Parity comes from the orientation of the triangle (the sign of the triple
+product) and is tested both ways when the triangle is too flat to tell.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+
+import numpy as np
+
+from starnav.attitude.wahba import wahba
+from starnav.geometry import angle_between, chord_from_angle
+from starnav.identify.base import Identification, IdentifyOutcome, MatchSettings
+from starnav.identify.database import PairDatabase
+from starnav.identify.verify import false_match_probability, match_catalog
+
+
+def triangle_order(n: int) -> Iterator[tuple[int, int, int]]:
+    """Index triples (i < j < k) of ``n`` stars in Mortari's order: every star is left behind
+    soon, so one false star costs only a few triangles."""
+    for dj in range(1, n - 1):
+        for dk in range(1, n - dj):
+            for i in range(n - dj - dk):
+                yield i, i + dj, i + dj + dk
+
+
+def _both_ways(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    return np.concatenate([a, b]), np.concatenate([b, a])
+
+
+def catalog_triangles(
+    database: PairDatabase, side_ij: float, side_ik: float, side_jk: float, tol_rad: float
+) -> np.ndarray:
+    """Catalog index triples (a, b, c), shape (m, 3), whose sides ab, ac, bc agree with the
+    measured sides ij, ik, jk within ``tol_rad``."""
+    empty = np.empty((0, 3), dtype=np.int64)
+    a1, b1 = database.pairs_within(side_ij, tol_rad)
+    a2, c2 = database.pairs_within(side_ik, tol_rad)
+    b3, c3 = database.pairs_within(side_jk, tol_rad)
+    if len(a1) == 0 or len(a2) == 0 or len(b3) == 0:
+        return empty
+    a1, b1 = _both_ways(a1.astype(np.int64), b1.astype(np.int64))
+    a2, c2 = _both_ways(a2.astype(np.int64), c2.astype(np.int64))
+    by_a = np.argsort(a2, kind="stable")
+    a2, c2 = a2[by_a], c2[by_a]
+    lo = np.searchsorted(a2, a1, side="left")
+    count = np.searchsorted(a2, a1, side="right") - lo
+    total = int(count.sum())
+    if total == 0:
+        return empty
+    row = np.repeat(np.arange(len(a1)), count)
+    offset = np.arange(total) - np.repeat(np.cumsum(count) - count, count)
+    a, b, c = a1[row], b1[row], c2[lo[row] + offset]
+    n_cat = len(database.catalog)
+    b3, c3 = _both_ways(b3.astype(np.int64), c3.astype(np.int64))
+    keys = np.sort(b3 * n_cat + c3)
+    wanted = b * n_cat + c
+    pos = np.minimum(np.searchsorted(keys, wanted), len(keys) - 1)
+    ok = (keys[pos] == wanted) & (b != c)
+    return np.column_stack([a[ok], b[ok], c[ok]])
+
+
+def _screen(
+    bearings: np.ndarray,
+    triangle: np.ndarray,
+    catalog_triangles: np.ndarray,
+    parities: np.ndarray,
+    database: PairDatabase,
+    settings: MatchSettings,
+) -> np.ndarray:
+    """Number of bearings that land near some catalog star, for every hypothesis at once.
+
+    ``triangle`` (3, 3): the measured triangle; ``catalog_triangles`` (m, 3, 3): the catalog
+    vectors of each hypothesis; ``parities`` (m,). A quick count (a catalog star may be hit
+    twice): the hypotheses that pass are verified properly with ``match_catalog``.
+    """
+    flip = np.ones((len(parities), 1, 3))
+    flip[:, 0, 1] = parities
+    # Wahba by SVD for all hypotheses, on the y-flipped bearings of mirrored ones
+    B = np.einsum("ki,mkj->mij", triangle, catalog_triangles) * flip.transpose(0, 2, 1)
+    U, _, Vt = np.linalg.svd(B)
+    d = np.sign(np.linalg.det(U) * np.linalg.det(Vt))
+    U[:, :, 2] *= d[:, None]
+    R_proper = U @ Vt  # maps ICRS to the (flipped) camera frame
+    # measured bearings into ICRS: r = R_proper^T (flip * b)
+    icrs = np.einsum("mnj,mji->mni", bearings[None, :, :] * flip, R_proper)
+    dist, _ = database.tree.query(
+        icrs.reshape(-1, 3), k=1, distance_upper_bound=chord_from_angle(settings.match_radius_rad)
+    )
+    return np.isfinite(dist).reshape(len(parities), len(bearings)).sum(axis=1)
+
+
+def _triple_product(v: np.ndarray) -> np.ndarray:
+    """det[v0, v1, v2] for arrays of shape (..., 3, 3)."""
+    return np.einsum("...i,...i->...", v[..., 0, :], np.cross(v[..., 1, :], v[..., 2, :]))
+
+
+class Pyramid:
+    """Triangle search on the pair database with whole-field verification (the default)."""
+
+    name = "pyramid"
+
+    def identify(
+        self,
+        bearings: np.ndarray,
+        order: np.ndarray,
+        database: PairDatabase,
+        settings: MatchSettings,
+    ) -> IdentifyOutcome:
+        """Identify camera-frame ``bearings`` (n, 3); ``order`` lists rows best-first."""
+        order = np.asarray(order)[: settings.max_stars]
+        n_total = len(bearings)
+        if len(order) < 3:
+            return IdentifyOutcome(None, "fewer than 3 stars", 0)
+        tol = settings.pair_tol_rad
+        vectors = database.catalog.vectors
+        hypotheses = 0
+        triangles_with_candidates = 0
+        best_p = 1.0
+        for i, j, k in triangle_order(len(order)):
+            idx = order[[i, j, k]]
+            b = bearings[idx]
+            sides = angle_between(b[[0, 0, 1]], b[[1, 2, 2]])
+            if sides.min() < 2.0 * tol or sides.max() > database.max_angle_rad + tol:
+                continue
+            triples = catalog_triangles(database, sides[0], sides[1], sides[2], tol)
+            if len(triples) == 0:
+                continue
+            triangles_with_candidates += 1
+            det_obs = _triple_product(b)
+            det_cat = _triple_product(vectors[triples])
+            parities = np.where(np.sign(det_obs) == np.sign(det_cat), 1, -1)
+            if abs(det_obs) < 3.0 * tol * sides.max():  # too flat to tell the orientation
+                triples = np.concatenate([triples, triples])
+                parities = np.concatenate([parities, -parities])
+            if settings.parity is not None:
+                keep = parities == settings.parity
+                triples, parities = triples[keep], parities[keep]
+            if len(triples) == 0:
+                continue
+            hypotheses += len(triples)
+            agree = _screen(bearings, b, vectors[triples], parities, database, settings)
+            for h in np.argsort(-agree, kind="stable"):
+                if agree[h] < 4:
+                    break
+                parity = int(parities[h])
+                R = wahba(b, vectors[triples[h]], parity=parity)
+                ver = match_catalog(bearings, R, database, settings.match_radius_rad)
+                p = false_match_probability(
+                    n_total, len(ver.obs_index), 3, ver.p_chance, hypotheses
+                )
+                best_p = min(best_p, p)
+                if p <= settings.max_false_match_probability:
+                    found = self._polish(bearings, ver, R, parity, database, settings, hypotheses)
+                    return IdentifyOutcome(found, "", hypotheses)
+            if hypotheses >= settings.max_hypotheses:
+                return IdentifyOutcome(None, f"gave up after {hypotheses} hypotheses", hypotheses)
+        if triangles_with_candidates == 0:
+            reason = "no star triangle matches the catalog"
+        elif best_p < 1.0:
+            reason = (
+                f"best hypothesis not convincing (false-match probability {best_p:.2g} > "
+                f"{settings.max_false_match_probability:g})"
+            )
+        else:
+            reason = "no hypothesis was confirmed by a fourth star"
+        return IdentifyOutcome(None, reason, hypotheses)
+
+    @staticmethod
+    def _polish(bearings, ver, R, parity, database, settings, hypotheses) -> Identification:
+        """Re-solve with every agreeing star and match again (takes stars the triangle's
+        rougher attitude missed)."""
+        vectors = database.catalog.vectors
+        for _ in range(2):
+            R_all = wahba(bearings[ver.obs_index], vectors[ver.cat_index], parity=parity)
+            again = match_catalog(bearings, R_all, database, settings.match_radius_rad)
+            if len(again.obs_index) < len(ver.obs_index):
+                break
+            ver, R = again, R_all
+        p = false_match_probability(len(bearings), len(ver.obs_index), 3, ver.p_chance, hypotheses)
+        return Identification(ver.obs_index, ver.cat_index, R, parity, p, hypotheses)

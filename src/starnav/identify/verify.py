@@ -1,0 +1,85 @@
+"""Verification of an attitude hypothesis: reproject the catalog, count agreeing stars, and
+compute the probability that a wrong hypothesis would agree as well.
+
+False-match model: with an attitude that is wrong, every measured star that was not used to
+make the hypothesis lands within the match radius of some catalog star with probability
+``p = n_catalog_in_field * (solid angle of the match circle) / (solid angle of the field)``.
+The number of such chance agreements is binomial; the probability of at least the observed
+count is multiplied by the number of hypotheses tried (a Bonferroni bound).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.special import betainc
+
+from starnav.identify.database import PairDatabase
+
+
+@dataclass(frozen=True)
+class Verification:
+    """Agreeing stars of one hypothesis: rows of the bearings and of the catalog, the angular
+    distance (radians) of each pair, and the chance probability ``p`` per star."""
+
+    obs_index: np.ndarray
+    cat_index: np.ndarray
+    distance_rad: np.ndarray
+    p_chance: float
+
+
+def match_catalog(
+    bearings: np.ndarray,
+    R_cam_from_icrs: np.ndarray,
+    database: PairDatabase,
+    radius_rad: float,
+) -> Verification:
+    """Pair each bearing with the nearest reprojected catalog star within ``radius_rad``.
+
+    One catalog star takes at most one bearing (the closest).
+    """
+    boresight = R_cam_from_icrs[2]
+    cos_field = float(np.min(bearings[:, 2]))
+    field_rad = float(np.arccos(np.clip(cos_field, -1.0, 1.0))) + radius_rad
+    cone = database.cone(boresight, field_rad)
+    if len(cone) == 0:
+        empty = np.empty(0, dtype=np.intp)
+        return Verification(empty, empty, np.empty(0), 0.0)
+    cam = database.catalog.vectors[cone] @ R_cam_from_icrs.T
+    # chord^2 between unit vectors; small, so angle ~= chord
+    d2 = np.sum((bearings[:, None, :] - cam[None, :, :]) ** 2, axis=2)
+    nearest = np.argmin(d2, axis=1)
+    chord = np.sqrt(d2[np.arange(len(bearings)), nearest])
+    ok = chord <= 2.0 * np.sin(0.5 * radius_rad)
+    obs = np.flatnonzero(ok)
+    cat = nearest[ok]
+    dist = chord[ok]
+    if len(np.unique(cat)) < len(cat):
+        keep = np.ones(len(cat), dtype=bool)
+        for c in np.unique(cat):
+            rows = np.flatnonzero(cat == c)
+            if len(rows) > 1:
+                keep[rows] = False
+                keep[rows[np.argmin(dist[rows])]] = True
+        obs, cat, dist = obs[keep], cat[keep], dist[keep]
+    field_area = 1.0 - np.cos(field_rad)
+    p_chance = min(1.0, len(cone) * (1.0 - np.cos(radius_rad)) / field_area)
+    return Verification(obs, cone[cat], dist, float(p_chance))
+
+
+def false_match_probability(
+    n_stars: int, n_agree: int, n_used: int, p_chance: float, hypotheses: int
+) -> float:
+    """Chance that a wrong hypothesis makes ``n_agree`` of ``n_stars`` agree.
+
+    ``n_used`` stars built the hypothesis (they agree by construction); each of the other
+    ``n_stars - n_used`` agrees by chance with probability ``p_chance``.
+    """
+    trials = n_stars - n_used
+    extra = n_agree - n_used
+    if extra <= 0 or trials <= 0:
+        return 1.0
+    # P(X >= extra) for X ~ Binomial(trials, p) is the regularised incomplete beta function
+    tail = float(betainc(extra, trials - extra + 1, p_chance))
+    return min(1.0, tail * max(hypotheses, 1))

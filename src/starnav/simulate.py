@@ -1,0 +1,123 @@
+"""Simulated star-tracker frames (centroids) from a catalog at a known attitude.
+
+Stars are projected with the pinhole model (``starnav.camera``); those landing inside the image
+are kept, brightest first. Errors: Gaussian centroid noise, a fraction of stars dropped, false
+stars at random positions, Gaussian magnitude noise. The true catalog id of every point is
+carried beside it (-1 for a false star) so every stage can be scored.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from starnav.camera import Camera
+from starnav.catalog import Catalog
+from starnav.errors import StarnavError
+from starnav.geometry import attitude_from_radec_roll, radec_roll_from_attitude
+
+FALSE_STAR_ID = -1
+
+
+@dataclass(frozen=True, eq=False)
+class SimulatedFrame:
+    """Centroids ``xy`` (n, 2, px), ``mag`` and ``brightness`` (10**(-0.4 mag)) per point,
+    ``true_id`` (catalog id, -1 for false stars), the true attitude and the camera.
+    ``n_in_view``: catalog stars (within the magnitude limit) inside the image before drops."""
+
+    xy: np.ndarray
+    mag: np.ndarray
+    true_id: np.ndarray
+    R_cam_from_icrs: np.ndarray
+    camera: Camera
+    n_in_view: int
+
+    @property
+    def brightness(self) -> np.ndarray:
+        return 10.0 ** (-0.4 * self.mag)
+
+    @property
+    def truth(self) -> tuple[float, float, float, int]:
+        """(ra_deg, dec_deg, roll_deg, parity) of the true attitude."""
+        return radec_roll_from_attitude(self.R_cam_from_icrs)
+
+
+def project_catalog(
+    catalog: Catalog, R_cam_from_icrs: np.ndarray, camera: Camera
+) -> tuple[np.ndarray, np.ndarray]:
+    """Catalog rows inside the image and their exact pixel positions (no noise)."""
+    c = catalog.vectors @ np.asarray(R_cam_from_icrs).T
+    front = np.flatnonzero(c[:, 2] > np.cos(camera.half_diagonal_rad + 0.01))
+    xy = camera.bearings_to_pixels(c[front])
+    inside = camera.contains(xy)
+    return front[inside], xy[inside]
+
+
+def simulate_frame(
+    catalog: Catalog,
+    camera: Camera,
+    *,
+    ra_deg: float | None = None,
+    dec_deg: float | None = None,
+    roll_deg: float | None = None,
+    parity: int = 1,
+    R_cam_from_icrs: np.ndarray | None = None,
+    mag_limit: float | None = None,
+    noise_px: float = 0.0,
+    false_stars: int = 0,
+    missing_frac: float = 0.0,
+    mag_noise: float = 0.0,
+    seed: int | np.random.Generator | None = None,
+) -> SimulatedFrame:
+    """One frame at the attitude given by (ra_deg, dec_deg, roll_deg, parity) or by
+    ``R_cam_from_icrs``; missing values of the former are drawn at random (uniform sky)."""
+    for name, value in (("noise_px", noise_px), ("mag_noise", mag_noise)):
+        if not (np.isfinite(value) and value >= 0):
+            raise StarnavError(f"{name} must be >= 0, got {value!r}")
+    if not 0.0 <= missing_frac < 1.0:
+        raise StarnavError(f"missing_frac must be in [0, 1), got {missing_frac!r}")
+    if false_stars < 0:
+        raise StarnavError(f"false_stars must be >= 0, got {false_stars!r}")
+    if parity not in (1, -1):
+        raise StarnavError(f"parity must be +1 or -1, got {parity!r}")
+    rng = np.random.default_rng(seed)
+    if R_cam_from_icrs is None:
+        if ra_deg is None:
+            ra_deg = rng.uniform(0.0, 360.0)
+        if dec_deg is None:
+            dec_deg = np.degrees(np.arcsin(rng.uniform(-1.0, 1.0)))
+        if roll_deg is None:
+            roll_deg = rng.uniform(0.0, 360.0)
+        if not -90.0 <= dec_deg <= 90.0:
+            raise StarnavError(f"dec_deg must be within ±90, got {dec_deg!r}")
+        R_cam_from_icrs = attitude_from_radec_roll(ra_deg, dec_deg, roll_deg, parity)
+    R = np.asarray(R_cam_from_icrs, dtype=float)
+    if mag_limit is not None:
+        catalog = catalog.brighter_than(mag_limit)
+    rows, xy = project_catalog(catalog, R, camera)
+    mag = (
+        catalog.mag[rows] + rng.normal(0.0, mag_noise, len(rows))
+        if mag_noise
+        else (catalog.mag[rows].copy())
+    )
+    ids = catalog.ids[rows]
+    n_in_view = len(rows)
+    n_drop = round(missing_frac * n_in_view)
+    if n_drop:
+        keep = np.sort(rng.choice(n_in_view, n_in_view - n_drop, replace=False))
+        xy, mag, ids = xy[keep], mag[keep], ids[keep]
+    if noise_px:
+        xy = xy + rng.normal(0.0, noise_px, xy.shape)
+    if false_stars:
+        faint = float(catalog.mag.max()) if mag_limit is None else float(mag_limit)
+        bright = float(np.min(mag)) if len(mag) else faint - 2.0
+        fxy = rng.uniform([0.0, 0.0], [camera.width, camera.height], (false_stars, 2))
+        fmag = rng.uniform(bright, faint, false_stars)
+        xy = np.vstack([xy, fxy])
+        mag = np.concatenate([mag, fmag])
+        ids = np.concatenate([ids, np.full(false_stars, FALSE_STAR_ID)])
+    inside = camera.contains(xy)
+    xy, mag, ids = xy[inside], mag[inside], ids[inside]
+    order = np.argsort(mag, kind="stable")
+    return SimulatedFrame(xy[order], mag[order], ids[order], R, camera, n_in_view)

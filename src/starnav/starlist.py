@@ -1,0 +1,131 @@
+"""Star lists (centroids) from CSV files and arrays, checked at the boundary.
+
+CSV: a header row; ``x``, ``y`` (pixels, origin top-left) required; ``label`` and one of
+``flux`` (larger is brighter) or ``mag`` (smaller is brighter) optional. Columns whose name
+starts with ``true_`` carry the truth beside simulated input and are ignored.
+"""
+
+from __future__ import annotations
+
+import csv
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from starnav.errors import StarListError
+
+# A centroid may sit a little outside the image (blooming, a star cut by the edge); beyond
+# this fraction of the image size it cannot belong to the image.
+OUTSIDE_MARGIN_FRAC = 0.1
+_KNOWN = {"label", "x", "y", "flux", "mag"}
+
+
+@dataclass(frozen=True, eq=False)
+class StarList:
+    """Checked centroids: ``xy`` (n, 2, px), ``labels``, ``brightness`` (n,) or None."""
+
+    xy: np.ndarray
+    labels: tuple[str, ...]
+    brightness: np.ndarray | None
+
+
+def read_star_csv(path: str | Path) -> StarList:
+    """Read a star list CSV; raise ``StarListError`` naming the problem."""
+    path = Path(path)
+    try:
+        with path.open(newline="", encoding="utf-8-sig") as fh:
+            rows = [r for r in csv.reader(fh) if any(cell.strip() for cell in r)]
+    except (OSError, UnicodeDecodeError) as exc:
+        raise StarListError(f"cannot read star list {str(path)!r}: {exc}") from None
+    if not rows:
+        raise StarListError(f"star list {str(path)!r} is empty")
+    header = [h.strip().lower() for h in rows[0]]
+    unknown = [h for h in header if h not in _KNOWN and not h.startswith("true_")]
+    if unknown or "x" not in header or "y" not in header:
+        raise StarListError(
+            f"star list {str(path)!r} has columns {','.join(rows[0])}; expected x,y and "
+            f"optionally label, flux or mag"
+            + (f" (unknown: {','.join(unknown)})" if unknown else "")
+        )
+    if "flux" in header and "mag" in header:
+        raise StarListError(f"star list {str(path)!r} has both flux and mag; give one")
+    if len(header) != len(set(header)):
+        raise StarListError(f"star list {str(path)!r} repeats a column name")
+    col = {name: header.index(name) for name in header}
+    bright_col = "flux" if "flux" in col else "mag" if "mag" in col else None
+    xy = np.empty((len(rows) - 1, 2))
+    bright = np.empty(len(rows) - 1)
+    labels = []
+    for n, row in enumerate(rows[1:]):
+        line = n + 2
+        if len(row) != len(header):
+            raise StarListError(
+                f"star list {str(path)!r} line {line}: {len(row)} fields, header has {len(header)}"
+            )
+        try:
+            xy[n] = float(row[col["x"]]), float(row[col["y"]])
+            if bright_col:
+                bright[n] = float(row[col[bright_col]])
+        except ValueError:
+            raise StarListError(
+                f"star list {str(path)!r} line {line}: not a number in {','.join(row)!r}"
+            ) from None
+        labels.append(row[col["label"]].strip() if "label" in col else str(n + 1))
+    if len(xy) == 0:
+        raise StarListError(f"star list {str(path)!r} has a header but no stars")
+    brightness = None
+    if bright_col == "flux":
+        brightness = bright
+    elif bright_col == "mag":
+        brightness = 10.0 ** (-0.4 * bright)
+    return StarList(xy, tuple(labels), brightness)
+
+
+def check_star_list(
+    xy: np.ndarray,
+    *,
+    width: float,
+    height: float,
+    brightness: np.ndarray | None = None,
+    labels: tuple[str, ...] | list[str] | None = None,
+) -> StarList:
+    """Validate centroids against the image: shape, finiteness, count, position, duplicates."""
+    try:
+        xy = np.array(xy, dtype=float)
+    except (TypeError, ValueError):
+        raise StarListError("star positions must be numbers, shape (n, 2)") from None
+    if xy.ndim != 2 or xy.shape[1] != 2:
+        raise StarListError(f"star positions must have shape (n, 2), got {xy.shape}")
+    if not np.isfinite(xy).all():
+        row = int(np.flatnonzero(~np.isfinite(xy).all(axis=1))[0])
+        raise StarListError(f"star {row + 1} has a NaN or infinite position {tuple(xy[row])}")
+    if len(xy) < 3:
+        raise StarListError(f"need at least 3 stars to identify, got {len(xy)}")
+    mx, my = OUTSIDE_MARGIN_FRAC * width, OUTSIDE_MARGIN_FRAC * height
+    outside = (
+        (xy[:, 0] < -mx) | (xy[:, 0] > width + mx) | (xy[:, 1] < -my) | (xy[:, 1] > height + my)
+    )
+    if outside.any():
+        row = int(np.flatnonzero(outside)[0])
+        raise StarListError(
+            f"star {row + 1} at ({xy[row, 0]:g}, {xy[row, 1]:g}) px is far outside the "
+            f"{width:g} x {height:g} image"
+        )
+    rounded = np.round(xy, 6)
+    _, first, counts = np.unique(rounded, axis=0, return_index=True, return_counts=True)
+    if (counts > 1).any():
+        row = int(first[np.argmax(counts > 1)])
+        raise StarListError(f"duplicate star position ({xy[row, 0]:g}, {xy[row, 1]:g}) px")
+    if labels is None:
+        labels = tuple(str(n + 1) for n in range(len(xy)))
+    elif len(labels) != len(xy):
+        raise StarListError(f"{len(labels)} labels for {len(xy)} stars")
+    if brightness is not None:
+        brightness = np.asarray(brightness, dtype=float).reshape(-1)
+        if len(brightness) != len(xy):
+            raise StarListError(f"{len(brightness)} brightness values for {len(xy)} stars")
+        if not np.isfinite(brightness).all():
+            row = int(np.flatnonzero(~np.isfinite(brightness))[0])
+            raise StarListError(f"star {row + 1} has a NaN or infinite brightness")
+    return StarList(xy, tuple(str(label) for label in labels), brightness)
