@@ -25,7 +25,7 @@ from starnav.identify.verify import false_match_probability, match_catalog
 from starnav.starlist import check_star_list
 
 DEFAULT_SIGMA_PX = 1.0
-DEFAULT_MAX_FALSE_MATCH_PROBABILITY = 1e-6
+DEFAULT_MAX_FALSE_MATCH_PROBABILITY = 1e-4
 
 
 @dataclass(frozen=True)

@@ -164,7 +164,7 @@ def _solution_dict(s: Solution) -> dict:
     return out
 
 
-def _print_solution(s: Solution, *, file=sys.stdout) -> None:
+def _print_solution(s: Solution, *, file=None) -> None:
     print(
         f"solved: RA {s.ra_deg:.5f}°  Dec {s.dec_deg:+.5f}°  roll {s.roll_deg:.4f}°  "
         f"parity {s.parity:+d}",

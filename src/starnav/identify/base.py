@@ -22,7 +22,7 @@ class MatchSettings:
 
     pair_tol_rad: float
     match_radius_rad: float
-    max_false_match_probability: float = 1e-6
+    max_false_match_probability: float = 1e-4
     parity: int | None = None
     max_stars: int = 25
     max_hypotheses: int = 20000

@@ -13,8 +13,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.optimize import linear_sum_assignment
 from scipy.special import betainc
 
+from starnav.geometry import chord_from_angle
 from starnav.identify.database import PairDatabase
 
 
@@ -35,10 +37,8 @@ def match_catalog(
     database: PairDatabase,
     radius_rad: float,
 ) -> Verification:
-    """Pair each bearing with the nearest reprojected catalog star within ``radius_rad``.
-
-    One catalog star takes at most one bearing (the closest).
-    """
+    """Pair bearings with reprojected catalog stars within ``radius_rad``, closest first,
+    each bearing and each catalog star at most once."""
     boresight = R_cam_from_icrs[2]
     cos_field = float(np.min(bearings[:, 2]))
     field_rad = float(np.arccos(np.clip(cos_field, -1.0, 1.0))) + radius_rad
@@ -47,22 +47,16 @@ def match_catalog(
         empty = np.empty(0, dtype=np.intp)
         return Verification(empty, empty, np.empty(0), 0.0)
     cam = database.catalog.vectors[cone] @ R_cam_from_icrs.T
-    # chord^2 between unit vectors; small, so angle ~= chord
-    d2 = np.sum((bearings[:, None, :] - cam[None, :, :]) ** 2, axis=2)
-    nearest = np.argmin(d2, axis=1)
-    chord = np.sqrt(d2[np.arange(len(bearings)), nearest])
-    ok = chord <= 2.0 * np.sin(0.5 * radius_rad)
-    obs = np.flatnonzero(ok)
-    cat = nearest[ok]
-    dist = chord[ok]
-    if len(np.unique(cat)) < len(cat):
-        keep = np.ones(len(cat), dtype=bool)
-        for c in np.unique(cat):
-            rows = np.flatnonzero(cat == c)
-            if len(rows) > 1:
-                keep[rows] = False
-                keep[rows[np.argmin(dist[rows])]] = True
-        obs, cat, dist = obs[keep], cat[keep], dist[keep]
+    d2 = np.sum((bearings[:, None, :] - cam[None, :, :]) ** 2, axis=2)  # chord squared
+    within = d2 <= chord_from_angle(radius_rad) ** 2
+    rows = np.flatnonzero(within.any(axis=1))
+    cols = np.flatnonzero(within.any(axis=0))
+    # one-to-one pairing of least total squared distance (matters for close double stars)
+    cost = np.where(within[np.ix_(rows, cols)], d2[np.ix_(rows, cols)], 1e6)
+    r, c = linear_sum_assignment(cost)
+    ok = cost[r, c] < 1e6
+    obs, cat = rows[r[ok]], cols[c[ok]]
+    dist = np.sqrt(d2[obs, cat])
     field_area = 1.0 - np.cos(field_rad)
     p_chance = min(1.0, len(cone) * (1.0 - np.cos(radius_rad)) / field_area)
     return Verification(obs, cone[cat], dist, float(p_chance))

@@ -1,0 +1,55 @@
+import numpy as np
+import pytest
+
+import starnav
+from conftest import CONTEST
+from starnav import StarListError, StarnavError
+
+
+def test_solution_fields(contest_catalog):
+    xy = np.loadtxt(
+        CONTEST / "images" / "xingtu02.csv", delimiter=",", skiprows=1, usecols=(1, 2)
+    )
+    s = starnav.solve(xy, width=512, height=512, fov_deg=12.0, catalog=contest_catalog)
+    assert isinstance(s, starnav.Solution)
+    R = s.R_cam_from_icrs
+    assert R.shape == (3, 3) and np.allclose(R @ R.T, np.eye(3))
+    assert np.isclose(np.linalg.det(R), s.parity)
+    d = s.to_dict()
+    assert d["solved"] and len(d["stars"]) == len(xy) and d["n_matched"] == s.n_matched
+    assert s.sigma_boresight_arcsec > 0 and s.sigma_roll_arcsec > s.sigma_boresight_arcsec
+
+
+def test_returns_none_when_unsure(contest_catalog):
+    xy = [[10.0, 10.0], [100.0, 400.0], [300.0, 30.0], [480.0, 480.0]]
+    assert starnav.solve(xy, width=512, fov_deg=12.0, catalog=contest_catalog) is None
+    result = starnav.solve_verbose(xy, width=512, fov_deg=12.0, catalog=contest_catalog)
+    assert result.solution is None and result.reason
+
+
+@pytest.mark.parametrize(
+    "xy,kwargs,needle",
+    [
+        ([[1, 2], [3, 4]], {}, "at least 3 stars to identify, got 2"),
+        ([[1, 2], [3, np.nan], [5, 6]], {}, "star 2 has a NaN"),
+        ([[1, 2, 3], [3, 4, 5], [5, 6, 7]], {}, "shape (n, 2), got (3, 3)"),
+        ([[1, 2], [3, 4], [900, 6]], {}, "star 3 at (900, 6) px is far outside"),
+        ([[1, 2], [3, 4], [1, 2]], {}, "duplicate star position (1, 2)"),
+        ([[1, 2], [3, 4], [5, 6]], {"brightness": [1.0, 2.0]}, "2 brightness values for 3"),
+        ([[1, 2], [3, 4], [5, 6]], {"sigma_px": -1.0}, "sigma_px must be"),
+        ([[1, 2], [3, 4], [5, 6]], {"parity": 2}, "parity must be"),
+        ([[1, 2], [3, 4], [5, 6]], {"algorithm": "magic"}, "unknown algorithm 'magic'"),
+        ([[1, 2], [3, 4], [5, 6]], {"fov_deg": 0.0}, "fov_deg must be"),
+    ],
+)
+def test_bad_input_raises_named_error(contest_catalog, xy, kwargs, needle):
+    args = {"width": 512, "fov_deg": 12.0, "catalog": contest_catalog, **kwargs}
+    with pytest.raises(StarnavError) as err:
+        starnav.solve(xy, **args)
+    assert isinstance(err.value, ValueError)
+    assert needle in str(err.value)
+
+
+def test_star_list_error_is_specific():
+    with pytest.raises(StarListError):
+        starnav.solve([[1.0, 2.0]], width=512, fov_deg=12.0)

@@ -1,0 +1,53 @@
+import numpy as np
+import pytest
+
+from starnav.attitude import refine_attitude, wahba
+from starnav.camera import Camera
+from starnav.geometry import ARCSEC_PER_RAD, angle_between, attitude_from_radec_roll
+from starnav.simulate import project_catalog
+
+
+@pytest.mark.parametrize("parity", [1, -1])
+def test_wahba_exact(parity):
+    rng = np.random.default_rng(0)
+    R = attitude_from_radec_roll(123.0, -40.0, 77.0, parity)
+    icrs = rng.normal(size=(6, 3))
+    icrs /= np.linalg.norm(icrs, axis=1, keepdims=True)
+    assert np.allclose(wahba(icrs @ R.T, icrs, parity=parity), R, atol=1e-12)
+
+
+def _stars(hip, R, cam):
+    rows, xy = project_catalog(hip, R, cam)
+    return hip.vectors[rows], xy
+
+
+def test_refine_recovers_attitude_and_focal(hip_1991):
+    cam = Camera.from_fov(12.0, 512)
+    R = attitude_from_radec_roll(200.0, 30.0, 15.0)
+    icrs, xy = _stars(hip_1991, R, cam)
+    R0 = attitude_from_radec_roll(200.02, 30.01, 15.1)
+    wrong_focal = cam.with_focal(cam.focal_px * 1.004)
+    fit = refine_attitude(R0, icrs, xy, wrong_focal, fit_focal=True)
+    assert np.isclose(fit.camera.focal_px, cam.focal_px, rtol=1e-7)
+    assert angle_between(fit.R_cam_from_icrs[2], R[2]) * ARCSEC_PER_RAD < 1e-3
+    assert fit.rms_px < 1e-4
+
+
+def test_uncertainty_matches_monte_carlo(hip_1991):
+    """The reported 1-sigma of boresight and roll agree with the scatter of repeated fits."""
+    cam = Camera.from_fov(12.0, 512)
+    R = attitude_from_radec_roll(83.0, -1.0, 40.0)  # Orion: many stars
+    icrs, xy = _stars(hip_1991, R, cam)
+    rng = np.random.default_rng(11)
+    errs, sig_b, sig_r = [], [], []
+    for _ in range(300):
+        fit = refine_attitude(R, icrs, xy + rng.normal(0, 0.5, xy.shape), cam)
+        dR = fit.R_cam_from_icrs @ R.T
+        errs.append([dR[2, 1], -dR[2, 0], dR[1, 0]])  # small rotation about x, y, z
+        sig_b.append(fit.sigma_boresight_arcsec)
+        sig_r.append(fit.sigma_roll_arcsec)
+    errs = np.array(errs) * ARCSEC_PER_RAD
+    mc_boresight = np.sqrt(np.mean(errs[:, 0] ** 2 + errs[:, 1] ** 2))
+    mc_roll = np.sqrt(np.mean(errs[:, 2] ** 2))
+    assert np.median(sig_b) == pytest.approx(mc_boresight, rel=0.2)
+    assert np.median(sig_r) == pytest.approx(mc_roll, rel=0.2)

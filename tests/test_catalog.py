@@ -1,0 +1,54 @@
+import numpy as np
+import pytest
+
+from starnav.catalog import HIPPARCOS_EPOCH_YEAR, load_catalog, load_csv, load_hipparcos
+from starnav.errors import CatalogError
+
+
+def test_hipparcos_magnitude_limit(hip_1991):
+    # the reference frames' generator counts 4559 stars with Hp <= 6.0
+    assert len(hip_1991) == 4559
+    assert hip_1991.mag.max() <= 6.0
+    fainter = load_hipparcos(mag_limit=6.5, epoch_year=HIPPARCOS_EPOCH_YEAR)
+    assert len(fainter) > len(hip_1991)
+
+
+def test_proper_motion_of_barnards_star():
+    # HIP 87937 moves 10.3 arcsec/yr, mostly north; Hp about 9.5
+    at = {year: load_hipparcos(mag_limit=10.0, epoch_year=year) for year in (1991.25, 2001.25)}
+    rows = {y: np.flatnonzero(c.ids == 87937)[0] for y, c in at.items()}
+    d_dec = (at[2001.25].dec_deg[rows[2001.25]] - at[1991.25].dec_deg[rows[1991.25]]) * 3600
+    assert 100.0 < d_dec < 106.0
+
+
+def test_contest_csv(contest_catalog):
+    assert len(contest_catalog) == 4908
+    assert contest_catalog.ids[0] == 1
+    assert contest_catalog.mag.min() == pytest.approx(-1.44)
+
+
+@pytest.mark.parametrize(
+    "text,needle",
+    [
+        ("", "empty"),
+        ("id,ra_deg,dec_deg\n1,2,3\n", "lacks column(s) mag"),
+        ("id,ra_deg,dec_deg,mag\n1,2,x,4\n", "line 2"),
+        ("id,ra_deg,dec_deg,mag\n", "no stars"),
+        ("id,ra_deg,dec_deg,mag\n1,2,95,4\n", "dec_deg 95"),
+        ("id,ra_deg,dec_deg,mag\n1,2,nan,4\n", "NaN"),
+        ("id,ra_deg,dec_deg,mag\n1,2,3,4\n1,3,4,5\n", "duplicate ids"),
+    ],
+)
+def test_bad_csv_catalog(tmp_path, text, needle):
+    path = tmp_path / "cat.csv"
+    path.write_text(text)
+    with pytest.raises(CatalogError, match=needle.replace("(", r"\(").replace(")", r"\)")):
+        load_csv(path)
+
+
+def test_unreadable_catalog(tmp_path):
+    with pytest.raises(CatalogError, match="cannot read"):
+        load_catalog(tmp_path / "missing.csv")
+    (tmp_path / "bin.csv").write_bytes(b"\xff\xfe\x00\x81")
+    with pytest.raises(CatalogError):
+        load_catalog(tmp_path / "bin.csv")

@@ -1,0 +1,122 @@
+import numpy as np
+import pytest
+
+import starnav
+from conftest import reference_frames
+from starnav.camera import Camera
+from starnav.geometry import angle_between, attitude_difference_deg
+from starnav.simulate import FALSE_STAR_ID, simulate_frame
+
+
+def _score(solution, R_true, true_ids, catalog, double_px=0.5):
+    """Attitude errors (degrees) and the number of wrong ids. Two catalog stars closer than
+    ``double_px`` (doubles that the noise makes unresolvable, such as the Trapezium) may swap
+    without counting as wrong."""
+    boresight_deg, roll_deg = attitude_difference_deg(solution.R_cam_from_icrs, R_true)
+    row = {int(i): n for n, i in enumerate(catalog.ids)}
+    double_rad = double_px / solution.focal_px
+    wrong_ids = 0
+    for m, true_id in zip(solution.stars, true_ids, strict=True):
+        if m.catalog_id is None or m.catalog_id == true_id:
+            continue
+        if (
+            true_id == -1
+            or angle_between(catalog.vectors[row[m.catalog_id]], catalog.vectors[row[int(true_id)]])
+            > double_rad
+        ):
+            wrong_ids += 1
+    return boresight_deg, roll_deg, wrong_ids
+
+
+@pytest.mark.parametrize(
+    "name,sigma,max_boresight_arcsec",
+    [
+        ("a_fov12_512_clean.jsonl", 0.1, 10.0),
+        ("b_fov12_512_noisy.jsonl", 0.5, 40.0),
+        ("c_fov20_1024.jsonl", 0.2, 10.0),
+    ],
+)
+def test_reference_frames(hip_1991, name, sigma, max_boresight_arcsec):
+    """Frames of an independent generator: same attitude, roll and parity, right star ids."""
+    solved = 0
+    frames = reference_frames(name)
+    for frame in frames:
+        c = np.array(frame["centroids"])
+        R_true = np.array(frame["truth"]["R_cam_from_icrs"])
+        hips = [h if h else -1 for h in frame["truth"]["hip"]]
+        s = starnav.solve(
+            c[:, :2],
+            width=frame["width"],
+            height=frame["height"],
+            fov_deg=frame["fov_deg"],
+            brightness=c[:, 2],
+            catalog=hip_1991,
+            sigma_px=sigma,
+        )
+        if s is None:
+            continue
+        solved += 1
+        boresight_deg, roll_deg, wrong_ids = _score(s, R_true, hips, hip_1991)
+        assert boresight_deg * 3600 < max_boresight_arcsec
+        assert roll_deg < 0.5
+        assert wrong_ids == 0
+        assert s.parity == 1
+        assert abs(s.roll_deg - frame["truth"]["roll_deg"]) % 360 < 0.5
+    assert solved >= len(frames) - 2
+
+
+def test_mirrored_frames_found_with_parity(hip_1991):
+    cam = Camera.from_fov(12.0, 512)
+    rng = np.random.default_rng(5)
+    for _ in range(10):
+        f = simulate_frame(hip_1991, cam, parity=-1, noise_px=0.3, seed=rng)
+        if np.sum(f.true_id > 0) < 8:
+            continue
+        s = starnav.solve(f.xy, width=512, fov_deg=12.0, catalog=hip_1991)
+        assert s is not None and s.parity == -1
+        assert np.linalg.det(s.R_cam_from_icrs) < 0
+        assert attitude_difference_deg(s.R_cam_from_icrs, f.R_cam_from_icrs)[0] < 0.01
+
+
+def test_tolerates_false_missing_and_1px_noise_without_brightness(hip_1991):
+    """Issue minimum: >= 2 false stars, 10-30 % missing, 1 px noise, no brightness."""
+    cam = Camera.from_fov(12.0, 512)
+    rng = np.random.default_rng(12)
+    tried = solved = 0
+    for _ in range(30):
+        f = simulate_frame(hip_1991, cam, noise_px=1.0, false_stars=2, missing_frac=0.3, seed=rng)
+        if np.sum(f.true_id > 0) < 8:
+            continue
+        tried += 1
+        perm = rng.permutation(len(f.xy))  # no brightness order either
+        s = starnav.solve(f.xy[perm], width=512, fov_deg=12.0, catalog=hip_1991)
+        if s is None:
+            continue
+        solved += 1
+        boresight_deg, roll_deg, wrong_ids = _score(
+            s, f.R_cam_from_icrs, f.true_id[perm], hip_1991, double_px=2.0
+        )
+        assert boresight_deg < 0.05 and roll_deg < 0.5 and wrong_ids == 0
+        assert boresight_deg * 3600 < 4 * s.sigma_boresight_arcsec
+        false_rows = f.true_id[perm] == FALSE_STAR_ID
+        assert all(s.stars[n].catalog_id is None for n in np.flatnonzero(false_rows))
+    assert tried >= 15 and solved >= tried - 1
+
+
+def test_random_points_are_refused(hip_1991):
+    """A field of points that are no stars must give no answer, not a wrong one."""
+    rng = np.random.default_rng(99)
+    for _ in range(15):
+        xy = rng.uniform(0, 512, (int(rng.integers(5, 12)), 2))
+        assert starnav.solve(xy, width=512, fov_deg=12.0, catalog=hip_1991, sigma_px=0.5) is None
+
+
+def test_fit_focal_recovers_true_focal(hip_1991):
+    cam = Camera.from_fov(12.0, 512)
+    f = simulate_frame(hip_1991, cam, ra_deg=83.0, dec_deg=-1.0, roll_deg=0, noise_px=0.1, seed=2)
+    s = starnav.solve(
+        f.xy, width=512, fov_deg=12.05, catalog=hip_1991, sigma_px=1.0, fit_focal=True
+    )
+    assert s is not None
+    assert s.focal_px == pytest.approx(cam.focal_px, rel=1e-3)
+    assert s.fov_deg == pytest.approx(12.0, abs=0.01)
