@@ -7,9 +7,7 @@ from starnav import StarListError, StarnavError
 
 
 def test_solution_fields(contest_catalog):
-    xy = np.loadtxt(
-        CONTEST / "images" / "xingtu02.csv", delimiter=",", skiprows=1, usecols=(1, 2)
-    )
+    xy = np.loadtxt(CONTEST / "images" / "xingtu02.csv", delimiter=",", skiprows=1, usecols=(1, 2))
     s = starnav.solve(xy, width=512, height=512, fov_deg=12.0, catalog=contest_catalog)
     assert isinstance(s, starnav.Solution)
     R = s.R_cam_from_icrs
