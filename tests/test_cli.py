@@ -228,3 +228,37 @@ def test_console_script_no_traceback(tmp_path):
     )
     assert proc.returncode == 2
     assert proc.stderr.strip().count("\n") == 0 and "Traceback" not in proc.stderr
+
+
+def test_identify_plot_writes_png(capsys, tmp_path):
+    png = tmp_path / "map.png"
+    code, _, _ = _run(
+        capsys,
+        "identify",
+        MAP1,
+        "--fov-deg",
+        "12",
+        "--width",
+        "512",
+        "--catalog",
+        CATALOG,
+        "--plot",
+        str(png),
+    )
+    assert code == 0
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and png.stat().st_size > 10000
+    code, _, err = _run(
+        capsys,
+        "identify",
+        MAP1,
+        "--fov-deg",
+        "12",
+        "--width",
+        "512",
+        "--catalog",
+        CATALOG,
+        "--plot",
+        str(tmp_path / "no" / "map.png"),
+    )
+    assert code == 2 and "cannot write plot" in err
+

@@ -6,6 +6,7 @@ import argparse
 import csv
 import json
 import math
+import os
 import sys
 import time
 from pathlib import Path
@@ -110,6 +111,7 @@ def _build_parser() -> argparse.ArgumentParser:
         help="refuse less certain answers (default %(default)g)",
     )
     p.add_argument("--algorithm", choices=sorted(ALGORITHMS), default=DEFAULT_ALGORITHM)
+    p.add_argument("--plot", metavar="PNG", help="draw the identified map into this PNG file")
     p.add_argument("--json", action="store_true", help="print one JSON object")
 
     p = sub.add_parser("simulate", help="simulate a frame of centroids from the catalog")
@@ -207,6 +209,15 @@ def _cmd_identify(args) -> int:
         algorithm=args.algorithm,
     )
     s = result.solution
+    if s is not None and args.plot:
+        from starnav.plot import plot_solution
+
+        plot_solution(
+            s,
+            make_camera(width=args.width, height=args.height, fov_deg=args.fov_deg),
+            result.database.catalog,
+            args.plot,
+        )
     if args.json:
         out = (
             _solution_dict(s)
@@ -413,6 +424,11 @@ def main(argv: list[str] | None = None) -> int:
     except StarnavError as exc:
         print(f"starnav {args.command}: error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
+    except BrokenPipeError:  # output piped into head & co: stop quietly
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return EXIT_OK
+    except KeyboardInterrupt:
+        return 130
 
 
 if __name__ == "__main__":
