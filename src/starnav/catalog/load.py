@@ -12,7 +12,7 @@ import csv
 import datetime as _dt
 import hashlib
 import warnings
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
 
@@ -32,7 +32,7 @@ _MAS_TO_RAD = np.pi / 180.0 / 3.6e6
 class Catalog:
     """Stars with ids, ICRS position (degrees) at ``epoch_year`` and magnitude.
 
-    ``mag`` may be NaN-free magnitudes in any band; smaller is brighter.
+    ``mag``: magnitudes in any band, smaller is brighter.
     """
 
     ids: np.ndarray
@@ -41,7 +41,6 @@ class Catalog:
     mag: np.ndarray
     name: str
     epoch_year: float | None = None
-    _fingerprint: list = field(default_factory=list, repr=False)
 
     def __len__(self) -> int:
         return len(self.ids)
@@ -51,15 +50,13 @@ class Catalog:
         """ICRS unit vectors, shape (n, 3)."""
         return radec_to_unit(np.radians(self.ra_deg), np.radians(self.dec_deg))
 
-    @property
+    @cached_property
     def fingerprint(self) -> str:
         """Short hash of the catalog content, used to key cached databases."""
-        if not self._fingerprint:
-            h = hashlib.sha1()
-            for arr in (self.ids, self.ra_deg, self.dec_deg, self.mag):
-                h.update(np.ascontiguousarray(arr, dtype=float).tobytes())
-            self._fingerprint.append(h.hexdigest()[:16])
-        return self._fingerprint[0]
+        h = hashlib.sha1()
+        for arr in (self.ids, self.ra_deg, self.dec_deg, self.mag):
+            h.update(np.ascontiguousarray(arr, dtype=float).tobytes())
+        return h.hexdigest()[:16]
 
     def brighter_than(self, mag_limit: float) -> Catalog:
         """The stars with ``mag <= mag_limit``."""

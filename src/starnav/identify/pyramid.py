@@ -44,28 +44,27 @@ def catalog_triangles(
     empty = np.empty((0, 3), dtype=np.int64)
     a1, b1 = database.pairs_within(side_ij, tol_rad)
     a2, c2 = database.pairs_within(side_ik, tol_rad)
-    b3, c3 = database.pairs_within(side_jk, tol_rad)
-    if len(a1) == 0 or len(a2) == 0 or len(b3) == 0:
+    if len(a1) == 0 or len(a2) == 0:
         return empty
-    a1, b1 = _both_ways(a1.astype(np.int64), b1.astype(np.int64))
-    a2, c2 = _both_ways(a2.astype(np.int64), c2.astype(np.int64))
-    by_a = np.argsort(a2, kind="stable")
-    a2, c2 = a2[by_a], c2[by_a]
-    lo = np.searchsorted(a2, a1, side="left")
-    count = np.searchsorted(a2, a1, side="right") - lo
+    n_cat = len(database.catalog)
+    a1, b1 = _both_ways(a1, b1)
+    a2, c2 = _both_ways(a2, c2)
+    # side ik grouped by its first star (counting sort), then joined to side ij on star a
+    count2 = np.bincount(a2, minlength=n_cat)
+    start2 = np.cumsum(count2) - count2
+    c2 = c2[np.argsort(a2, kind="stable")]
+    count = count2[a1]
     total = int(count.sum())
     if total == 0:
         return empty
     row = np.repeat(np.arange(len(a1)), count)
     offset = np.arange(total) - np.repeat(np.cumsum(count) - count, count)
-    a, b, c = a1[row], b1[row], c2[lo[row] + offset]
-    n_cat = len(database.catalog)
-    b3, c3 = _both_ways(b3.astype(np.int64), c3.astype(np.int64))
-    keys = np.sort(b3 * n_cat + c3)
-    wanted = b * n_cat + c
-    pos = np.minimum(np.searchsorted(keys, wanted), len(keys) - 1)
-    ok = (keys[pos] == wanted) & (b != c)
-    return np.column_stack([a[ok], b[ok], c[ok]])
+    a, b, c = a1[row], b1[row], c2[start2[a1][row] + offset]
+    # keep the (b, c) whose separation agrees with side jk
+    cos_bc = np.einsum("ij,ij->i", database.catalog.vectors[b], database.catalog.vectors[c])
+    ok = (cos_bc >= np.cos(side_jk + tol_rad)) & (cos_bc <= np.cos(max(side_jk - tol_rad, 0.0)))
+    ok &= b != c
+    return np.column_stack([a[ok], b[ok], c[ok]]).astype(np.intp)
 
 
 def _screen(
@@ -125,6 +124,11 @@ class Pyramid:
         hypotheses = 0
         triangles_with_candidates = 0
         best_p = 1.0
+        # the smallest chance agreement per star any hypothesis can have (a field holding a
+        # single catalog star): hypotheses whose screen count cannot beat the threshold even
+        # with it are not verified in full
+        field_rad = np.arccos(np.clip(bearings[:, 2].min(), -1.0, 1.0)) + settings.match_radius_rad
+        p_floor = (1.0 - np.cos(settings.match_radius_rad)) / (1.0 - np.cos(field_rad))
         for i, j, k in triangle_order(len(order)):
             idx = order[[i, j, k]]
             b = bearings[idx]
@@ -149,8 +153,9 @@ class Pyramid:
             hypotheses += len(triples)
             agree = _screen(bearings, b, vectors[triples], parities, database, settings)
             for h in np.argsort(-agree, kind="stable"):
-                if agree[h] < 4:
-                    break
+                p_best_case = false_match_probability(n_total, agree[h], 3, p_floor, hypotheses)
+                if p_best_case > settings.max_false_match_probability:
+                    break  # neither this nor any later (lower) count can be convincing
                 parity = int(parities[h])
                 R = wahba(b, vectors[triples[h]], parity=parity)
                 ver = match_catalog(bearings, R, database, settings.match_radius_rad)
@@ -171,7 +176,7 @@ class Pyramid:
                 f"{settings.max_false_match_probability:g})"
             )
         else:
-            reason = "no hypothesis was confirmed by a fourth star"
+            reason = "no hypothesis agreed with enough stars to be convincing"
         return IdentifyOutcome(None, reason, hypotheses)
 
     @staticmethod
