@@ -19,10 +19,13 @@ def test_solution_fields(contest_catalog):
 
 
 def test_returns_none_when_unsure(contest_catalog):
-    xy = [[10.0, 10.0], [100.0, 400.0], [300.0, 30.0], [480.0, 480.0]]
-    assert starnav.solve(xy, width=512, fov_deg=12.0, catalog=contest_catalog) is None
-    result = starnav.solve_verbose(xy, width=512, fov_deg=12.0, catalog=contest_catalog)
-    assert result.solution is None and result.reason
+    """Random points (enough of them for hypotheses to be tested) get no answer."""
+    rng = np.random.default_rng(8)
+    for _ in range(5):
+        xy = rng.uniform(0, 512, (10, 2))
+        assert starnav.solve(xy, width=512, fov_deg=12.0, catalog=contest_catalog) is None
+        result = starnav.solve_verbose(xy, width=512, fov_deg=12.0, catalog=contest_catalog)
+        assert result.solution is None and result.reason and result.hypotheses > 0
 
 
 @pytest.mark.parametrize(

@@ -32,11 +32,12 @@ def test_contest_csv(contest_catalog):
     [
         ("", "empty"),
         ("id,ra_deg,dec_deg\n1,2,3\n", "lacks column(s) mag"),
-        ("id,ra_deg,dec_deg,mag\n1,2,x,4\n", "line 2"),
+        ("id,ra_deg,dec_deg,mag\n1,2,x,4\n", "row 2"),
+        ("id,ra_deg,dec_deg,mag\n1.5,2,3,4\n2,3,4,5\n3,4,5,6\n", "integer id"),
         ("id,ra_deg,dec_deg,mag\n", "no stars"),
         ("id,ra_deg,dec_deg,mag\n1,2,95,4\n", "dec_deg 95"),
         ("id,ra_deg,dec_deg,mag\n1,2,nan,4\n", "NaN"),
-        ("id,ra_deg,dec_deg,mag\n1,2,3,4\n1,3,4,5\n", "duplicate ids"),
+        ("id,ra_deg,dec_deg,mag\n1,2,3,4\n1,3,4,5\n", "repeats id 1"),
     ],
 )
 def test_bad_csv_catalog(tmp_path, text, needle):
@@ -52,3 +53,25 @@ def test_unreadable_catalog(tmp_path):
     (tmp_path / "bin.csv").write_bytes(b"\xff\xfe\x00\x81")
     with pytest.raises(CatalogError):
         load_catalog(tmp_path / "bin.csv")
+
+
+def test_csv_with_bom_blank_lines_and_big_ids(tmp_path):
+    path = tmp_path / "cat.csv"
+    big = 6917528997577384321  # a Gaia DR3 source id: must survive exactly
+    path.write_text(
+        f"\ufeffid,ra_deg,dec_deg,mag,extra\n{big},10,20,3,x\n2,11,21,4,y\n\n3,12,22,5,z\n\n"
+    )
+    cat = load_catalog(path)
+    assert len(cat) == 3 and int(cat.ids[0]) == big
+
+
+def test_catalog_cuts_that_leave_nothing(contest_catalog):
+    with pytest.raises(CatalogError, match="holds 0 stars"):
+        load_catalog(None, mag_limit=-5.0)
+    with pytest.raises(CatalogError, match="holds 0 stars"):
+        load_catalog(contest_catalog, mag_limit=-3.0)
+
+
+def test_epoch_only_for_hipparcos(contest_catalog):
+    with pytest.raises(CatalogError, match="epoch applies to the embedded Hipparcos"):
+        load_catalog(contest_catalog, epoch_year=2000.0)

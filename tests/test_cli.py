@@ -2,6 +2,7 @@ import json
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 
 from conftest import CONTEST
@@ -67,7 +68,8 @@ def test_identify_table_output(capsys):
 
 def test_not_solved_exits_1_with_json(capsys, tmp_path):
     path = tmp_path / "random.csv"
-    path.write_text("x,y\n10,10\n200,40\n330,300\n50,480\n")
+    xy = np.random.default_rng(2).uniform(0, 512, (10, 2))
+    path.write_text("x,y\n" + "".join(f"{x:.2f},{y:.2f}\n" for x, y in xy))
     code, out, err = _run(
         capsys,
         "identify",
@@ -83,9 +85,10 @@ def test_not_solved_exits_1_with_json(capsys, tmp_path):
     assert code == 1 and err == ""
     result = json.loads(out)
     assert result["solved"] is False and result["reason"]
-    assert result["ra_deg"] is None and len(result["stars"]) == 4
+    assert EXPECTED_KEYS <= set(result)
+    assert result["ra_deg"] is None and len(result["stars"]) == 10
     assert all(s["catalog_id"] is None for s in result["stars"])
-    assert [s["label"] for s in result["stars"]] == ["1", "2", "3", "4"]
+    assert [s["label"] for s in result["stars"]][:3] == ["1", "2", "3"]
 
 
 BAD_FILES = {
@@ -99,6 +102,7 @@ BAD_FILES = {
     "duplicates": ("x,y\n1,2\n30,40\n1,2\n", "duplicate"),
     "text": ("x,y\n1,2\nabc,40\n5,6\n", "not a number"),
     "short row": ("x,y,label\n1,2,a\n30,40\n5,6,c\n", "fields"),
+    "empty column name": ("x,y,\n1,2,\n30,40,\n5,6,\n", "empty column name"),
 }
 
 
@@ -132,6 +136,10 @@ def test_bad_star_list_exits_2_with_one_line(capsys, tmp_path, case):
         (["--width", "abc"], "--width"),
         (["--sigma-px", "0"], "sigma_px"),
         (["--fov-deg", "nan"], "--fov-deg"),
+        (["--width", "512.0"], "not a whole number"),
+        (["--plot", "map.jpg"], "ending in .png"),
+        (["--epoch", "2000"], "epoch applies"),
+        (["--mag-limit", "-9"], "holds 0 stars"),
     ],
 )
 def test_bad_options_exit_2(capsys, argv, needle):
@@ -142,6 +150,41 @@ def test_bad_options_exit_2(capsys, argv, needle):
     code, out, err = _run(capsys, *args)
     assert code == 2 and out == ""
     assert needle in err and len(err.strip().splitlines()) == 1
+
+
+@pytest.mark.parametrize(
+    "argv,needle",
+    [
+        (["demo", "--seed", "-1"], "at least 0"),
+        (["demo", "--fov-deg", "0.01"], "choose a wider field"),
+        (
+            [
+                "simulate",
+                "--fov-deg",
+                "12",
+                "--width",
+                "512",
+                "--false-stars",
+                "99999999",
+                "-o",
+                "x.csv",
+            ],
+            "false_stars must be",
+        ),
+        (
+            ["simulate", "--fov-deg", "12", "--width", "512", "-o", "/nonexistent/dir/x.csv"],
+            "cannot write",
+        ),
+        (
+            ["simulate", "--fov-deg", "12", "--width", "512", "--missing-frac", "1", "-o", "x.csv"],
+            "missing_frac",
+        ),
+    ],
+)
+def test_bad_simulate_and_demo_options(capsys, tmp_path, monkeypatch, argv, needle):
+    monkeypatch.chdir(tmp_path)
+    code, _, err = _run(capsys, *argv)
+    assert code == 2 and needle in err and len(err.strip().splitlines()) == 1
 
 
 def test_simulate_then_identify(capsys, tmp_path):
@@ -261,4 +304,3 @@ def test_identify_plot_writes_png(capsys, tmp_path):
         str(tmp_path / "no" / "map.png"),
     )
     assert code == 2 and "cannot write plot" in err
-

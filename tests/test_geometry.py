@@ -1,4 +1,5 @@
 import numpy as np
+import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
@@ -60,3 +61,14 @@ def test_attitude_difference():
     boresight, roll = attitude_difference_deg(R1, R2)
     assert np.isclose(boresight, 1.0, atol=1e-9)
     assert np.isclose(roll, 2.0, atol=0.05)
+
+
+def test_roll_difference_is_stable_at_the_pole():
+    """2 arcsec of tilt at Dec 89.9995° swings the position angle, not the roll error."""
+    R1 = attitude_from_radec_roll(10.0, 89.9995, 30.0)
+    tilt = np.radians(2.0 / 3600.0)
+    c, s = np.cos(tilt), np.sin(tilt)
+    R2 = np.array([[1, 0, 0], [0, c, -s], [0, s, c]]) @ R1
+    boresight, roll = attitude_difference_deg(R1, R2)
+    assert boresight == pytest.approx(2.0 / 3600.0, rel=1e-3)
+    assert roll < 1e-6

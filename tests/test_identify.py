@@ -4,7 +4,13 @@ import pytest
 import starnav
 from conftest import reference_frames
 from starnav.camera import Camera
-from starnav.geometry import angle_between, attitude_difference_deg
+from starnav.catalog import Catalog
+from starnav.geometry import (
+    angle_between,
+    attitude_difference_deg,
+    attitude_from_radec_roll,
+    unit_to_radec,
+)
 from starnav.simulate import FALSE_STAR_ID, simulate_frame
 
 
@@ -61,21 +67,24 @@ def test_reference_frames(hip_1991, name, sigma, max_boresight_arcsec):
         assert roll_deg < 0.5
         assert wrong_ids == 0
         assert s.parity == 1
-        assert abs(s.roll_deg - frame["truth"]["roll_deg"]) % 360 < 0.5
+        assert abs((s.roll_deg - frame["truth"]["roll_deg"] + 180.0) % 360.0 - 180.0) < 0.5
     assert solved >= len(frames) - 2
 
 
 def test_mirrored_frames_found_with_parity(hip_1991):
     cam = Camera.from_fov(12.0, 512)
     rng = np.random.default_rng(5)
+    tried = 0
     for _ in range(10):
         f = simulate_frame(hip_1991, cam, parity=-1, noise_px=0.3, seed=rng)
         if np.sum(f.true_id > 0) < 8:
             continue
+        tried += 1
         s = starnav.solve(f.xy, width=512, fov_deg=12.0, catalog=hip_1991)
         assert s is not None and s.parity == -1
         assert np.linalg.det(s.R_cam_from_icrs) < 0
         assert attitude_difference_deg(s.R_cam_from_icrs, f.R_cam_from_icrs)[0] < 0.01
+    assert tried >= 5
 
 
 def test_tolerates_false_missing_and_1px_noise_without_brightness(hip_1991):
@@ -120,3 +129,47 @@ def test_fit_focal_recovers_true_focal(hip_1991):
     assert s is not None
     assert s.focal_px == pytest.approx(cam.focal_px, rel=1e-3)
     assert s.fov_deg == pytest.approx(12.0, abs=0.01)
+
+
+def test_collinear_stars_refused_for_ambiguous_parity(hip_1991):
+    """Stars on one line fit the sky and its mirror image equally: no answer unless the parity
+    is given."""
+    cam = Camera.from_fov(12.0, 512)
+    R = attitude_from_radec_roll(40.0, 20.0, 30.0)
+    xs = np.array([40.0, 95, 170, 230, 300, 350, 420, 480])
+    xy = np.column_stack([xs, np.full(8, 120.0)])
+    line = cam.pixels_to_bearings(xy) @ R  # the ICRS directions of those pixels
+    ra, dec = unit_to_radec(line)
+    far = hip_1991.vectors @ R[2] < np.cos(np.radians(12.0))  # empty the rest of the field
+    cat = Catalog(
+        np.arange(far.sum() + 8),
+        np.r_[hip_1991.ra_deg[far], np.degrees(ra)],
+        np.r_[hip_1991.dec_deg[far], np.degrees(dec)],
+        np.full(far.sum() + 8, 5.0),
+        "a line of stars",
+    )
+    result = starnav.solve_verbose(xy, width=512, fov_deg=12.0, catalog=cat, sigma_px=0.3)
+    assert result.solution is None and "parity ambiguous" in result.reason
+    s = starnav.solve(xy, width=512, fov_deg=12.0, catalog=cat, sigma_px=0.3, parity=1)
+    assert s is not None
+    assert attitude_difference_deg(s.R_cam_from_icrs, R)[0] < 0.01
+
+
+def test_wrong_field_of_view_is_refused(hip_1991):
+    """Told 12.3° for a 12° camera: the centre stars still match, but the attitude would be
+    off by ~0.1°, so starnav says the scale is wrong instead of answering."""
+    cam = Camera.from_fov(12.0, 512)
+    rng = np.random.default_rng(3)
+    refused = 0
+    for _ in range(20):
+        f = simulate_frame(hip_1991, cam, noise_px=0.3, seed=rng)
+        if len(f.xy) < 8:
+            continue
+        result = starnav.solve_verbose(
+            f.xy, width=512, fov_deg=12.3, brightness=f.brightness, catalog=hip_1991
+        )
+        if result.solution is None:
+            refused += 1
+            continue
+        assert attitude_difference_deg(result.solution.R_cam_from_icrs, f.R_cam_from_icrs)[0] < 0.05
+    assert refused >= 10

@@ -22,10 +22,15 @@ from starnav.identify import (
 )
 from starnav.identify.database import database_angle_deg
 from starnav.identify.verify import false_match_probability, match_catalog
+from starnav.simulate import project_catalog
 from starnav.starlist import check_star_list
 
 DEFAULT_SIGMA_PX = 1.0
 DEFAULT_MAX_FALSE_MATCH_PROBABILITY = 1e-4
+DEFAULT_MIN_MATCHED_FRACTION = 0.5
+_MAX_REMATCH = 5
+_MIN_STARS_SCALE_CHECK = 6
+_SCALE_TOLERANCE = 0.005  # relative focal-length error tolerated without --fit-focal
 
 
 @dataclass(frozen=True)
@@ -49,7 +54,8 @@ class Solution:
     (position angle of image up from North through East), ``fov_deg`` (horizontal).
     ``parity``: +1 the sky as seen, -1 mirrored. ``R_cam_from_icrs``: rows are the camera axes
     in ICRS (determinant = parity). ``rms_px``: residual rms of matched stars;
-    ``sigma_*_arcsec``: 1-sigma from the fit; ``time_ms``: identification and fit, without
+    ``sigma_*_arcsec``: 1-sigma from the fit (``sigma_focal_px`` 0 unless the focal length
+    was fitted); ``time_ms``: identification and fit, without
     loading the catalog or database.
     """
 
@@ -62,6 +68,7 @@ class Solution:
     rms_px: float
     sigma_boresight_arcsec: float
     sigma_roll_arcsec: float
+    sigma_focal_px: float
     false_match_probability: float
     time_ms: float
     R_cam_from_icrs: np.ndarray
@@ -102,12 +109,9 @@ def get_database(catalog: Catalog, camera: Camera) -> PairDatabase:
     return _DATABASES[key]
 
 
-def make_camera(
-    *, width: float, height: float | None, fov_deg: float, focal_px: float | None = None
-) -> Camera:
-    """Camera from the user's numbers; ``focal_px`` overrides the one implied by the FOV."""
-    camera = Camera.from_fov(fov_deg, width, height)
-    return camera if focal_px is None else camera.with_focal(focal_px)
+def make_camera(*, width: float, height: float | None, fov_deg: float) -> Camera:
+    """Camera from the user's numbers (height defaults to width)."""
+    return Camera.from_fov(fov_deg, width, height)
 
 
 def solve_verbose(
@@ -125,9 +129,20 @@ def solve_verbose(
     sigma_px: float = DEFAULT_SIGMA_PX,
     fit_focal: bool = False,
     max_false_match_probability: float = DEFAULT_MAX_FALSE_MATCH_PROBABILITY,
+    min_matched_fraction: float = DEFAULT_MIN_MATCHED_FRACTION,
     algorithm: str = DEFAULT_ALGORITHM,
 ) -> SolveResult:
-    """Like ``solve`` but always returns a ``SolveResult`` with the reason when unsolved."""
+    """Like ``solve`` but always returns a ``SolveResult`` with the reason when unsolved.
+
+    ``labels``: a name per star (default "1", "2", ...); ``mag_limit``, ``epoch_year``: for
+    the embedded Hipparcos catalog (see ``load_catalog``); ``parity``: +1 / -1 when known;
+    ``sigma_px``: 1-sigma centroid error, which sets the matching tolerances;
+    ``fit_focal``: fit the focal length with the attitude;
+    ``max_false_match_probability``: refuse less certain identifications;
+    ``min_matched_fraction``: refuse when fewer of the stars that should be seen (the smaller
+    of the number of points and of catalog stars inside the image) agree;
+    ``algorithm``: identification algorithm by name.
+    """
     camera = make_camera(width=width, height=height, fov_deg=fov_deg)
     stars = check_star_list(
         xy, width=camera.width, height=camera.height, brightness=brightness, labels=labels
@@ -138,6 +153,8 @@ def solve_verbose(
         raise StarnavError(f"parity must be +1, -1 or None, got {parity!r}")
     if algorithm not in ALGORITHMS:
         raise StarnavError(f"unknown algorithm {algorithm!r}; known: {', '.join(ALGORITHMS)}")
+    if not 0.0 <= min_matched_fraction <= 1.0:
+        raise StarnavError(f"min_matched_fraction must be in [0, 1], got {min_matched_fraction!r}")
     if not 0.0 < max_false_match_probability < 1.0:
         raise StarnavError(
             f"max_false_match_probability must be in (0, 1), got {max_false_match_probability!r}"
@@ -166,20 +183,53 @@ def solve_verbose(
         ms = (time.perf_counter() - t0) * 1e3
         return SolveResult(None, outcome.reason, ms, outcome.hypotheses, database)
 
-    # least squares on the image, then take in any star the better attitude brings in range
+    # least squares on the image; take in the stars the better attitude brings in range and
+    # fit again, until the set of matches stops changing
     obs, cat_rows = found.obs_index, found.cat_index
-    R = found.R_cam_from_icrs
-    for _ in range(3):
-        fit = refine_attitude(R, cat.vectors[cat_rows], stars.xy[obs], camera, fit_focal=fit_focal)
-        R = fit.R_cam_from_icrs
+    fit = refine_attitude(
+        found.R_cam_from_icrs, cat.vectors[cat_rows], stars.xy[obs], camera, fit_focal=fit_focal
+    )
+    for _ in range(_MAX_REMATCH):
         ver = match_catalog(
-            fit.camera.pixels_to_bearings(stars.xy), R, database, settings.match_radius_rad
+            fit.camera.pixels_to_bearings(stars.xy),
+            fit.R_cam_from_icrs,
+            database,
+            settings.match_radius_rad,
         )
         same = np.array_equal(ver.obs_index, obs) and np.array_equal(ver.cat_index, cat_rows)
         if same or len(ver.obs_index) < len(obs):
             break
         obs, cat_rows = ver.obs_index, ver.cat_index
+        fit = refine_attitude(
+            fit.R_cam_from_icrs, cat.vectors[cat_rows], stars.xy[obs], camera, fit_focal=fit_focal
+        )
+    R = fit.R_cam_from_icrs
     p_false = false_match_probability(len(bearings), len(obs), 3, ver.p_chance, found.hypotheses)
+    # stars the solution says should be measurable: catalog stars inside the image
+    expected = min(len(stars.xy), len(project_catalog(cat, R, fit.camera)[0]))
+    refusal = ""
+    if not fit_focal and len(obs) >= _MIN_STARS_SCALE_CHECK:
+        # a wrong focal length biases the attitude beyond its error bars: test the scale
+        free = refine_attitude(R, cat.vectors[cat_rows], stars.xy[obs], camera, fit_focal=True)
+        df = free.camera.focal_px - camera.focal_px
+        if abs(df) > 5.0 * free.sigma_focal_px and abs(df) > _SCALE_TOLERANCE * camera.focal_px:
+            refusal = (
+                f"the stars fit a focal length of {free.camera.focal_px:.1f} px (FOV "
+                f"{free.camera.fov_deg:.3f}°), not the {camera.focal_px:.1f} px given: "
+                f"correct the field of view or fit the focal length"
+            )
+    if refusal:
+        pass
+    elif p_false > max_false_match_probability:
+        refusal = f"false-match probability {p_false:.2g} after the fit"
+    elif len(obs) < min_matched_fraction * expected:
+        refusal = (
+            f"only {len(obs)} of {expected} stars agree with the best attitude (need "
+            f"{min_matched_fraction:.0%}): is the field of view right?"
+        )
+    if refusal:
+        ms = (time.perf_counter() - t0) * 1e3
+        return SolveResult(None, refusal, ms, outcome.hypotheses, database)
     residual = dict(
         zip(obs.tolist(), np.linalg.norm(fit.residuals_px, axis=1).tolist(), strict=True)
     )
@@ -206,6 +256,7 @@ def solve_verbose(
         rms_px=fit.rms_px,
         sigma_boresight_arcsec=fit.sigma_boresight_arcsec,
         sigma_roll_arcsec=fit.sigma_roll_arcsec,
+        sigma_focal_px=fit.sigma_focal_px,
         false_match_probability=p_false,
         time_ms=ms,
         R_cam_from_icrs=R,

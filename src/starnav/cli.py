@@ -39,6 +39,7 @@ _SOLUTION_KEYS = (
     "rms_px",
     "sigma_boresight_arcsec",
     "sigma_roll_arcsec",
+    "sigma_focal_px",
     "false_match_probability",
 )
 
@@ -51,17 +52,38 @@ class _Parser(argparse.ArgumentParser):
 
 
 def _finite(text: str) -> float:
-    value = float(text)
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
     if not math.isfinite(value):
         raise argparse.ArgumentTypeError(f"not a finite number: {text!r}")
     return value
 
 
-def _positive_int(text: str) -> int:
-    value = int(text)
-    if value <= 0:
-        raise argparse.ArgumentTypeError(f"must be a positive integer: {text!r}")
-    return value
+def _int_at_least(minimum: int):
+    def convert(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"not a whole number: {text!r}") from None
+        if value < minimum:
+            raise argparse.ArgumentTypeError(f"must be at least {minimum}, got {text}")
+        return value
+
+    return convert
+
+
+_positive_int = _int_at_least(1)
+_count = _int_at_least(0)
+
+
+def _png_path(text: str) -> str:
+    if not text.lower().endswith(".png"):
+        raise argparse.ArgumentTypeError(
+            f"the plot is a PNG file: give a name ending in .png, got {text!r}"
+        )
+    return text
 
 
 def _add_camera(p: argparse.ArgumentParser, *, required: bool = True) -> None:
@@ -111,7 +133,9 @@ def _build_parser() -> argparse.ArgumentParser:
         help="refuse less certain answers (default %(default)g)",
     )
     p.add_argument("--algorithm", choices=sorted(ALGORITHMS), default=DEFAULT_ALGORITHM)
-    p.add_argument("--plot", metavar="PNG", help="draw the identified map into this PNG file")
+    p.add_argument(
+        "--plot", metavar="PNG", type=_png_path, help="draw the identified map into this PNG file"
+    )
     p.add_argument("--json", action="store_true", help="print one JSON object")
 
     p = sub.add_parser("simulate", help="simulate a frame of centroids from the catalog")
@@ -122,19 +146,19 @@ def _build_parser() -> argparse.ArgumentParser:
     _add_camera(p)
     _add_catalog(p)
     p.add_argument("--noise-px", type=_finite, default=0.0, help="centroid noise, 1 sigma")
-    p.add_argument("--false-stars", type=int, default=0, help="false stars added")
+    p.add_argument("--false-stars", type=_count, default=0, help="false stars added")
     p.add_argument("--missing-frac", type=_finite, default=0.0, help="fraction of stars dropped")
     p.add_argument("--mag-noise", type=_finite, default=0.0, help="magnitude noise, 1 sigma")
-    p.add_argument("--seed", type=int, help="random seed")
+    p.add_argument("--seed", type=_count, help="random seed")
     p.add_argument("-o", "--output", required=True, help="frame CSV to write")
     p.add_argument("--json", action="store_true", help="print the truth as one JSON object")
 
     p = sub.add_parser("demo", help="simulate a random frame, identify it, compare with truth")
-    p.add_argument("--seed", type=int, help="random seed (default: random)")
+    p.add_argument("--seed", type=_count, help="random seed (default: random)")
     p.add_argument("--fov-deg", type=_finite, default=12.0)
     p.add_argument("--width", type=_positive_int, default=512)
     p.add_argument("--noise-px", type=_finite, default=0.5)
-    p.add_argument("--false-stars", type=int, default=2)
+    p.add_argument("--false-stars", type=_count, default=2)
     p.add_argument("--missing-frac", type=_finite, default=0.1)
     p.add_argument("--json", action="store_true")
 
@@ -145,10 +169,25 @@ def _build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _json(obj: dict) -> str:
+    """One line of JSON; NaN and infinities (e.g. an undetermined sigma) become null."""
+
+    def clean(v):
+        if isinstance(v, float) and not math.isfinite(v):
+            return None
+        if isinstance(v, dict):
+            return {k: clean(x) for k, x in v.items()}
+        if isinstance(v, list):
+            return [clean(x) for x in v]
+        return v
+
+    return json.dumps(clean(obj), allow_nan=False)
+
+
 def _unsolved_dict(reason: str, time_ms: float, labels, xy) -> dict:
     out: dict = {"solved": False, "reason": reason}
     out.update(dict.fromkeys(_SOLUTION_KEYS))
-    out["time_ms"] = time_ms
+    out.update(time_ms=time_ms, n_matched=0, algorithm=None, catalog=None, R_cam_from_icrs=None)
     out["stars"] = [
         {"label": lab, "x": float(x), "y": float(y), "catalog_id": None, "residual_px": None}
         for lab, (x, y) in zip(labels, xy, strict=True)
@@ -209,6 +248,8 @@ def _cmd_identify(args) -> int:
         algorithm=args.algorithm,
     )
     s = result.solution
+    if s is None and args.plot:
+        print(f"starnav identify: not solved, no plot written to {args.plot}", file=sys.stderr)
     if s is not None and args.plot:
         from starnav.plot import plot_solution
 
@@ -224,7 +265,7 @@ def _cmd_identify(args) -> int:
             if s
             else _unsolved_dict(result.reason, result.time_ms, stars.labels, stars.xy)
         )
-        print(json.dumps(out))
+        print(_json(out))
     elif s:
         _print_solution(s)
     else:
@@ -287,7 +328,7 @@ def _cmd_simulate(args) -> int:
     _write_frame(args.output, frame)
     truth = _truth_dict(frame)
     if args.json:
-        print(json.dumps({"output": args.output, **truth}))
+        print(_json({"output": args.output, **truth}))
     else:
         print(
             f"wrote {truth['n_points']} points ({truth['n_false']} false) to {args.output}: "
@@ -312,6 +353,11 @@ def _cmd_demo(args) -> int:
         missing_frac=args.missing_frac,
         seed=rng,
     )
+    if len(frame.xy) < 3:
+        raise StarnavError(
+            f"the simulated {args.fov_deg:g}° field holds only {len(frame.xy)} stars: "
+            "choose a wider field of view"
+        )
     result = solve_verbose(
         frame.xy,
         width=camera.width,
@@ -334,18 +380,17 @@ def _cmd_demo(args) -> int:
             "false_stars_refused": int(np.sum((ids == -1) & (frame.true_id == FALSE_STAR_ID))),
         }
     if args.json:
+        labels = [str(n + 1) for n in range(len(frame.xy))]
+        solution = (
+            _solution_dict(s)
+            if s
+            else _unsolved_dict(result.reason, result.time_ms, labels, frame.xy)
+        )
         print(
-            json.dumps(
+            _json(
                 {
                     "truth": truth,
-                    "solution": _solution_dict(s)
-                    if s
-                    else _unsolved_dict(
-                        result.reason,
-                        result.time_ms,
-                        [str(n + 1) for n in range(len(frame.xy))],
-                        frame.xy,
-                    ),
+                    "solution": solution,
                     "comparison": right,
                     "database_bytes": database.nbytes,
                     "setup_s": setup_s,
@@ -397,7 +442,7 @@ def _cmd_database(args) -> int:
         "path": str(db.path) if db.path else None,
     }
     if args.json:
-        print(json.dumps(info))
+        print(_json(info))
     else:
         print(
             f"{info['catalog']}: {info['stars']} stars, {info['pairs']} pairs up to "
@@ -423,6 +468,9 @@ def main(argv: list[str] | None = None) -> int:
         return _COMMANDS[args.command](args)
     except StarnavError as exc:
         print(f"starnav {args.command}: error: {exc}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except MemoryError:
+        print(f"starnav {args.command}: error: out of memory (input too large)", file=sys.stderr)
         return EXIT_BAD_INPUT
     except BrokenPipeError:  # output piped into head & co: stop quietly
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())

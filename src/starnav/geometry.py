@@ -78,9 +78,14 @@ def chord_from_angle(angle_rad: float) -> float:
 
 
 def attitude_difference_deg(R_a: np.ndarray, R_b: np.ndarray) -> tuple[float, float]:
-    """(boresight separation, roll difference) in degrees between two attitudes."""
+    """(boresight separation, |rotation about the boresight|) in degrees between two attitudes.
+
+    The roll difference is taken from the relative rotation ``R_a R_b^T`` (not from the
+    difference of position angles, which is unstable near the celestial poles).
+    """
+    R_a = np.asarray(R_a, dtype=float)
+    R_b = np.asarray(R_b, dtype=float)
     boresight = float(np.degrees(angle_between(R_a[2], R_b[2])))
-    roll_a = radec_roll_from_attitude(R_a)[2]
-    roll_b = radec_roll_from_attitude(R_b)[2]
-    droll = (roll_a - roll_b + 180.0) % 360.0 - 180.0
-    return boresight, abs(droll)
+    D = R_a @ R_b.T
+    droll = np.degrees(np.arctan2(D[1, 0] - D[0, 1], D[0, 0] + D[1, 1]))
+    return boresight, float(abs(droll))

@@ -18,6 +18,7 @@ from starnav.errors import StarnavError
 from starnav.geometry import attitude_from_radec_roll, radec_roll_from_attitude
 
 FALSE_STAR_ID = -1
+MAX_FALSE_STARS = 10000
 
 
 @dataclass(frozen=True, eq=False)
@@ -48,7 +49,7 @@ def project_catalog(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Catalog rows inside the image and their exact pixel positions (no noise)."""
     c = catalog.vectors @ np.asarray(R_cam_from_icrs).T
-    front = np.flatnonzero(c[:, 2] > np.cos(camera.half_diagonal_rad + 0.01))
+    front = np.flatnonzero((c[:, 2] > 0.0) & (c[:, 2] > np.cos(camera.half_diagonal_rad + 0.01)))
     xy = camera.bearings_to_pixels(c[front])
     inside = camera.contains(xy)
     return front[inside], xy[inside]
@@ -77,8 +78,8 @@ def simulate_frame(
             raise StarnavError(f"{name} must be >= 0, got {value!r}")
     if not 0.0 <= missing_frac < 1.0:
         raise StarnavError(f"missing_frac must be in [0, 1), got {missing_frac!r}")
-    if false_stars < 0:
-        raise StarnavError(f"false_stars must be >= 0, got {false_stars!r}")
+    if not 0 <= false_stars <= MAX_FALSE_STARS:
+        raise StarnavError(f"false_stars must be in 0..{MAX_FALSE_STARS}, got {false_stars!r}")
     if parity not in (1, -1):
         raise StarnavError(f"parity must be +1 or -1, got {parity!r}")
     rng = np.random.default_rng(seed)

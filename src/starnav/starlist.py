@@ -41,6 +41,8 @@ def read_star_csv(path: str | Path) -> StarList:
     if not rows:
         raise StarListError(f"star list {str(path)!r} is empty")
     header = [h.strip().lower() for h in rows[0]]
+    if "" in header:
+        raise StarListError(f"star list {str(path)!r} has an empty column name in its header")
     unknown = [h for h in header if h not in _KNOWN and not h.startswith("true_")]
     if unknown or "x" not in header or "y" not in header:
         raise StarListError(

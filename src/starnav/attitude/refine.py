@@ -79,8 +79,10 @@ def refine_attitude(
 ) -> Refinement:
     """Refine ``R0`` (and the focal length when ``fit_focal``) on matched stars.
 
-    ``icrs_vectors`` (n, 3) are the catalog stars of the centroids ``xy`` (n, 2, px).
-    The focal length is only freed with at least 4 stars.
+    ``icrs_vectors`` (n, 3) are the catalog stars of the centroids ``xy`` (n, 2, px), n >= 2.
+    The focal length is only freed with at least 4 stars. The model's derivatives are exact
+    at the starting attitude; the optimiser's steps are small (the start is within a pixel or
+    so), and the covariance is computed with derivatives taken again at the solution.
     """
     xy = np.asarray(xy, dtype=float)
     icrs = np.asarray(icrs_vectors, dtype=float)
@@ -93,10 +95,13 @@ def refine_attitude(
     def jac(p):
         return _residuals_and_jacobian(p, R0, icrs, xy, camera, fit_focal)[1]
 
-    method = "lm" if 2 * len(xy) >= n_params else "trf"
-    fit = least_squares(fun, np.zeros(n_params), jac=jac, method=method, x_scale="jac")
-    res, J, focal = _residuals_and_jacobian(fit.x, R0, icrs, xy, camera, fit_focal)
+    fit = least_squares(fun, np.zeros(n_params), jac=jac, method="lm", x_scale="jac")
     R = _rotate(fit.x[:3], R0)
+    focal = camera.focal_px * np.exp(fit.x[3]) if fit_focal else camera.focal_px
+    # the Jacobian above is exact at omega = 0: linearise again about the solution for the
+    # covariance
+    zero = np.zeros(n_params)
+    res, J, focal = _residuals_and_jacobian(zero, R, icrs, xy, camera.with_focal(focal), fit_focal)
     residuals = np.column_stack([res[: len(xy)], res[len(xy) :]])
     dof = max(2 * len(xy) - n_params, 1)
     s2 = float(res @ res) / dof

@@ -30,7 +30,7 @@ _MAS_TO_RAD = np.pi / 180.0 / 3.6e6
 
 @dataclass(frozen=True, eq=False)
 class Catalog:
-    """Stars with ids, ICRS position (degrees) at ``epoch_year`` and magnitude.
+    """Stars with ids, ICRS position (degrees, at the epoch named in ``name``), magnitude.
 
     ``mag``: magnitudes in any band, smaller is brighter.
     """
@@ -40,7 +40,6 @@ class Catalog:
     dec_deg: np.ndarray
     mag: np.ndarray
     name: str
-    epoch_year: float | None = None
 
     def __len__(self) -> int:
         return len(self.ids)
@@ -67,7 +66,6 @@ class Catalog:
             self.dec_deg[keep],
             self.mag[keep],
             f"{self.name}, mag <= {mag_limit:g}",
-            self.epoch_year,
         )
 
 
@@ -121,7 +119,6 @@ def load_hipparcos(
         dec_deg=np.degrees(dec),
         mag=hp,
         name=f"Hipparcos (I/311), Hp <= {mag_limit:g}, epoch {epoch_year:g}",
-        epoch_year=float(epoch_year),
     )
 
 
@@ -130,7 +127,7 @@ def load_csv(path: str | Path, *, mag_limit: float | None = None) -> Catalog:
     path = Path(path)
     try:
         with path.open(newline="", encoding="utf-8-sig") as fh:
-            rows = list(csv.reader(fh))
+            rows = [r for r in csv.reader(fh) if any(cell.strip() for cell in r)]
     except (OSError, UnicodeDecodeError) as exc:
         raise CatalogError(f"cannot read catalog {str(path)!r}: {exc}") from None
     if not rows:
@@ -144,26 +141,30 @@ def load_csv(path: str | Path, *, mag_limit: float | None = None) -> Catalog:
             f"expected header id,ra_deg,dec_deg,mag, got {','.join(rows[0])}"
         )
     cols = [header.index(c) for c in need]
-    values = np.empty((len(rows) - 1, 4))
+    ids = np.empty(len(rows) - 1, dtype=np.int64)
+    values = np.empty((len(rows) - 1, 3))
     for n, row in enumerate(rows[1:]):
         try:
-            values[n] = [float(row[c]) for c in cols]
-        except (ValueError, IndexError):
+            ids[n] = int(row[cols[0]])
+            values[n] = [float(row[c]) for c in cols[1:]]
+        except (ValueError, IndexError, OverflowError):
             raise CatalogError(
-                f"catalog {str(path)!r} line {n + 2}: not four numbers: {','.join(row)!r}"
+                f"catalog {str(path)!r} row {n + 2}: need an integer id and three numbers, "
+                f"got {','.join(row)!r}"
             ) from None
     if len(values) == 0:
         raise CatalogError(f"catalog {str(path)!r} has a header but no stars")
     if not np.isfinite(values).all():
         bad = int(np.flatnonzero(~np.isfinite(values).all(axis=1))[0])
-        raise CatalogError(f"catalog {str(path)!r} line {bad + 2}: NaN or infinite value")
-    ids, ra, dec, mag = values.T
+        raise CatalogError(f"catalog {str(path)!r} row {bad + 2}: NaN or infinite value")
+    ra, dec, mag = values.T
     if (np.abs(dec) > 90.0).any():
         bad = int(np.flatnonzero(np.abs(dec) > 90.0)[0])
-        raise CatalogError(f"catalog {str(path)!r} line {bad + 2}: dec_deg {dec[bad]} outside ±90")
-    if len(np.unique(ids)) != len(ids):
-        raise CatalogError(f"catalog {str(path)!r} has duplicate ids")
-    cat = Catalog(ids.astype(np.int64), ra % 360.0, dec, mag, f"{path.name}")
+        raise CatalogError(f"catalog {str(path)!r} row {bad + 2}: dec_deg {dec[bad]} outside ±90")
+    unique, counts = np.unique(ids, return_counts=True)
+    if (counts > 1).any():
+        raise CatalogError(f"catalog {str(path)!r} repeats id {unique[np.argmax(counts > 1)]}")
+    cat = Catalog(ids, ra % 360.0, dec, mag, f"{path.name}")
     return cat if mag_limit is None else cat.brighter_than(mag_limit)
 
 
@@ -173,15 +174,29 @@ def load_catalog(
     mag_limit: float | None = None,
     epoch_year: float | None = None,
 ) -> Catalog:
-    """A catalog from a ``Catalog``, a CSV path, or None for the embedded Hipparcos."""
-    if isinstance(source, Catalog):
-        return source if mag_limit is None else source.brighter_than(mag_limit)
+    """A catalog from a ``Catalog``, a CSV path, or None for the embedded Hipparcos.
+
+    ``mag_limit``: keep stars with ``mag <= mag_limit`` (Hipparcos default 6.0, others: all);
+    ``epoch_year``: for Hipparcos only (a CSV or ``Catalog`` is used at its own epoch).
+    """
     if source is None or str(source).lower() == "hipparcos":
-        return _cached_hipparcos(
+        cat = _cached_hipparcos(
             DEFAULT_MAG_LIMIT if mag_limit is None else float(mag_limit),
             default_epoch_year() if epoch_year is None else float(epoch_year),
         )
-    return load_csv(source, mag_limit=mag_limit)
+    else:
+        if epoch_year is not None:
+            raise CatalogError(
+                "an epoch applies to the embedded Hipparcos catalog only; a CSV catalog is "
+                "used at the epoch of its positions"
+            )
+        if isinstance(source, Catalog):
+            cat = source if mag_limit is None else source.brighter_than(mag_limit)
+        else:
+            cat = load_csv(source, mag_limit=mag_limit)
+    if len(cat) < 3:
+        raise CatalogError(f"catalog {cat.name!r} holds {len(cat)} stars; at least 3 are needed")
+    return cat
 
 
 _HIP_CACHE: dict[tuple[float, float], Catalog] = {}

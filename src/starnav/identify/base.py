@@ -12,12 +12,15 @@ from starnav.identify.database import PairDatabase
 
 @dataclass(frozen=True)
 class MatchSettings:
-    """Tolerances of an identification, as angles in radians.
+    """Tolerances and limits of an identification.
 
-    ``pair_tol_rad``: how far a measured inter-star angle may be from the catalog's;
-    ``match_radius_rad``: how close a reprojected catalog star must be to count as agreeing;
-    ``max_false_match_probability``: refuse any answer less certain than this;
-    ``parity``: +1 or -1 when known, None to find it.
+    ``pair_tol_rad``: how far a measured inter-star angle may be from the catalog's (radians);
+    ``match_radius_rad``: how close a reprojected catalog star must be to count as agreeing
+    (radians); ``max_false_match_probability``: refuse any answer less certain than this;
+    ``parity``: +1 or -1 when known, None to find it; ``max_stars``: triangles are made of
+    the first (brightest) this many stars; ``max_screen_stars``: hypotheses are screened
+    against the first this many (the full verification uses all); ``max_hypotheses``: give
+    up after testing this many.
     """
 
     pair_tol_rad: float
@@ -25,6 +28,7 @@ class MatchSettings:
     max_false_match_probability: float = 1e-4
     parity: int | None = None
     max_stars: int = 25
+    max_screen_stars: int = 50
     max_hypotheses: int = 20000
 
 
@@ -33,8 +37,9 @@ class Identification:
     """A verified identification.
 
     ``obs_index``/``cat_index``: matched bearing rows and catalog rows; ``R_cam_from_icrs``:
-    the attitude from all matches (Wahba); ``false_match_probability``: the chance that a
-    random hypothesis would agree this well (corrected for the hypotheses tried).
+    the attitude of the accepted hypothesis (from its star triangle); ``parity``;
+    ``false_match_probability``: the chance that a wrong hypothesis would agree this well
+    (corrected for the ``hypotheses`` tried).
     """
 
     obs_index: np.ndarray

@@ -22,6 +22,8 @@ from starnav.identify.base import Identification, IdentifyOutcome, MatchSettings
 from starnav.identify.database import PairDatabase
 from starnav.identify.verify import false_match_probability, match_catalog
 
+_SCREEN_CHUNK = 2000  # hypotheses screened per batch (bounds memory on wide fields)
+
 
 def triangle_order(n: int) -> Iterator[tuple[int, int, int]]:
     """Index triples (i < j < k) of ``n`` stars in Mortari's order: every star is left behind
@@ -77,10 +79,26 @@ def _screen(
 ) -> np.ndarray:
     """Number of bearings that land near some catalog star, for every hypothesis at once.
 
+    ``bearings``: the stars to screen with (the brightest ``max_screen_stars``);
     ``triangle`` (3, 3): the measured triangle; ``catalog_triangles`` (m, 3, 3): the catalog
-    vectors of each hypothesis; ``parities`` (m,). A quick count (a catalog star may be hit
-    twice): the hypotheses that pass are verified properly with ``match_catalog``.
+    vectors of each hypothesis; ``parities`` (m,). A quick count that may only err high (a
+    catalog star may be hit twice); the hypotheses that pass are verified with
+    ``match_catalog``.
     """
+    if len(parities) > _SCREEN_CHUNK:
+        return np.concatenate(
+            [
+                _screen(
+                    bearings,
+                    triangle,
+                    catalog_triangles[k : k + _SCREEN_CHUNK],
+                    parities[k : k + _SCREEN_CHUNK],
+                    database,
+                    settings,
+                )
+                for k in range(0, len(parities), _SCREEN_CHUNK)
+            ]
+        )
     flip = np.ones((len(parities), 1, 3))
     flip[:, 0, 1] = parities
     # Wahba by SVD for all hypotheses, on the y-flipped bearings of mirrored ones
@@ -95,6 +113,17 @@ def _screen(
         icrs.reshape(-1, 3), k=1, distance_upper_bound=chord_from_angle(settings.match_radius_rad)
     )
     return np.isfinite(dist).reshape(len(parities), len(bearings)).sum(axis=1)
+
+
+def _mirror_agrees(bearings, ver, parity, database, settings, hypotheses) -> bool:
+    """Whether the mirror image of a verified hypothesis verifies too (collinear stars)."""
+    vectors = database.catalog.vectors
+    R = wahba(bearings[ver.obs_index], vectors[ver.cat_index], parity=-parity)
+    mirror = match_catalog(bearings, R, database, settings.match_radius_rad)
+    p = false_match_probability(
+        len(bearings), len(mirror.obs_index), 3, mirror.p_chance, hypotheses
+    )
+    return p <= settings.max_false_match_probability
 
 
 def _triple_product(v: np.ndarray) -> np.ndarray:
@@ -115,6 +144,7 @@ class Pyramid:
         settings: MatchSettings,
     ) -> IdentifyOutcome:
         """Identify camera-frame ``bearings`` (n, 3); ``order`` lists rows best-first."""
+        full_order = order
         order = np.asarray(order)[: settings.max_stars]
         n_total = len(bearings)
         if len(order) < 3:
@@ -129,6 +159,8 @@ class Pyramid:
         # with it are not verified in full
         field_rad = np.arccos(np.clip(bearings[:, 2].min(), -1.0, 1.0)) + settings.match_radius_rad
         p_floor = (1.0 - np.cos(settings.match_radius_rad)) / (1.0 - np.cos(field_rad))
+        screen_set = bearings[np.asarray(full_order)[: settings.max_screen_stars]]
+        n_screen = len(screen_set)
         for i, j, k in triangle_order(len(order)):
             idx = order[[i, j, k]]
             b = bearings[idx]
@@ -151,9 +183,11 @@ class Pyramid:
             if len(triples) == 0:
                 continue
             hypotheses += len(triples)
-            agree = _screen(bearings, b, vectors[triples], parities, database, settings)
+            agree = _screen(screen_set, b, vectors[triples], parities, database, settings)
             for h in np.argsort(-agree, kind="stable"):
-                p_best_case = false_match_probability(n_total, agree[h], 3, p_floor, hypotheses)
+                p_best_case = false_match_probability(
+                    n_total, agree[h] + n_total - n_screen, 3, p_floor, hypotheses
+                )
                 if p_best_case > settings.max_false_match_probability:
                     break  # neither this nor any later (lower) count can be convincing
                 parity = int(parities[h])
@@ -164,7 +198,16 @@ class Pyramid:
                 )
                 best_p = min(best_p, p)
                 if p <= settings.max_false_match_probability:
-                    found = self._polish(bearings, ver, R, parity, database, settings, hypotheses)
+                    if settings.parity is None and _mirror_agrees(
+                        bearings, ver, parity, database, settings, hypotheses
+                    ):
+                        return IdentifyOutcome(
+                            None,
+                            "parity ambiguous: the identified stars are nearly collinear "
+                            "(give the parity to solve)",
+                            hypotheses,
+                        )
+                    found = Identification(ver.obs_index, ver.cat_index, R, parity, p, hypotheses)
                     return IdentifyOutcome(found, "", hypotheses)
             if hypotheses >= settings.max_hypotheses:
                 return IdentifyOutcome(None, f"gave up after {hypotheses} hypotheses", hypotheses)
@@ -178,17 +221,3 @@ class Pyramid:
         else:
             reason = "no hypothesis agreed with enough stars to be convincing"
         return IdentifyOutcome(None, reason, hypotheses)
-
-    @staticmethod
-    def _polish(bearings, ver, R, parity, database, settings, hypotheses) -> Identification:
-        """Re-solve with every agreeing star and match again (takes stars the triangle's
-        rougher attitude missed)."""
-        vectors = database.catalog.vectors
-        for _ in range(2):
-            R_all = wahba(bearings[ver.obs_index], vectors[ver.cat_index], parity=parity)
-            again = match_catalog(bearings, R_all, database, settings.match_radius_rad)
-            if len(again.obs_index) < len(ver.obs_index):
-                break
-            ver, R = again, R_all
-        p = false_match_probability(len(bearings), len(ver.obs_index), 3, ver.p_chance, hypotheses)
-        return Identification(ver.obs_index, ver.cat_index, R, parity, p, hypotheses)
