@@ -4,7 +4,7 @@ from starnav.identify.base import Identification, Identifier, IdentifyOutcome, M
 from starnav.identify.database import PairDatabase, build_database, cache_dir
 from starnav.identify.pyramid import Pyramid
 
-ALGORITHMS: dict[str, type] = {"pyramid": Pyramid}
+ALGORITHMS: dict[str, type[Identifier]] = {"pyramid": Pyramid}
 DEFAULT_ALGORITHM = "pyramid"
 
 __all__ = [

@@ -18,9 +18,9 @@ class MatchSettings:
     ``match_radius_rad``: how close a reprojected catalog star must be to count as agreeing
     (radians); ``max_false_match_probability``: refuse any answer less certain than this;
     ``parity``: +1 or -1 when known, None to find it; ``max_stars``: triangles are made of
-    the first (brightest) this many stars; ``max_screen_stars``: hypotheses are screened
-    against the first this many (the full verification uses all); ``max_hypotheses``: give
-    up after testing this many.
+    the first (brightest) this many stars; ``max_screen_stars``: identification uses the first
+    this many (the attitude fit then takes in the rest); ``max_hypotheses``: give up after
+    testing this many.
     """
 
     pair_tol_rad: float

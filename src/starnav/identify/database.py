@@ -36,7 +36,7 @@ class PairDatabase:
     """Catalog star pairs with their angular separation, sorted by angle.
 
     ``pair_a``, ``pair_b``: catalog row indices (a < b); ``pair_angle_rad`` ascending.
-    ``build_s``: seconds it took to build (0 stays the build time when loaded from cache);
+    ``build_s``: seconds the build took (kept in the cache file, so also shown when loaded);
     ``from_cache``: whether it was loaded from disk; ``path``: the cache file, if any.
     """
 

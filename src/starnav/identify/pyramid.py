@@ -13,6 +13,7 @@ product) and is tested both ways when the triangle is too flat to tell.
 from __future__ import annotations
 
 from collections.abc import Iterator
+from dataclasses import replace
 
 import numpy as np
 
@@ -79,7 +80,6 @@ def _screen(
 ) -> np.ndarray:
     """Number of bearings that land near some catalog star, for every hypothesis at once.
 
-    ``bearings``: the stars to screen with (the brightest ``max_screen_stars``);
     ``triangle`` (3, 3): the measured triangle; ``catalog_triangles`` (m, 3, 3): the catalog
     vectors of each hypothesis; ``parities`` (m,). A quick count that may only err high (a
     catalog star may be hit twice); the hypotheses that pass are verified with
@@ -143,8 +143,18 @@ class Pyramid:
         database: PairDatabase,
         settings: MatchSettings,
     ) -> IdentifyOutcome:
-        """Identify camera-frame ``bearings`` (n, 3); ``order`` lists rows best-first."""
-        full_order = order
+        """Identify camera-frame ``bearings`` (n, 3); ``order`` lists rows best-first.
+
+        Only the first ``settings.max_screen_stars`` stars in ``order`` take part (the caller
+        matches the rest once the attitude is known).
+        """
+        used = np.asarray(order)[: settings.max_screen_stars]
+        if len(used) < len(bearings):
+            outcome = self.identify(bearings[used], np.arange(len(used)), database, settings)
+            found = outcome.identification
+            if found is not None:
+                found = replace(found, obs_index=used[found.obs_index])
+            return replace(outcome, identification=found)
         order = np.asarray(order)[: settings.max_stars]
         n_total = len(bearings)
         if len(order) < 3:
@@ -159,8 +169,6 @@ class Pyramid:
         # with it are not verified in full
         field_rad = np.arccos(np.clip(bearings[:, 2].min(), -1.0, 1.0)) + settings.match_radius_rad
         p_floor = (1.0 - np.cos(settings.match_radius_rad)) / (1.0 - np.cos(field_rad))
-        screen_set = bearings[np.asarray(full_order)[: settings.max_screen_stars]]
-        n_screen = len(screen_set)
         for i, j, k in triangle_order(len(order)):
             idx = order[[i, j, k]]
             b = bearings[idx]
@@ -183,11 +191,9 @@ class Pyramid:
             if len(triples) == 0:
                 continue
             hypotheses += len(triples)
-            agree = _screen(screen_set, b, vectors[triples], parities, database, settings)
+            agree = _screen(bearings, b, vectors[triples], parities, database, settings)
             for h in np.argsort(-agree, kind="stable"):
-                p_best_case = false_match_probability(
-                    n_total, agree[h] + n_total - n_screen, 3, p_floor, hypotheses
-                )
+                p_best_case = false_match_probability(n_total, agree[h], 3, p_floor, hypotheses)
                 if p_best_case > settings.max_false_match_probability:
                     break  # neither this nor any later (lower) count can be convincing
                 parity = int(parities[h])

@@ -37,8 +37,8 @@ def match_catalog(
     database: PairDatabase,
     radius_rad: float,
 ) -> Verification:
-    """Pair bearings with reprojected catalog stars within ``radius_rad``, closest first,
-    each bearing and each catalog star at most once."""
+    """Pair bearings with reprojected catalog stars within ``radius_rad``, one to one, with
+    the least total squared distance (so close doubles are not both given one star)."""
     boresight = R_cam_from_icrs[2]
     cos_field = float(np.min(bearings[:, 2]))
     field_rad = float(np.arccos(np.clip(cos_field, -1.0, 1.0))) + radius_rad
