@@ -27,6 +27,12 @@ EXPECTED_KEYS = {
 }
 
 
+def _identify(capsys, path, *extra):
+    """``starnav identify PATH`` with the 12° / 512 px camera and the contest catalog."""
+    argv = ["identify", str(path), "--fov-deg", "12", "--width", "512", "--catalog", CATALOG]
+    return _run(capsys, *argv, *extra)
+
+
 def _run(capsys, *argv):
     try:
         code = main(list(argv))
@@ -37,16 +43,9 @@ def _run(capsys, *argv):
 
 
 def test_identify_json_contest_map(capsys):
-    code, out, err = _run(
+    code, out, err = _identify(
         capsys,
-        "identify",
         MAP1,
-        "--fov-deg",
-        "12",
-        "--width",
-        "512",
-        "--catalog",
-        CATALOG,
         "--json",
     )
     assert code == 0 and err == ""
@@ -59,9 +58,7 @@ def test_identify_json_contest_map(capsys):
 
 
 def test_identify_table_output(capsys):
-    code, out, _ = _run(
-        capsys, "identify", MAP1, "--fov-deg", "12", "--width", "512", "--catalog", CATALOG
-    )
+    code, out, _ = _identify(capsys, MAP1)
     assert code == 0
     assert out.startswith("solved: RA 109.6") and "A15" in out
 
@@ -70,18 +67,7 @@ def test_not_solved_exits_1_with_json(capsys, tmp_path):
     path = tmp_path / "random.csv"
     xy = np.random.default_rng(2).uniform(0, 512, (10, 2))
     path.write_text("x,y\n" + "".join(f"{x:.2f},{y:.2f}\n" for x, y in xy))
-    code, out, err = _run(
-        capsys,
-        "identify",
-        str(path),
-        "--fov-deg",
-        "12",
-        "--width",
-        "512",
-        "--catalog",
-        CATALOG,
-        "--json",
-    )
+    code, out, err = _identify(capsys, path, "--json")
     assert code == 1 and err == ""
     result = json.loads(out)
     assert result["solved"] is False and result["reason"]
@@ -111,18 +97,7 @@ def test_bad_star_list_exits_2_with_one_line(capsys, tmp_path, case):
     text, needle = BAD_FILES[case]
     path = tmp_path / "stars.csv"
     path.write_text(text)
-    code, out, err = _run(
-        capsys,
-        "identify",
-        str(path),
-        "--fov-deg",
-        "12",
-        "--width",
-        "512",
-        "--catalog",
-        CATALOG,
-        "--json",
-    )
+    code, out, err = _identify(capsys, path, "--json")
     assert code == 2 and out == ""
     assert len(err.strip().splitlines()) == 1 and needle in err
     assert "Traceback" not in err
@@ -275,31 +250,17 @@ def test_console_script_no_traceback(tmp_path):
 
 def test_identify_plot_writes_png(capsys, tmp_path):
     png = tmp_path / "map.png"
-    code, _, _ = _run(
+    code, _, _ = _identify(
         capsys,
-        "identify",
         MAP1,
-        "--fov-deg",
-        "12",
-        "--width",
-        "512",
-        "--catalog",
-        CATALOG,
         "--plot",
         str(png),
     )
     assert code == 0
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and png.stat().st_size > 10000
-    code, _, err = _run(
+    code, _, err = _identify(
         capsys,
-        "identify",
         MAP1,
-        "--fov-deg",
-        "12",
-        "--width",
-        "512",
-        "--catalog",
-        CATALOG,
         "--plot",
         str(tmp_path / "no" / "map.png"),
     )

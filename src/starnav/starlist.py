@@ -7,12 +7,12 @@ starts with ``true_`` carry the truth beside simulated input and are ignored.
 
 from __future__ import annotations
 
-import csv
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from starnav.csvrows import read_rows
 from starnav.errors import StarListError
 
 # A centroid may sit a little outside the image (blooming, a star cut by the edge); beyond
@@ -33,33 +33,22 @@ class StarList:
 def read_star_csv(path: str | Path) -> StarList:
     """Read a star list CSV; raise ``StarListError`` naming the problem."""
     path = Path(path)
-    try:
-        with path.open(newline="", encoding="utf-8-sig") as fh:
-            rows = [r for r in csv.reader(fh) if any(cell.strip() for cell in r)]
-    except (OSError, UnicodeDecodeError) as exc:
-        raise StarListError(f"cannot read star list {str(path)!r}: {exc}") from None
-    if not rows:
-        raise StarListError(f"star list {str(path)!r} is empty")
-    header = [h.strip().lower() for h in rows[0]]
-    if "" in header:
-        raise StarListError(f"star list {str(path)!r} has an empty column name in its header")
+    header, rows = read_rows(path, what="star list", error=StarListError)
     unknown = [h for h in header if h not in _KNOWN and not h.startswith("true_")]
     if unknown or "x" not in header or "y" not in header:
         raise StarListError(
-            f"star list {str(path)!r} has columns {','.join(rows[0])}; expected x,y and "
+            f"star list {str(path)!r} has columns {','.join(header)}; expected x,y and "
             f"optionally label, flux or mag"
             + (f" (unknown: {','.join(unknown)})" if unknown else "")
         )
     if "flux" in header and "mag" in header:
         raise StarListError(f"star list {str(path)!r} has both flux and mag; give one")
-    if len(header) != len(set(header)):
-        raise StarListError(f"star list {str(path)!r} repeats a column name")
     col = {name: header.index(name) for name in header}
     bright_col = "flux" if "flux" in col else "mag" if "mag" in col else None
-    xy = np.empty((len(rows) - 1, 2))
-    bright = np.empty(len(rows) - 1)
+    xy = np.empty((len(rows), 2))
+    bright = np.empty(len(rows))
     labels = []
-    for n, row in enumerate(rows[1:]):
+    for n, row in enumerate(rows):
         line = n + 2
         if len(row) != len(header):
             raise StarListError(

@@ -8,7 +8,6 @@ J1991.25; proper motion and parallax are propagated to the requested epoch with 
 
 from __future__ import annotations
 
-import csv
 import datetime as _dt
 import hashlib
 import warnings
@@ -19,6 +18,7 @@ from pathlib import Path
 import erfa
 import numpy as np
 
+from starnav.csvrows import read_rows
 from starnav.errors import CatalogError
 from starnav.geometry import radec_to_unit
 
@@ -125,25 +125,18 @@ def load_hipparcos(
 def load_csv(path: str | Path, *, mag_limit: float | None = None) -> Catalog:
     """A plain CSV catalog with header ``id,ra_deg,dec_deg,mag`` (positions used as given)."""
     path = Path(path)
-    try:
-        with path.open(newline="", encoding="utf-8-sig") as fh:
-            rows = [r for r in csv.reader(fh) if any(cell.strip() for cell in r)]
-    except (OSError, UnicodeDecodeError) as exc:
-        raise CatalogError(f"cannot read catalog {str(path)!r}: {exc}") from None
-    if not rows:
-        raise CatalogError(f"catalog {str(path)!r} is empty")
-    header = [h.strip().lower() for h in rows[0]]
+    header, rows = read_rows(path, what="catalog", error=CatalogError)
     need = ["id", "ra_deg", "dec_deg", "mag"]
     missing = [c for c in need if c not in header]
     if missing:
         raise CatalogError(
             f"catalog {str(path)!r} lacks column(s) {', '.join(missing)}; "
-            f"expected header id,ra_deg,dec_deg,mag, got {','.join(rows[0])}"
+            f"expected header id,ra_deg,dec_deg,mag, got {','.join(header)}"
         )
     cols = [header.index(c) for c in need]
-    ids = np.empty(len(rows) - 1, dtype=np.int64)
-    values = np.empty((len(rows) - 1, 3))
-    for n, row in enumerate(rows[1:]):
+    ids = np.empty(len(rows), dtype=np.int64)
+    values = np.empty((len(rows), 3))
+    for n, row in enumerate(rows):
         try:
             ids[n] = int(row[cols[0]])
             values[n] = [float(row[c]) for c in cols[1:]]
