@@ -162,6 +162,29 @@ def _build_parser() -> argparse.ArgumentParser:
     p.add_argument("--missing-frac", type=_finite, default=0.1)
     p.add_argument("--json", action="store_true")
 
+    p = sub.add_parser("pointing", help="boresight from three known stars (or the best three)")
+    p.add_argument("stars", help="CSV: ra_deg,dec_deg and x,y or r_px (optionally label)")
+    p.add_argument("--focal-px", type=_finite, help="focal length (px); default: solve for it")
+    p.add_argument("--width", type=_positive_int, help="image width (px), needed with x,y")
+    p.add_argument("--height", type=_positive_int, help="image height (px; default: width)")
+    p.add_argument("--sigma-px", type=_finite, help="centroid noise per axis, for the 1σ error")
+    p.add_argument("--parity", type=int, choices=(1, -1), default=1)
+    p.add_argument(
+        "--select-best",
+        action="store_true",
+        help="from N > 3 stars pick the three with the smallest predicted error",
+    )
+    p.add_argument("--json", action="store_true")
+
+    p = sub.add_parser("pointing-study", help="boresight error of classic star arrangements")
+    p.add_argument("--fov-deg", type=_finite, default=12.0)
+    p.add_argument("--width", type=_positive_int, default=512)
+    p.add_argument("--sigma-px", type=_finite, default=0.5)
+    p.add_argument("--trials", type=_positive_int, default=20000, help="Monte Carlo draws")
+    p.add_argument("--seed", type=_count, default=0)
+    p.add_argument("--out-dir", default=".", help="where the PNG figures go")
+    p.add_argument("--json", action="store_true")
+
     p = sub.add_parser("database", help="build (or load) the pair database and report it")
     _add_camera(p)
     _add_catalog(p)
@@ -453,11 +476,91 @@ def _cmd_database(args) -> int:
     return EXIT_OK
 
 
+def _print_pointing(p, used_labels) -> None:
+    roll = "-" if p.roll_deg is None else f"{p.roll_deg:.4f}°"
+    sigma = "" if p.sigma_boresight_arcsec is None else f", 1σ {p.sigma_boresight_arcsec:.2f}″"
+    print(f"stars used: {', '.join(used_labels)}")
+    print(
+        f"boresight: RA {p.ra_deg:.6f}°  Dec {p.dec_deg:+.6f}°  roll {roll}  focal "
+        f"{p.focal_px:.3f} px  consistency |d|-1 = {p.consistency:.2e}{sigma}"
+    )
+    for k, alt in enumerate(p.alternatives, 1):
+        print(
+            f"  alternative {k}: RA {alt.ra_deg:.6f}°  Dec {alt.dec_deg:+.6f}°  focal "
+            f"{alt.focal_px:.3f} px"
+        )
+    if p.note:
+        print(f"note: {p.note}")
+
+
+def _cmd_pointing(args) -> int:
+    from starnav.pointing import PointingError, best_triple, three_star
+    from starnav.starlist import read_known_stars_csv
+
+    stars = read_known_stars_csv(args.stars)
+    height = args.height if args.height is not None else args.width
+    rows = np.arange(len(stars.ra_deg))
+    if args.select_best:
+        if stars.xy is None or args.focal_px is None or args.width is None:
+            raise PointingError("--select-best needs x,y columns, --focal-px and --width")
+        rows = np.array(
+            best_triple(
+                stars.ra_deg,
+                stars.dec_deg,
+                stars.xy,
+                focal_px=args.focal_px,
+                width=args.width,
+                height=height,
+                sigma_px=args.sigma_px or 1.0,
+            )
+        )
+    result = three_star(
+        stars.ra_deg[rows],
+        stars.dec_deg[rows],
+        xy=None if stars.xy is None else stars.xy[rows],
+        r_px=None if stars.r_px is None else stars.r_px[rows],
+        focal_px=args.focal_px,
+        width=args.width,
+        height=height if args.width is not None else None,
+        sigma_px=args.sigma_px,
+        parity=args.parity,
+    )
+    used = [stars.labels[k] for k in rows]
+    if args.json:
+        print(_json({**result.to_dict(), "stars_used": used}))
+    else:
+        _print_pointing(result, used)
+    return EXIT_OK
+
+
+def _cmd_pointing_study(args) -> int:
+    from starnav.pointing_study import format_table, run_study
+
+    out_dir = Path(args.out_dir)
+    if not out_dir.is_dir():
+        raise StarnavError(f"--out-dir {args.out_dir!r} is not a directory")
+    result = run_study(
+        fov_deg=args.fov_deg,
+        width=args.width,
+        sigma_px=args.sigma_px,
+        trials=args.trials,
+        seed=args.seed,
+        out_dir=out_dir,
+    )
+    if args.json:
+        print(_json(result.to_dict()))
+    else:
+        print(format_table(result))
+    return EXIT_OK
+
+
 _COMMANDS = {
     "identify": _cmd_identify,
     "simulate": _cmd_simulate,
     "demo": _cmd_demo,
     "database": _cmd_database,
+    "pointing": _cmd_pointing,
+    "pointing-study": _cmd_pointing_study,
 }
 
 

@@ -29,6 +29,7 @@ from starnav.geometry import (
 
 # a triple whose stars span less volume than this (|det U|) is "nearly collinear"
 MIN_TRIPLE_PRODUCT = 1e-9
+MAX_INCONSISTENCY = 0.2  # | |d| - 1 | beyond this: the data cannot be one camera's view
 _F_GRID = np.geomspace(1.0, 1e7, 4000)  # focal lengths (px) searched when f is unknown
 
 
@@ -60,8 +61,15 @@ class Pointing:
     fit_rms_px: float | None = None
 
     def to_dict(self) -> dict:
-        keys = ("ra_deg", "dec_deg", "roll_deg", "focal_px", "consistency",
-                "sigma_boresight_arcsec", "fit_rms_px")
+        keys = (
+            "ra_deg",
+            "dec_deg",
+            "roll_deg",
+            "focal_px",
+            "consistency",
+            "sigma_boresight_arcsec",
+            "fit_rms_px",
+        )
         out = {k: getattr(self, k) for k in keys}
         out["alternatives"] = [a.to_dict() for a in self.alternatives]
         out["note"] = self.note
@@ -209,7 +217,14 @@ def three_star(
     if focal_px is not None:
         if not (np.isfinite(focal_px) and focal_px > 0):
             raise PointingError(f"focal_px must be positive, got {focal_px!r}")
-        return solution(float(focal_px))
+        known = solution(float(focal_px))
+        if abs(known.consistency) > MAX_INCONSISTENCY:
+            raise PointingError(
+                f"the distances do not fit these stars at focal length {focal_px:g} px: the "
+                f"boresight equations give |d| = {1 + known.consistency:.3f} (cosines beyond "
+                "what the star separations allow); check the identification and focal length"
+            )
+        return known
     roots = focal_solutions(U, a)
     if not roots:
         raise PointingError(
@@ -230,9 +245,8 @@ def three_star(
         sens = [sigma_boresight_arcsec(U, a, s.focal_px, 1.0) for s in sols]
         sols = [sols[k] for k in np.argsort(sens)]
     if len(sols) > 1:
-        note = (
-            f"{len(sols)} focal lengths fit these three stars; best first"
-            + ("" if offsets is not None else " (x,y would tell them apart)")
+        note = f"{len(sols)} focal lengths fit these three stars; best first" + (
+            "" if offsets is not None else " (x,y would tell them apart)"
         )
         return _with(sols[0], alternatives=tuple(sols[1:]), note=note)
     return sols[0]

@@ -120,3 +120,56 @@ def check_star_list(
             row = int(np.flatnonzero(~np.isfinite(brightness))[0])
             raise StarListError(f"star {row + 1} has a NaN or infinite brightness")
     return StarList(xy, tuple(str(label) for label in labels), brightness)
+
+
+@dataclass(frozen=True, eq=False)
+class KnownStars:
+    """Stars with known sky position and measured image position (for three-star pointing):
+    ``ra_deg``, ``dec_deg`` (n,), and either ``xy`` (n, 2, px) or ``r_px`` (n,)."""
+
+    ra_deg: np.ndarray
+    dec_deg: np.ndarray
+    xy: np.ndarray | None
+    r_px: np.ndarray | None
+    labels: tuple[str, ...]
+
+
+def read_known_stars_csv(path: str | Path) -> KnownStars:
+    """CSV with ``ra_deg,dec_deg`` and either ``x,y`` or ``r_px`` (and optionally ``label``)."""
+    header, rows = read_rows(path, what="star list", error=StarListError)
+    has_xy = "x" in header and "y" in header
+    has_r = "r_px" in header
+    allowed = {"label", "ra_deg", "dec_deg", "x", "y", "r_px"}
+    unknown = [h for h in header if h not in allowed]
+    if unknown or "ra_deg" not in header or "dec_deg" not in header or has_xy == has_r:
+        raise StarListError(
+            f"star list {str(path)!r} has columns {','.join(header)}; expected ra_deg,dec_deg "
+            "and either x,y or r_px (optionally label)"
+        )
+    cols = ["ra_deg", "dec_deg", *(["x", "y"] if has_xy else ["r_px"])]
+    values = np.empty((len(rows), len(cols)))
+    for n, row in enumerate(rows):
+        if len(row) != len(header):
+            raise StarListError(
+                f"star list {str(path)!r} line {n + 2}: {len(row)} fields, header has {len(header)}"
+            )
+        try:
+            values[n] = [float(row[header.index(c)]) for c in cols]
+        except ValueError:
+            raise StarListError(
+                f"star list {str(path)!r} line {n + 2}: not a number in {','.join(row)!r}"
+            ) from None
+    if not np.isfinite(values).all():
+        bad = int(np.flatnonzero(~np.isfinite(values).all(axis=1))[0])
+        raise StarListError(f"star list {str(path)!r} line {bad + 2}: NaN or infinite value")
+    labels = tuple(
+        row[header.index("label")].strip() if "label" in header else str(n + 1)
+        for n, row in enumerate(rows)
+    )
+    return KnownStars(
+        ra_deg=values[:, 0],
+        dec_deg=values[:, 1],
+        xy=values[:, 2:4] if has_xy else None,
+        r_px=None if has_xy else values[:, 2],
+        labels=labels,
+    )
