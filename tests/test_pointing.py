@@ -206,3 +206,20 @@ def test_cli_pointing_bad_files(capsys, tmp_path, text, needle):
     code = main(["pointing", str(path)])
     err = capsys.readouterr().err
     assert code == 2 and needle in err and len(err.strip().splitlines()) == 1
+
+
+def test_best_three_star_from_a_solution(contest_catalog):
+    """Best triple of contest map 1's identified stars: boresight within 1 arcmin of the full
+    least-squares attitude (the map is exact)."""
+    import starnav
+    from conftest import CONTEST
+    from starnav.starlist import read_star_csv
+
+    stars = read_star_csv(CONTEST / "images" / "xingtu01.csv")
+    s = starnav.solve(
+        stars.xy, width=512, fov_deg=12.0, labels=stars.labels, catalog=contest_catalog
+    )
+    pointing, used = starnav.best_three_star(s, width=512, catalog=contest_catalog)
+    assert len(used) == 3 and set(used) <= set(stars.labels)
+    assert _angle(pointing.boresight, s.R_cam_from_icrs[2]) < np.radians(1 / 60)
+    assert pointing.roll_deg == pytest.approx(s.roll_deg, abs=0.05)

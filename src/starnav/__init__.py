@@ -1,6 +1,6 @@
 """starnav: star identification, attitude and celestial navigation from star cameras."""
 
-from starnav.api import Solution, SolveResult, StarMatch, solve, solve_verbose
+from starnav.api import Solution, SolveResult, StarMatch, best_three_star, solve, solve_verbose
 from starnav.camera import Camera
 from starnav.catalog import Catalog, load_catalog
 from starnav.errors import CameraError, CatalogError, StarListError, StarnavError
@@ -19,6 +19,7 @@ __all__ = [
     "StarListError",
     "StarMatch",
     "StarnavError",
+    "best_three_star",
     "load_catalog",
     "simulate_frame",
     "solve",

@@ -22,6 +22,7 @@ from starnav.identify import (
 )
 from starnav.identify.database import database_angle_deg
 from starnav.identify.verify import false_match_probability, match_catalog
+from starnav.pointing import Pointing, best_triple, three_star
 from starnav.simulate import project_catalog
 from starnav.starlist import check_star_list
 
@@ -295,3 +296,53 @@ def solve(
         catalog=catalog,
         **options,
     ).solution
+
+
+def best_three_star(
+    solution: Solution,
+    *,
+    width: float,
+    height: float | None = None,
+    catalog: Catalog | str | Path | None = None,
+    sigma_px: float = 1.0,
+) -> tuple[Pointing, tuple[str, ...]]:
+    """Three-star pointing with the best triple of a solution's identified stars.
+
+    Picks the three matched stars whose boresight has the smallest predicted error (analytic
+    covariance at ``sigma_px``) and solves with them at the solution's focal length. Returns
+    the ``Pointing`` and the labels of the stars used. ``catalog``: the one the solution came
+    from (default Hipparcos).
+    """
+    cat = load_catalog(catalog)
+    height = width if height is None else height
+    row_of = {int(i): n for n, i in enumerate(cat.ids)}
+    matched = [m for m in solution.stars if m.catalog_id is not None]
+    if len(matched) < 3:
+        raise StarnavError(f"the solution has {len(matched)} identified stars; 3 are needed")
+    missing = [m.catalog_id for m in matched if m.catalog_id not in row_of]
+    if missing:
+        raise StarnavError(f"catalog {cat.name!r} has no star with id {missing[0]}")
+    rows = [row_of[m.catalog_id] for m in matched]
+    xy = np.array([[m.x, m.y] for m in matched])
+    triple = list(
+        best_triple(
+            cat.ra_deg[rows],
+            cat.dec_deg[rows],
+            xy,
+            focal_px=solution.focal_px,
+            width=width,
+            height=height,
+            sigma_px=sigma_px,
+        )
+    )
+    pointing = three_star(
+        cat.ra_deg[rows][triple],
+        cat.dec_deg[rows][triple],
+        xy=xy[triple],
+        width=width,
+        height=height,
+        focal_px=solution.focal_px,
+        sigma_px=sigma_px,
+        parity=solution.parity,
+    )
+    return pointing, tuple(matched[k].label for k in triple)
