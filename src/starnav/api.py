@@ -206,28 +206,18 @@ def solve_verbose(
         )
     R = fit.R_cam_from_icrs
     p_false = false_match_probability(len(bearings), len(obs), 3, ver.p_chance, found.hypotheses)
-    # stars the solution says should be measurable: catalog stars inside the image
-    expected = min(len(stars.xy), len(project_catalog(cat, R, fit.camera)[0]))
-    refusal = ""
-    if not fit_focal and len(obs) >= _MIN_STARS_SCALE_CHECK:
-        # a wrong focal length biases the attitude beyond its error bars: test the scale
-        free = refine_attitude(R, cat.vectors[cat_rows], stars.xy[obs], camera, fit_focal=True)
-        df = free.camera.focal_px - camera.focal_px
-        if abs(df) > 5.0 * free.sigma_focal_px and abs(df) > _SCALE_TOLERANCE * camera.focal_px:
-            refusal = (
-                f"the stars fit a focal length of {free.camera.focal_px:.1f} px (FOV "
-                f"{free.camera.fov_deg:.3f}°), not the {camera.focal_px:.1f} px given: "
-                f"correct the field of view or fit the focal length"
-            )
-    if refusal:
-        pass
-    elif p_false > max_false_match_probability:
-        refusal = f"false-match probability {p_false:.2g} after the fit"
-    elif len(obs) < min_matched_fraction * expected:
-        refusal = (
-            f"only {len(obs)} of {expected} stars agree with the best attitude (need "
-            f"{min_matched_fraction:.0%}): is the field of view right?"
-        )
+    refusal = _refusal(
+        fit,
+        cat,
+        cat_rows,
+        stars.xy[obs],
+        camera,
+        fit_focal=fit_focal,
+        p_false=p_false,
+        max_p=max_false_match_probability,
+        n_points=len(stars.xy),
+        min_matched_fraction=min_matched_fraction,
+    )
     if refusal:
         ms = (time.perf_counter() - t0) * 1e3
         return SolveResult(None, refusal, ms, outcome.hypotheses, database)
@@ -267,6 +257,44 @@ def solve_verbose(
         catalog=cat.name,
     )
     return SolveResult(solution, "", ms, outcome.hypotheses, database)
+
+
+def _refusal(
+    fit,
+    cat,
+    cat_rows,
+    xy_matched,
+    camera,
+    *,
+    fit_focal,
+    p_false,
+    max_p,
+    n_points,
+    min_matched_fraction,
+) -> str:
+    """Why a fitted identification must not be reported ("" when it may)."""
+    R = fit.R_cam_from_icrs
+    n_matched = len(xy_matched)
+    if not fit_focal and n_matched >= _MIN_STARS_SCALE_CHECK:
+        # a wrong focal length biases the attitude beyond its error bars: test the scale
+        free = refine_attitude(R, cat.vectors[cat_rows], xy_matched, camera, fit_focal=True)
+        df = free.camera.focal_px - camera.focal_px
+        if abs(df) > 5.0 * free.sigma_focal_px and abs(df) > _SCALE_TOLERANCE * camera.focal_px:
+            return (
+                f"the stars fit a focal length of {free.camera.focal_px:.1f} px (FOV "
+                f"{free.camera.fov_deg:.3f}°), not the {camera.focal_px:.1f} px given: "
+                f"correct the field of view or fit the focal length"
+            )
+    if p_false > max_p:
+        return f"false-match probability {p_false:.2g} after the fit"
+    # stars the solution says should be measurable: catalog stars inside the image
+    expected = min(n_points, len(project_catalog(cat, R, fit.camera)[0]))
+    if n_matched < min_matched_fraction * expected:
+        return (
+            f"only {n_matched} of {expected} stars agree with the best attitude (need "
+            f"{min_matched_fraction:.0%}): is the field of view right?"
+        )
+    return ""
 
 
 def solve(
