@@ -265,3 +265,53 @@ def test_identify_plot_writes_png(capsys, tmp_path):
         str(tmp_path / "no" / "map.png"),
     )
     assert code == 2 and "cannot write plot" in err
+
+
+def test_flux_column_orders_the_search(capsys, tmp_path):
+    """A flux column is read as brightness: the frame solves with the rows shuffled."""
+    code, out, _ = _run(
+        capsys,
+        "simulate",
+        "--ra-deg",
+        "250",
+        "--dec-deg",
+        "36",
+        "--roll-deg",
+        "5",
+        "--fov-deg",
+        "12",
+        "--width",
+        "512",
+        "--seed",
+        "1",
+        "--epoch",
+        "2000",
+        "-o",
+        str(tmp_path / "f.csv"),
+        "--json",
+    )
+    lines = (tmp_path / "f.csv").read_text().splitlines()
+    rows = [line.split(",") for line in lines[1:]]
+    rng = np.random.default_rng(0)
+    flux_csv = tmp_path / "flux.csv"
+    flux_csv.write_text(
+        "label,x,y,flux\n"
+        + "".join(
+            f"{r[0]},{r[1]},{r[2]},{10 ** (-0.4 * float(r[3]))}\n"
+            for r in (rows[k] for k in rng.permutation(len(rows)))
+        )
+    )
+    code, out, _ = _run(
+        capsys,
+        "identify",
+        str(flux_csv),
+        "--fov-deg",
+        "12",
+        "--width",
+        "512",
+        "--epoch",
+        "2000",
+        "--json",
+    )
+    result = json.loads(out)
+    assert code == 0 and abs(result["ra_deg"] - 250) < 0.01 and abs(result["dec_deg"] - 36) < 0.01

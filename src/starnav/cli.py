@@ -111,7 +111,11 @@ def _add_catalog(p: argparse.ArgumentParser) -> None:
 
 
 def _build_parser() -> argparse.ArgumentParser:
-    parser = _Parser(prog="starnav", description=__doc__)
+    parser = _Parser(
+        prog="starnav",
+        description="Star identification and attitude from star-camera centroids. "
+        "Exit status: 0 done/solved, 1 not solved, 2 bad input.",
+    )
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
 
     p = sub.add_parser("identify", help="identify a star list (CSV) and solve the attitude")
