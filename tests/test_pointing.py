@@ -223,3 +223,18 @@ def test_best_three_star_from_a_solution(contest_catalog):
     assert len(used) == 3 and set(used) <= set(stars.labels)
     assert _angle(pointing.boresight, s.R_cam_from_icrs[2]) < np.radians(1 / 60)
     assert pointing.roll_deg == pytest.approx(s.roll_deg, abs=0.05)
+
+
+def test_cli_pointing_study(capsys, tmp_path):
+    code = main(["pointing-study", "--trials", "500", "--out-dir", str(tmp_path), "--json"])
+    out = json.loads(capsys.readouterr().out)
+    assert code == 0 and out["best"].startswith("equilateral")
+    assert out["worst"].startswith("nearly collinear") and out["worst_over_best"] > 10
+    assert all(
+        (tmp_path / name).exists()
+        for name in (
+            "pointing_arrangements.png",
+            "pointing_placement_map.png",
+            "pointing_volume.png",
+        )
+    )

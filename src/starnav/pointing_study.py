@@ -136,6 +136,35 @@ class StudyResult:
     def row(self, name: str) -> ArrangementResult:
         return next(r for r in self.rows if r.name == name)
 
+    def to_dict(self) -> dict:
+        """JSON-ready summary: the table rows, best and worst, the volume law, the figures."""
+        return {
+            "fov_deg": self.fov_deg,
+            "width": self.width,
+            "focal_px": self.focal_px,
+            "sigma_px": self.sigma_px,
+            "trials": self.trials,
+            "arrangements": [
+                {
+                    "name": r.name,
+                    "xy": r.xy.tolist(),
+                    "analytic_arcsec": r.analytic_arcsec,
+                    "mc_rms_arcsec": r.mc_rms_arcsec,
+                    "volume": r.volume,
+                    "geometric_factor": r.geometric_factor,
+                    "rejected": r.rejected,
+                }
+                for r in self.rows
+            ],
+            "best": self.best.name,
+            "worst": self.worst.name,
+            "worst_over_best": self.worst.analytic_arcsec / self.best.analytic_arcsec,
+            "volume_slope": self.volume_slope,
+            "volume_r2": self.volume_r2,
+            "volume_slope_inside": self.volume_slope_inside,
+            "figures": [str(f) for f in self.figures],
+        }
+
 
 def equilateral(cx: float, cy: float, circumradius: float) -> np.ndarray:
     """Vertices (3, 2) of an equilateral triangle, one vertex straight up (-y)."""
