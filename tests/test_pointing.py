@@ -238,3 +238,24 @@ def test_cli_pointing_study(capsys, tmp_path):
             "pointing_volume.png",
         )
     )
+
+
+def test_unknown_focal_error_propagation_matches_monte_carlo():
+    """With f solved from the same distances, the analytic 1σ of f and of the boresight
+    (which then includes f's error) agree with a Monte Carlo within 10 %."""
+    xy = np.array([[60.0, 80.0], [430.0, 150.0], [200.0, 470.0]])
+    ras, decs, R = _triple(120.0, -30.0, 40.0, 2435.68, xy)
+    a = np.hypot(*(xy - 256).T)
+    sigma = 0.5
+    ref = three_star(ras, decs, r_px=a, sigma_px=sigma)
+    assert not ref.alternatives  # one solution: no root switching in the draws
+    rng = np.random.default_rng(4)
+    focal, err = [], []
+    for _ in range(2000):
+        p = three_star(ras, decs, r_px=a + rng.normal(0, sigma, 3))
+        best = min([p, *p.alternatives], key=lambda q: abs(q.focal_px - ref.focal_px))
+        focal.append(best.focal_px)
+        err.append(_angle(best.boresight, R[2]))
+    assert np.std(focal) == pytest.approx(ref.sigma_focal_px, rel=0.1)
+    mc = np.degrees(np.sqrt(np.mean(np.square(err)))) * 3600
+    assert mc == pytest.approx(ref.sigma_boresight_arcsec, rel=0.1)

@@ -483,6 +483,8 @@ def _cmd_database(args) -> int:
 def _print_pointing(p, used_labels) -> None:
     roll = "-" if p.roll_deg is None else f"{p.roll_deg:.4f}°"
     sigma = "" if p.sigma_boresight_arcsec is None else f", 1σ {p.sigma_boresight_arcsec:.2f}″"
+    if p.sigma_focal_px is not None:
+        sigma += f", focal 1σ {p.sigma_focal_px:.2f} px"
     print(f"stars used: {', '.join(used_labels)}")
     print(
         f"boresight: RA {p.ra_deg:.6f}°  Dec {p.dec_deg:+.6f}°  roll {roll}  focal "

@@ -29,6 +29,7 @@ from starnav.geometry import (
 
 # a triple whose stars span less volume than this (|det U|) is "nearly collinear"
 MIN_TRIPLE_PRODUCT = 1e-9
+POOR_FOCAL_PER_PX = 0.01  # relative focal error per px of distance error called "poor"
 MAX_INCONSISTENCY = 0.2  # | |d| - 1 | beyond this: the data cannot be one camera's view
 _F_GRID = np.geomspace(1.0, 1e7, 4000)  # focal lengths (px) searched when f is unknown
 
@@ -46,7 +47,9 @@ class Pointing:
     (0 for exact data; with f solved it is 0 by construction); ``sigma_boresight_arcsec``:
     1-sigma boresight error from the analytic covariance (None without sigma_px);
     ``alternatives``: other (focal, boresight) solutions that fit as well, best first;
-    ``fit_rms_px``: with f solved from x,y, how well the inter-star angles agree (px).
+    ``fit_rms_px``: with f solved from x,y, how well the inter-star angles agree (px);
+    ``sigma_focal_px``: 1-sigma of a solved focal length (None when given or without
+    sigma_px). With f solved, ``sigma_boresight_arcsec`` includes its error.
     """
 
     ra_deg: float
@@ -59,6 +62,7 @@ class Pointing:
     alternatives: tuple[Pointing, ...] = ()
     note: str = ""
     fit_rms_px: float | None = None
+    sigma_focal_px: float | None = None
 
     def to_dict(self) -> dict:
         keys = (
@@ -68,6 +72,7 @@ class Pointing:
             "focal_px",
             "consistency",
             "sigma_boresight_arcsec",
+            "sigma_focal_px",
             "fit_rms_px",
         )
         out = {k: getattr(self, k) for k in keys}
@@ -85,29 +90,55 @@ def linear_boresight(U: np.ndarray, a_px: np.ndarray, focal_px: float) -> np.nda
     return np.linalg.solve(U, _cos_theta(a_px, focal_px))
 
 
+def _jacobians(U: np.ndarray, a_px: np.ndarray, focal_px: float, focal_free: bool):
+    """(d d_hat / d a (3x3), d f / d a (3,)) at a solution; with the focal length free it
+    moves with the data so that |d| stays 1 (implicit function theorem)."""
+    d = linear_boresight(U, a_px, focal_px)
+    r3 = (a_px**2 + focal_px**2) ** 1.5
+    dc_da = -focal_px * a_px / r3
+    dc_df = a_px**2 / r3
+    Uinv = np.linalg.inv(U)
+    df_da = np.zeros(3)
+    if focal_free:
+        dg_da = 2.0 * (d @ Uinv) * dc_da  # g = |d|^2 - 1
+        dg_df = 2.0 * d @ (Uinv @ dc_df)
+        df_da = -dg_da / dg_df if dg_df != 0 else np.full(3, np.inf)
+    J = Uinv @ (np.diag(dc_da) + np.outer(dc_df, df_da))
+    norm = np.linalg.norm(d)
+    d_hat = d / norm
+    return (np.eye(3) - np.outer(d_hat, d_hat)) @ J / norm, df_da
+
+
 def boresight_covariance(
-    U: np.ndarray, a_px: np.ndarray, focal_px: float, sigma_a_px: np.ndarray
+    U: np.ndarray,
+    a_px: np.ndarray,
+    focal_px: float,
+    sigma_a_px: np.ndarray,
+    *,
+    focal_free: bool = False,
 ) -> np.ndarray:
     """3x3 covariance of the unit boresight from independent errors of a_i (1-sigma, px).
 
     A centroid error of sigma per axis gives a radial error sigma on a_i (only the radial
-    component changes a_i to first order).
+    component changes a_i to first order). ``focal_free``: the focal length was solved from
+    the same data, so its error adds to the boresight's.
     """
-    d = linear_boresight(U, a_px, focal_px)
-    dc_da = -focal_px * a_px / (a_px**2 + focal_px**2) ** 1.5
-    J = np.linalg.solve(U, np.diag(dc_da))  # d d / d a
-    norm = np.linalg.norm(d)
-    d_hat = d / norm
-    J_hat = (np.eye(3) - np.outer(d_hat, d_hat)) @ J / norm
+    J_hat, _ = _jacobians(U, a_px, focal_px, focal_free)
     return J_hat @ np.diag(np.asarray(sigma_a_px, dtype=float) ** 2) @ J_hat.T
 
 
 def sigma_boresight_arcsec(
-    U: np.ndarray, a_px: np.ndarray, focal_px: float, sigma_px: float
+    U: np.ndarray, a_px: np.ndarray, focal_px: float, sigma_px: float, *, focal_free=False
 ) -> float:
     """1-sigma total boresight error (arcsec) for centroid noise ``sigma_px`` per axis."""
-    cov = boresight_covariance(U, a_px, focal_px, np.full(3, sigma_px))
+    cov = boresight_covariance(U, a_px, focal_px, np.full(3, sigma_px), focal_free=focal_free)
     return float(np.sqrt(np.trace(cov)) * ARCSEC_PER_RAD)
+
+
+def sigma_focal_px(U: np.ndarray, a_px: np.ndarray, focal_px: float, sigma_px: float) -> float:
+    """1-sigma of a focal length solved from three stars' distances (px)."""
+    _, df_da = _jacobians(U, a_px, focal_px, True)
+    return float(np.sqrt(np.sum(df_da**2)) * sigma_px)
 
 
 def _project_offsets(d_hat, roll_deg, parity, U, focal_px) -> np.ndarray:
@@ -198,6 +229,7 @@ def three_star(
         raise PointingError(f"sigma_px must be >= 0, got {sigma_px!r}")
 
     def solution(f: float, consistency: float | None = None) -> Pointing:
+        focal_free = consistency is not None
         d = linear_boresight(U, a, f)
         norm = float(np.linalg.norm(d))
         d_hat = d / norm
@@ -210,7 +242,10 @@ def three_star(
             consistency=norm - 1.0 if consistency is None else consistency,
             sigma_boresight_arcsec=None
             if sigma_px is None
-            else sigma_boresight_arcsec(U, a, f, sigma_px),
+            else sigma_boresight_arcsec(U, a, f, sigma_px, focal_free=focal_free),
+            sigma_focal_px=None
+            if sigma_px is None or not focal_free
+            else sigma_focal_px(U, a, f, sigma_px),
             boresight=d_hat,
         )
 
@@ -244,12 +279,20 @@ def three_star(
         # rank: the solution whose boresight is least sensitive to the data first
         sens = [sigma_boresight_arcsec(U, a, s.focal_px, 1.0) for s in sols]
         sols = [sols[k] for k in np.argsort(sens)]
+    notes = []
     if len(sols) > 1:
-        note = f"{len(sols)} focal lengths fit these three stars; best first" + (
-            "" if offsets is not None else " (x,y would tell them apart)"
+        notes.append(
+            f"{len(sols)} focal lengths fit these three stars; best first"
+            + ("" if offsets is not None else " (x,y would tell them apart)")
         )
-        return _with(sols[0], alternatives=tuple(sols[1:]), note=note)
-    return sols[0]
+    # how well this geometry fixes f, per px of error in the distances
+    spread = sigma_focal_px(U, a, sols[0].focal_px, 1.0) / sols[0].focal_px
+    if not np.isfinite(spread) or spread > POOR_FOCAL_PER_PX:
+        notes.append(
+            f"this geometry hardly determines the focal length: 1 px of error in the "
+            f"distances moves it by {spread:.1%}"
+        )
+    return _with(sols[0], alternatives=tuple(sols[1:]), note="; ".join(notes))
 
 
 def _angle_misfit_px(U: np.ndarray, offsets: np.ndarray, focal_px: float) -> float:
