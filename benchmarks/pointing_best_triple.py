@@ -74,7 +74,6 @@ def run(frames: int, seed: int, noise_px: float) -> dict:
                     focal_px=camera.focal_px,
                     width=WIDTH,
                     height=WIDTH,
-                    sigma_px=noise_px,
                 ),
                 "brightest three": (0, 1, 2),  # frame order is brightest first
                 "random three": tuple(rng.choice(len(rows), 3, replace=False)),

@@ -132,7 +132,14 @@ def test_best_triple_beats_a_bad_one():
         ([10, 11, 12], [0, 1, 0], {"r_px": [1, 2, 900], "width": 512, "height": 512}, "beyond the"),
         ([10, 11, 12], [0, 1, 0], {}, "either xy"),
         ([10, 11, 12], [0, 1, 0], {"r_px": [10, 20, 30], "focal_px": 100.0}, "do not fit"),
-        ([10, 11, 12], [0, 1, 0], {"xy": [[1, 2], [3, 4], [5, 6]]}, "width and height"),
+        ([10, 11, 12], [0, 1, 0], {"xy": [[1, 2], [3, 4], [5, 6]]}, "give the image width"),
+        ([10, 11, 12], [0, 1, 0], {"r_px": [1, 2, 3], "focal_px": 1e300}, "focal_px must be"),
+        (
+            [10, 11, 12],
+            [0, 1, 0],
+            {"xy": [[1, 1], [1, 1], [7, 7]], "width": 512, "focal_px": 2435.68},
+            "do not match the star separations",
+        ),
     ],
 )
 def test_bad_input(ra, dec, kwargs, needle):
@@ -259,3 +266,36 @@ def test_unknown_focal_error_propagation_matches_monte_carlo():
     assert np.std(focal) == pytest.approx(ref.sigma_focal_px, rel=0.1)
     mc = np.degrees(np.sqrt(np.mean(np.square(err)))) * 3600
     assert mc == pytest.approx(ref.sigma_boresight_arcsec, rel=0.1)
+
+
+def test_thin_triangle_roots_are_not_missed():
+    """Two roots within 0.4 % of each other (a thin triangle, exact data): both found
+    (a coarse sign-change search found neither and refused the data)."""
+    ras = [353.40592511423176, 3.1660248221705554, 14.973247776808579]
+    decs = [-77.02625840873065, -80.14394609493496, -81.11053022852899]
+    xy = [
+        [324.9118089621124, 130.07395242567063],
+        [214.76459234987664, 303.5688736217278],
+        [117.8771464182538, 375.67404960463057],
+    ]
+    result = three_star(ras, decs, xy=xy, width=512)
+    assert len(result.alternatives) == 1 and result.fit_rms_px < 1e-6
+    assert "hardly determines the focal length" in result.note
+
+
+def test_mirrored_image_roll_and_parity_found():
+    xy = np.array([[60.0, 80.0], [430.0, 150.0], [200.0, 470.0]])
+    ras, decs, _ = _triple(300.0, -60.0, 25.0, 1800.0, xy, parity=-1)
+    result = three_star(ras, decs, xy=xy, width=512)
+    assert result.parity == -1 and result.roll_deg == pytest.approx(25.0, abs=1e-6)
+    assert result.focal_px == pytest.approx(1800.0, rel=1e-9)
+    forced = three_star(ras, decs, xy=xy, width=512, parity=1)  # the wrong parity, forced
+    assert forced.parity == 1 and abs((forced.roll_deg - 25.0 + 180) % 360 - 180) > 1.0
+
+
+def test_select_best_among_many_stars_is_bounded():
+    rng = np.random.default_rng(9)
+    xy = rng.uniform(10, 500, (200, 2))
+    ras, decs, _ = _triple(10.0, 20.0, 33.0, 2435.68, xy)
+    triple = best_triple(ras, decs, xy, focal_px=2435.68, width=512)
+    assert max(triple) < 40  # only the first 40 (brightest) are considered

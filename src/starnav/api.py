@@ -332,16 +332,18 @@ def best_three_star(
     width: float,
     height: float | None = None,
     catalog: Catalog | str | Path | None = None,
+    mag_limit: float | None = None,
+    epoch_year: float | None = None,
     sigma_px: float = 1.0,
 ) -> tuple[Pointing, tuple[str, ...]]:
     """Three-star pointing with the best triple of a solution's identified stars.
 
     Picks the three matched stars whose boresight has the smallest predicted error (analytic
-    covariance at ``sigma_px``) and solves with them at the solution's focal length. Returns
-    the ``Pointing`` and the labels of the stars used. ``catalog``: the one the solution came
-    from (default Hipparcos).
+    covariance) and solves with them at the solution's focal length; ``sigma_px`` sets the
+    reported 1-sigma. Returns the ``Pointing`` and the labels of the stars used.
+    ``catalog``, ``mag_limit``, ``epoch_year``: as given to the solve that made ``solution``.
     """
-    cat = load_catalog(catalog)
+    cat = load_catalog(catalog, mag_limit=mag_limit, epoch_year=epoch_year)
     height = width if height is None else height
     row_of = {int(i): n for n, i in enumerate(cat.ids)}
     matched = [m for m in solution.stars if m.catalog_id is not None]
@@ -360,7 +362,6 @@ def best_three_star(
             focal_px=solution.focal_px,
             width=width,
             height=height,
-            sigma_px=sigma_px,
         )
     )
     pointing = three_star(

@@ -22,7 +22,7 @@ from starnav.api import (
     solve_verbose,
 )
 from starnav.catalog import DEFAULT_MAG_LIMIT, load_catalog
-from starnav.errors import StarnavError
+from starnav.errors import PointingError, StarnavError
 from starnav.geometry import attitude_difference_deg
 from starnav.identify import ALGORITHMS, DEFAULT_ALGORITHM
 from starnav.simulate import FALSE_STAR_ID, SimulatedFrame, simulate_frame
@@ -172,7 +172,7 @@ def _build_parser() -> argparse.ArgumentParser:
     p.add_argument("--width", type=_positive_int, help="image width (px), needed with x,y")
     p.add_argument("--height", type=_positive_int, help="image height (px; default: width)")
     p.add_argument("--sigma-px", type=_finite, help="centroid noise per axis, for the 1σ error")
-    p.add_argument("--parity", type=int, choices=(1, -1), default=1)
+    p.add_argument("--parity", type=int, choices=(1, -1), help="default: found from x,y")
     p.add_argument(
         "--select-best",
         action="store_true",
@@ -486,6 +486,8 @@ def _print_pointing(p, used_labels) -> None:
     if p.sigma_focal_px is not None:
         sigma += f", focal 1σ {p.sigma_focal_px:.2f} px"
     print(f"stars used: {', '.join(used_labels)}")
+    if p.fit_rms_px is not None:
+        sigma += f", parity {p.parity:+d}, angle misfit {p.fit_rms_px:.2f} px"
     print(
         f"boresight: RA {p.ra_deg:.6f}°  Dec {p.dec_deg:+.6f}°  roll {roll}  focal "
         f"{p.focal_px:.3f} px  consistency |d|-1 = {p.consistency:.2e}{sigma}"
@@ -500,9 +502,11 @@ def _print_pointing(p, used_labels) -> None:
 
 
 def _cmd_pointing(args) -> int:
-    from starnav.pointing import PointingError, best_triple, three_star
+    from starnav.pointing import best_triple, three_star
     from starnav.starlist import read_known_stars_csv
 
+    if args.height is not None and args.width is None:
+        raise PointingError("--height needs --width too")
     stars = read_known_stars_csv(args.stars)
     height = args.height if args.height is not None else args.width
     rows = np.arange(len(stars.ra_deg))
@@ -517,7 +521,6 @@ def _cmd_pointing(args) -> int:
                 focal_px=args.focal_px,
                 width=args.width,
                 height=height,
-                sigma_px=args.sigma_px or 1.0,
             )
         )
     result = three_star(
@@ -542,6 +545,14 @@ def _cmd_pointing(args) -> int:
 def _cmd_pointing_study(args) -> int:
     from starnav.pointing_study import format_table, run_study
 
+    if args.sigma_px <= 0:
+        raise StarnavError(f"--sigma-px must be positive, got {args.sigma_px:g}")
+    if not 1.0 <= args.fov_deg <= 120.0:
+        raise StarnavError(
+            f"--fov-deg must be between 1 and 120 for the study, got {args.fov_deg:g}"
+        )
+    if args.width < 64:
+        raise StarnavError(f"--width must be at least 64 px for the study, got {args.width}")
     out_dir = Path(args.out_dir)
     if not out_dir.is_dir():
         raise StarnavError(f"--out-dir {args.out_dir!r} is not a directory")

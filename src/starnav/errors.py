@@ -17,3 +17,7 @@ class CatalogError(StarnavError):
 
 class CameraError(StarnavError):
     """Impossible camera parameters (field of view, image size, focal length)."""
+
+
+class PointingError(StarnavError):
+    """Three stars that cannot give a boresight (wrong count, identical, collinear, ...)."""
