@@ -132,6 +132,11 @@ def test_bad_options_exit_2(capsys, argv, needle):
     [
         (["demo", "--seed", "-1"], "at least 0"),
         (["demo", "--fov-deg", "0.01"], "choose a wider field"),
+        (["database", "--fov-deg", "12", "--width", "512", "--mag-limit", "1e300"], "star pairs"),
+        (
+            ["simulate", "--ra-deg", "1e300", "--fov-deg", "12", "--width", "512", "-o", "x.csv"],
+            "ra_deg must be",
+        ),
         (
             [
                 "simulate",

@@ -11,7 +11,7 @@ import numpy as np
 from starnav.attitude import refine_attitude
 from starnav.camera import Camera
 from starnav.catalog import Catalog, load_catalog
-from starnav.errors import StarnavError
+from starnav.errors import CatalogError, StarnavError
 from starnav.geometry import radec_roll_from_attitude
 from starnav.identify import (
     ALGORITHMS,
@@ -29,6 +29,7 @@ from starnav.starlist import check_star_list
 DEFAULT_SIGMA_PX = 1.0
 DEFAULT_MAX_FALSE_MATCH_PROBABILITY = 1e-4
 DEFAULT_MIN_MATCHED_FRACTION = 0.5
+MAX_PAIRS = 3e7  # largest pair database built (about 0.5 GB)
 _MAX_REMATCH = 5
 _MIN_STARS_SCALE_CHECK = 6
 _SCALE_TOLERANCE = 0.005  # relative focal-length error tolerated without --fit-focal
@@ -104,6 +105,14 @@ _DATABASES: dict[tuple[str, float], PairDatabase] = {}  # in-memory, per process
 def get_database(catalog: Catalog, camera: Camera) -> PairDatabase:
     """The pair database for this catalog and field (memory, then disk cache, then built)."""
     max_angle_deg = float(np.degrees(2.0 * camera.half_diagonal_rad))
+    # pairs expected for n stars spread over the sky: n^2 (1 - cos angle) / 4
+    expected_pairs = len(catalog) ** 2 * (1.0 - np.cos(np.radians(max_angle_deg))) / 4.0
+    if expected_pairs > MAX_PAIRS:
+        raise CatalogError(
+            f"{len(catalog)} catalog stars in a {camera.fov_deg:.3g}° field make about "
+            f"{expected_pairs:.2g} star pairs (limit {MAX_PAIRS:.0e}): use a brighter "
+            "magnitude limit"
+        )
     key = (catalog.fingerprint, database_angle_deg(max_angle_deg))
     if key not in _DATABASES:
         _DATABASES[key] = build_database(catalog, max_angle_deg)

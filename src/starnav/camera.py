@@ -55,7 +55,7 @@ class Camera:
     def from_fov(cls, fov_deg: float, width: int, height: int | None = None) -> Camera:
         """Camera whose horizontal field of view across ``width`` px is ``fov_deg`` degrees."""
         if not (np.isfinite(fov_deg) and 0.0 < fov_deg < 179.0):
-            raise CameraError(f"fov_deg must be between 0 and 179 degrees, got {fov_deg!r}")
+            raise CameraError(f"fov_deg must be above 0 and below 179 degrees, got {fov_deg!r}")
         if not (np.isfinite(width) and width >= 8):
             raise CameraError(f"width must be at least 8 px, got {width!r}")
         height = width if height is None else height

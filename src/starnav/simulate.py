@@ -92,6 +92,9 @@ def simulate_frame(
             roll_deg = rng.uniform(0.0, 360.0)
         if not -90.0 <= dec_deg <= 90.0:
             raise StarnavError(f"dec_deg must be within ±90, got {dec_deg!r}")
+        for name, value in (("ra_deg", ra_deg), ("roll_deg", roll_deg)):
+            if not -360.0 <= value <= 720.0:
+                raise StarnavError(f"{name} must be an angle in degrees (0..360), got {value!r}")
         R_cam_from_icrs = attitude_from_radec_roll(ra_deg, dec_deg, roll_deg, parity)
     R = np.asarray(R_cam_from_icrs, dtype=float)
     if mag_limit is not None:
