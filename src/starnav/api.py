@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -21,7 +21,7 @@ from starnav.identify import (
     build_database,
 )
 from starnav.identify.database import database_angle_deg
-from starnav.identify.verify import false_match_probability, match_catalog
+from starnav.identify.verify import match_catalog
 from starnav.pointing import Pointing, best_triple, three_star
 from starnav.simulate import project_catalog
 from starnav.starlist import check_star_list
@@ -177,8 +177,14 @@ def solve_verbose(
     settings = MatchSettings(
         # a measured angle carries two centroid errors: 3 sigma of their sum, at least 1 px
         pair_tol_rad=max(3.0 * np.sqrt(2.0) * sigma_px, 1.0) / camera.focal_px,
-        # radial distance of a 2-D Gaussian error: beyond 3.5 sigma in 0.2 % of cases
-        match_radius_rad=max(3.5 * sigma_px, 1.0) / camera.focal_px,
+        # radial distance of a 2-D Gaussian error: beyond 3.5 sigma in 0.2 % of cases; the
+        # agreement is also scored within 1 and 2 sigma (at least 0.5 px)
+        match_radii_rad=tuple(
+            r / camera.focal_px
+            for r in sorted(
+                {max(sigma_px, 0.5), max(2.0 * sigma_px, 0.5), max(3.5 * sigma_px, 1.0)}
+            )
+        ),
         max_false_match_probability=max_false_match_probability,
         parity=parity,
     )
@@ -214,7 +220,20 @@ def solve_verbose(
             fit.R_cam_from_icrs, cat.vectors[cat_rows], stars.xy[obs], camera, fit_focal=fit_focal
         )
     R = fit.R_cam_from_icrs
-    p_false = false_match_probability(len(bearings), len(obs), 3, ver.p_chance, found.hypotheses)
+    # score the final pairs (the last verification may hold a slightly different set)
+    final = replace(
+        ver,
+        obs_index=obs,
+        cat_index=cat_rows,
+        distance_rad=np.linalg.norm(  # chord, as match_catalog measures it
+            fit.camera.pixels_to_bearings(stars.xy[obs])
+            - cat.vectors[cat_rows] @ fit.R_cam_from_icrs.T,
+            axis=1,
+        ),
+    )
+    p_false = final.false_match_probability(
+        len(bearings), 3, found.hypotheses, settings.match_radii_rad
+    )
     refusal = _refusal(
         fit,
         cat,

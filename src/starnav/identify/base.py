@@ -14,22 +14,28 @@ from starnav.identify.database import PairDatabase
 class MatchSettings:
     """Tolerances and limits of an identification.
 
-    ``pair_tol_rad``: how far a measured inter-star angle may be from the catalog's (radians);
-    ``match_radius_rad``: how close a reprojected catalog star must be to count as agreeing
-    (radians); ``max_false_match_probability``: refuse any answer less certain than this;
+    ``pair_tol_rad``: how far a measured inter-star angle may be from the catalog's
+    (radians); ``match_radii_rad``: how close a reprojected catalog star must be to count as
+    agreeing (radians; the false-match probability is evaluated at each, the largest sets
+    the pairing); ``max_false_match_probability``: refuse any answer less certain than this;
     ``parity``: +1 or -1 when known, None to find it; ``max_stars``: triangles are made of
-    the first (brightest) this many stars; ``max_screen_stars``: identification uses the first
-    this many (the attitude fit then takes in the rest); ``max_hypotheses``: give up after
-    testing this many.
+    the first (brightest) this many stars; ``max_screen_stars``: identification uses the
+    first this many (the attitude fit then takes in the rest); ``max_hypotheses``: give up
+    after testing this many.
     """
 
     pair_tol_rad: float
-    match_radius_rad: float
+    match_radii_rad: tuple[float, ...]
     max_false_match_probability: float = 1e-4
     parity: int | None = None
     max_stars: int = 25
     max_screen_stars: int = 50
     max_hypotheses: int = 20000
+
+    @property
+    def match_radius_rad(self) -> float:
+        """The largest match radius (radians): stars within it are paired."""
+        return max(self.match_radii_rad)
 
 
 @dataclass(frozen=True)

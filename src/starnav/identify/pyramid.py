@@ -120,9 +120,7 @@ def _mirror_agrees(bearings, ver, parity, database, settings, hypotheses) -> boo
     vectors = database.catalog.vectors
     R = wahba(bearings[ver.obs_index], vectors[ver.cat_index], parity=-parity)
     mirror = match_catalog(bearings, R, database, settings.match_radius_rad)
-    p = false_match_probability(
-        len(bearings), len(mirror.obs_index), 3, mirror.p_chance, hypotheses
-    )
+    p = mirror.false_match_probability(len(bearings), 3, hypotheses, settings.match_radii_rad)
     return p <= settings.max_false_match_probability
 
 
@@ -168,7 +166,8 @@ class Pyramid:
         # single catalog star): hypotheses whose screen count cannot beat the threshold even
         # with it are not verified in full
         field_rad = np.arccos(np.clip(bearings[:, 2].min(), -1.0, 1.0)) + settings.match_radius_rad
-        p_floor = (1.0 - np.cos(settings.match_radius_rad)) / (1.0 - np.cos(field_rad))
+        p_floor = (1.0 - np.cos(min(settings.match_radii_rad))) / (1.0 - np.cos(field_rad))
+        n_radii = len(settings.match_radii_rad)
         for i, j, k in triangle_order(len(order)):
             idx = order[[i, j, k]]
             b = bearings[idx]
@@ -193,15 +192,15 @@ class Pyramid:
             hypotheses += len(triples)
             agree = _screen(bearings, b, vectors[triples], parities, database, settings)
             for h in np.argsort(-agree, kind="stable"):
-                p_best_case = false_match_probability(n_total, agree[h], 3, p_floor, hypotheses)
+                p_best_case = n_radii * false_match_probability(
+                    n_total, agree[h], 3, p_floor, hypotheses
+                )
                 if p_best_case > settings.max_false_match_probability:
                     break  # neither this nor any later (lower) count can be convincing
                 parity = int(parities[h])
                 R = wahba(b, vectors[triples[h]], parity=parity)
                 ver = match_catalog(bearings, R, database, settings.match_radius_rad)
-                p = false_match_probability(
-                    n_total, len(ver.obs_index), 3, ver.p_chance, hypotheses
-                )
+                p = ver.false_match_probability(n_total, 3, hypotheses, settings.match_radii_rad)
                 best_p = min(best_p, p)
                 if p <= settings.max_false_match_probability:
                     if settings.parity is None and _mirror_agrees(

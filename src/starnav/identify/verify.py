@@ -5,7 +5,9 @@ False-match model: with an attitude that is wrong, every measured star that was 
 make the hypothesis lands within the match radius of some catalog star with probability
 ``p = n_catalog_in_field * (solid angle of the match circle) / (solid angle of the field)``.
 The number of such chance agreements is binomial; the probability of at least the observed
-count is multiplied by the number of hypotheses tried (a Bonferroni bound).
+count is multiplied by the number of hypotheses tried (a Bonferroni bound). It is evaluated
+at a few match radii (1, 2 and 3.5 sigma): close agreement of few stars and loose agreement of
+many both count, and the best is multiplied by the number of radii (Bonferroni again).
 """
 
 from __future__ import annotations
@@ -22,13 +24,34 @@ from starnav.identify.database import PairDatabase
 
 @dataclass(frozen=True)
 class Verification:
-    """Agreeing stars of one hypothesis: rows of the bearings and of the catalog, the angular
-    distance (radians) of each pair, and the chance probability ``p`` per star."""
+    """Agreeing stars of one hypothesis: rows of the bearings and of the catalog, the distance
+    of each pair (chord between unit vectors, = angle in radians for small angles);
+    ``n_cone`` catalog stars in the field cone whose
+    ``1 - cos(radius)`` is ``field_area``."""
 
     obs_index: np.ndarray
     cat_index: np.ndarray
     distance_rad: np.ndarray
-    p_chance: float
+    n_cone: int
+    field_area: float
+
+    def p_chance(self, radius_rad: float) -> float:
+        """Chance that a random point lands within ``radius_rad`` of a catalog star."""
+        if self.field_area <= 0:
+            return 1.0
+        return min(1.0, self.n_cone * (1.0 - np.cos(radius_rad)) / self.field_area)
+
+    def false_match_probability(
+        self, n_stars: int, n_used: int, hypotheses: int, radii_rad: tuple[float, ...]
+    ) -> float:
+        """False-match probability, the best over the match radii ``radii_rad`` (stars
+        agreeing within each), corrected for the number of radii tried."""
+        best = 1.0
+        for radius in radii_rad:
+            n_agree = int(np.sum(self.distance_rad <= chord_from_angle(radius) * (1 + 1e-12)))
+            p = false_match_probability(n_stars, n_agree, n_used, self.p_chance(radius), hypotheses)
+            best = min(best, p)
+        return min(1.0, best * len(radii_rad))
 
 
 def match_catalog(
@@ -45,7 +68,7 @@ def match_catalog(
     cone = database.cone(boresight, field_rad)
     if len(cone) == 0:
         empty = np.empty(0, dtype=np.intp)
-        return Verification(empty, empty, np.empty(0), 0.0)
+        return Verification(empty, empty, np.empty(0), 0, 1.0 - np.cos(field_rad))
     cam = database.catalog.vectors[cone] @ R_cam_from_icrs.T
     d2 = np.sum((bearings[:, None, :] - cam[None, :, :]) ** 2, axis=2)  # chord squared
     within = d2 <= chord_from_angle(radius_rad) ** 2
@@ -57,9 +80,7 @@ def match_catalog(
     ok = cost[r, c] < 1e6
     obs, cat = rows[r[ok]], cols[c[ok]]
     dist = np.sqrt(d2[obs, cat])
-    field_area = 1.0 - np.cos(field_rad)
-    p_chance = min(1.0, len(cone) * (1.0 - np.cos(radius_rad)) / field_area)
-    return Verification(obs, cone[cat], dist, float(p_chance))
+    return Verification(obs, cone[cat], dist, len(cone), float(1.0 - np.cos(field_rad)))
 
 
 def false_match_probability(
