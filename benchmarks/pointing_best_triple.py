@@ -50,7 +50,6 @@ def largest_volume(ra_deg: np.ndarray, dec_deg: np.ndarray) -> tuple[int, int, i
 def run(frames: int, seed: int, noise_px: float) -> dict:
     camera = Camera.from_fov(FOV_DEG, WIDTH)
     catalog = load_catalog(None, mag_limit=6.0, epoch_year=1991.25)
-    row_of = {int(i): n for n, i in enumerate(catalog.ids)}
     rng = np.random.default_rng(seed)
     errors = {m: [] for m in METHODS}
     predicted = {m: [] for m in METHODS}
@@ -64,7 +63,7 @@ def run(frames: int, seed: int, noise_px: float) -> dict:
             true = frame.true_id != FALSE_STAR_ID
             if true.sum() < MIN_STARS:
                 continue
-            rows = np.array([row_of[int(i)] for i in frame.true_id[true]])
+            rows = catalog.rows(frame.true_id[true])
             ra, dec, xy = catalog.ra_deg[rows], catalog.dec_deg[rows], frame.xy[true]
             triples = {
                 "best_triple": best_triple(

@@ -75,3 +75,9 @@ def test_catalog_cuts_that_leave_nothing(contest_catalog):
 def test_epoch_only_for_hipparcos(contest_catalog):
     with pytest.raises(CatalogError, match="epoch applies to the embedded Hipparcos"):
         load_catalog(contest_catalog, epoch_year=2000.0)
+
+
+def test_rows_of_ids(contest_catalog):
+    assert contest_catalog.rows([1, 4908]).tolist() == [0, 4907]
+    with pytest.raises(CatalogError, match="has no star with id 99999"):
+        contest_catalog.rows([1, 99999])

@@ -19,7 +19,6 @@ def _score(solution, R_true, true_ids, catalog, double_px=0.5):
     ``double_px`` (doubles that the noise makes unresolvable, such as the Trapezium) may swap
     without counting as wrong."""
     boresight_deg, roll_deg = attitude_difference_deg(solution.R_cam_from_icrs, R_true)
-    row = {int(i): n for n, i in enumerate(catalog.ids)}
     double_rad = double_px / solution.focal_px
     wrong_ids = 0
     for m, true_id in zip(solution.stars, true_ids, strict=True):
@@ -27,8 +26,7 @@ def _score(solution, R_true, true_ids, catalog, double_px=0.5):
             continue
         if (
             true_id == -1
-            or angle_between(catalog.vectors[row[m.catalog_id]], catalog.vectors[row[int(true_id)]])
-            > double_rad
+            or angle_between(*catalog.vectors[catalog.rows([m.catalog_id, true_id])]) > double_rad
         ):
             wrong_ids += 1
     return boresight_deg, roll_deg, wrong_ids

@@ -373,14 +373,10 @@ def best_three_star(
     """
     cat = load_catalog(catalog, mag_limit=mag_limit, epoch_year=epoch_year)
     height = width if height is None else height
-    row_of = {int(i): n for n, i in enumerate(cat.ids)}
     matched = [m for m in solution.stars if m.catalog_id is not None]
     if len(matched) < 3:
         raise StarnavError(f"the solution has {len(matched)} identified stars; 3 are needed")
-    missing = [m.catalog_id for m in matched if m.catalog_id not in row_of]
-    if missing:
-        raise StarnavError(f"catalog {cat.name!r} has no star with id {missing[0]}")
-    rows = [row_of[m.catalog_id] for m in matched]
+    rows = cat.rows([m.catalog_id for m in matched])
     xy = np.array([[m.x, m.y] for m in matched])
     triple = list(
         best_triple(

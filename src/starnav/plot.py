@@ -46,9 +46,8 @@ def plot_solution(
     ax.plot(*xy[matched].T, "o", mfc="none", mec="tab:blue", ms=10, label="identified")
     ax.plot(*xy[~matched].T, "o", mfc="none", mec="tab:red", ms=10, label="not a catalog star")
     if matched.any():
-        row_of = {int(i): n for n, i in enumerate(catalog.ids)}
-        ids = [row_of[m.catalog_id] for m in solution.stars if m.catalog_id is not None]
-        predicted = cam.bearings_to_pixels(catalog.vectors[ids] @ solution.R_cam_from_icrs.T)
+        rows = catalog.rows([m.catalog_id for m in solution.stars if m.catalog_id is not None])
+        predicted = cam.bearings_to_pixels(catalog.vectors[rows] @ solution.R_cam_from_icrs.T)
         ax.plot(*predicted.T, "+", color="k", ms=8, label="catalog star (solved attitude)")
         d = predicted - xy[matched]
         longest = float(np.max(np.linalg.norm(d, axis=1))) or 1.0

@@ -57,6 +57,19 @@ class Catalog:
             h.update(np.ascontiguousarray(arr, dtype=float).tobytes())
         return h.hexdigest()[:16]
 
+    @cached_property
+    def _row_of_id(self) -> dict[int, int]:
+        return {int(i): n for n, i in enumerate(self.ids)}
+
+    def rows(self, ids) -> np.ndarray:
+        """Row indices of the stars with these catalog ids; ``CatalogError`` naming an id
+        the catalog does not hold."""
+        row_of = self._row_of_id
+        try:
+            return np.array([row_of[int(i)] for i in ids], dtype=np.intp)
+        except KeyError as exc:
+            raise CatalogError(f"catalog {self.name!r} has no star with id {exc.args[0]}") from None
+
     def brighter_than(self, mag_limit: float) -> Catalog:
         """The stars with ``mag <= mag_limit``."""
         keep = self.mag <= mag_limit
