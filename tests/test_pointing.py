@@ -14,9 +14,11 @@ from starnav.geometry import (
     unit_to_radec,
 )
 from starnav.pointing import (
+    MIN_FLATNESS,
     PointingError,
     best_triple,
     boresight_covariance,
+    flatness,
     linear_boresight,
     three_star,
 )
@@ -46,7 +48,7 @@ def _angle(a, b):
 def test_noiseless_triple_gives_boresight_exactly(ra, dec, roll, focal, seed):
     xy = np.random.default_rng(seed).uniform(10, 502, (3, 2))
     ras, decs, R = _triple(ra, dec, roll, focal, xy)
-    if abs(np.linalg.det(radec_to_unit(np.radians(ras), np.radians(decs)))) < 1e-7:
+    if flatness(radec_to_unit(np.radians(ras), np.radians(decs))) < MIN_FLATNESS:
         return  # (nearly) collinear: refused, tested below
     known = three_star(ras, decs, xy=xy, width=512, height=512, focal_px=focal)
     assert _angle(known.boresight, R[2]) < 1e-9
@@ -54,7 +56,10 @@ def test_noiseless_triple_gives_boresight_exactly(ra, dec, roll, focal, seed):
     assert abs((known.roll_deg - roll + 180) % 360 - 180) < 1e-6
     unknown = three_star(ras, decs, xy=xy, width=512, height=512)
     assert _angle(unknown.boresight, R[2]) < 1e-9
-    assert unknown.focal_px == pytest.approx(focal, rel=1e-9)
+    # where the solver itself says the geometry hardly fixes f (1 px moving it by > 1 %),
+    # float rounding alone moves the root by more than 1e-9 of f
+    poorly_fixed = "hardly determines the focal length" in unknown.note
+    assert unknown.focal_px == pytest.approx(focal, rel=1e-6 if poorly_fixed else 1e-9)
 
 
 def test_distances_only_give_every_candidate_focal_length():
@@ -299,3 +304,13 @@ def test_select_best_among_many_stars_is_bounded():
     ras, decs, _ = _triple(10.0, 20.0, 33.0, 2435.68, xy)
     triple = best_triple(ras, decs, xy, focal_px=2435.68, width=512)
     assert max(triple) < 40  # only the first 40 (brightest) are considered
+
+
+def test_root_on_a_grid_point_is_found():
+    """f = 1000 px lies exactly on the search grid; rounding put g(f) = ±1e-16 there and the
+    root slipped between two brackets (found by hypothesis)."""
+    xy = np.random.default_rng(41135).uniform(10, 502, (3, 2))
+    ras, decs, R = _triple(0.0, 0.0, 1.0, 1000.0, xy)
+    result = three_star(ras, decs, xy=xy, width=512)
+    assert result.focal_px == pytest.approx(1000.0, rel=1e-9)
+    assert _angle(result.boresight, R[2]) < 1e-9

@@ -167,6 +167,15 @@ def _roll_deg(d_hat, U, xy_offsets, focal_px, parity) -> float:
     return float(rolls[int(np.argmin(misfit))])
 
 
+def flatness(U: np.ndarray) -> np.ndarray | float:
+    """|det U| / (2 x longest chord^2) of star triples ``U`` (..., 3, 3): a scale-free shape
+    measure, 0.43 for an equilateral triangle and 0 for stars on a great circle."""
+    U = np.asarray(U, dtype=float)
+    chords = np.linalg.norm(U[..., [0, 0, 1], :] - U[..., [1, 2, 2], :], axis=-1)
+    shape = np.abs(np.linalg.det(U)) / (2.0 * chords.max(axis=-1) ** 2)
+    return float(shape) if shape.ndim == 0 else shape
+
+
 def _check_stars(ra_deg, dec_deg) -> np.ndarray:
     """Unit vectors (3, 3) of three distinct, not collinear stars."""
     ra = np.asarray(ra_deg, dtype=float).reshape(-1)
@@ -182,10 +191,10 @@ def _check_stars(ra_deg, dec_deg) -> np.ndarray:
     for (i, j), chord in zip(combinations(range(3), 2), chords, strict=True):
         if chord < 1e-12:
             raise PointingError(f"stars {i + 1} and {j + 1} are the same star")
-    flatness = abs(np.linalg.det(U)) / (2.0 * max(chords) ** 2)
-    if flatness < MIN_FLATNESS:
+    shape = flatness(U)
+    if shape < MIN_FLATNESS:
         raise PointingError(
-            f"the three stars are (nearly) collinear on the sky (flatness {flatness:.1e}, "
+            f"the three stars are (nearly) collinear on the sky (flatness {shape:.1e}, "
             "equilateral 0.43): their boresight equations do not determine a direction"
         )
     return U
@@ -377,7 +386,9 @@ def focal_solutions(U: np.ndarray, a_px: np.ndarray) -> list[float]:
 
     grid = _F_GRID
     v = g(grid)
-    brackets = [(grid[k], grid[k + 1]) for k in np.flatnonzero(v[:-1] * v[1:] < 0)]
+    # <= 0: a root that falls on a grid point (g = 0 there, or a rounding-sized value of
+    # either sign) must not slip between two brackets
+    brackets = [(grid[k], grid[k + 1]) for k in np.flatnonzero(v[:-1] * v[1:] <= 0)]
     roots = []
     # turning points: a local minimum above zero or maximum below it may hide two roots
     turn = (
@@ -401,8 +412,11 @@ def focal_solutions(U: np.ndarray, a_px: np.ndarray) -> list[float]:
         elif abs(extreme) < 1e-12:  # touches zero: a double root
             roots.append(float(opt.x))
     for lo, hi in brackets:
-        if g(lo) * g(hi) < 0:
+        g_lo, g_hi = float(g(lo)), float(g(hi))
+        if g_lo * g_hi < 0:
             roots.append(brentq(lambda f: float(g(f)), lo, hi, xtol=1e-12, rtol=1e-14))
+        elif min(abs(g_lo), abs(g_hi)) < 1e-12:  # the root is the bracket's end point
+            roots.append(lo if abs(g_lo) <= abs(g_hi) else hi)
     roots.sort()
     return [f for k, f in enumerate(roots) if k == 0 or f - roots[k - 1] > 1e-9 * f]
 
@@ -416,9 +430,7 @@ def predicted_errors_arcsec(
     triples = np.array(list(combinations(range(len(U)), 3)), dtype=np.intp).reshape(-1, 3)
     Ut = U[triples]  # (T, 3, 3)
     at = a_px[triples]
-    chords = np.linalg.norm(Ut[:, [0, 0, 1]] - Ut[:, [1, 2, 2]], axis=2)
-    flatness = np.abs(np.linalg.det(Ut)) / (2.0 * chords.max(axis=1) ** 2)
-    keep = flatness >= MIN_FLATNESS
+    keep = flatness(Ut) >= MIN_FLATNESS
     Ut, at, triples = Ut[keep], at[keep], triples[keep]
     r2 = at**2 + focal_px**2
     cos = focal_px / np.sqrt(r2)

@@ -42,6 +42,7 @@ from starnav.geometry import (
 from starnav.pointing import (
     MIN_FLATNESS,
     PointingError,
+    flatness,
     sigma_boresight_arcsec,
     three_star,
 )
@@ -301,11 +302,6 @@ def monte_carlo_rms_arcsec(
     return float(np.sqrt(squares / trials) * ARCSEC_PER_RAD)
 
 
-def _flatness(U: np.ndarray) -> float:
-    chords = np.linalg.norm(U[[0, 0, 1]] - U[[1, 2, 2]], axis=1)
-    return float(abs(np.linalg.det(U)) / (2.0 * chords.max() ** 2))
-
-
 def run_study(
     *,
     fov_deg: float = 12.0,
@@ -402,7 +398,7 @@ def run_study(
     while len(volumes) < n_random:
         xy = rng.uniform(0.0, width, (3, 2))
         U = star_vectors(xy, camera, R)
-        if _flatness(U) < MIN_FLATNESS:
+        if flatness(U) < MIN_FLATNESS:
             continue
         volumes.append(tetrahedron_volume(U))
         errors.append(sigma_boresight_arcsec(U, radial_px(xy, camera), f, sigma_px))
