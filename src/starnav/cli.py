@@ -530,7 +530,7 @@ def _cmd_pointing(args) -> int:
         r_px=None if stars.r_px is None else stars.r_px[rows],
         focal_px=args.focal_px,
         width=args.width,
-        height=height if args.width is not None else None,
+        height=height,
         sigma_px=args.sigma_px,
         parity=args.parity,
     )

@@ -21,7 +21,7 @@ from starnav.attitude.wahba import wahba
 from starnav.geometry import angle_between, chord_from_angle
 from starnav.identify.base import Identification, IdentifyOutcome, MatchSettings
 from starnav.identify.database import PairDatabase
-from starnav.identify.verify import false_match_probability, match_catalog
+from starnav.identify.verify import false_match_probability, field_radius_rad, match_catalog
 
 _SCREEN_CHUNK = 2000  # hypotheses screened per batch (bounds memory on wide fields)
 
@@ -165,7 +165,7 @@ class Pyramid:
         # the smallest chance agreement per star any hypothesis can have (a field holding a
         # single catalog star): hypotheses whose screen count cannot beat the threshold even
         # with it are not verified in full
-        field_rad = np.arccos(np.clip(bearings[:, 2].min(), -1.0, 1.0)) + settings.match_radius_rad
+        field_rad = field_radius_rad(bearings, settings.match_radius_rad)
         p_floor = (1.0 - np.cos(min(settings.match_radii_rad))) / (1.0 - np.cos(field_rad))
         n_radii = len(settings.match_radii_rad)
         for i, j, k in triangle_order(len(order)):

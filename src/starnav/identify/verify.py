@@ -54,6 +54,12 @@ class Verification:
         return min(1.0, best * len(radii_rad))
 
 
+def field_radius_rad(bearings: np.ndarray, radius_rad: float) -> float:
+    """Half-angle (radians) of the cone about the boresight holding every bearing, grown by
+    the match radius: the field the chance of agreement is reckoned over."""
+    return float(np.arccos(np.clip(np.min(bearings[:, 2]), -1.0, 1.0))) + radius_rad
+
+
 def match_catalog(
     bearings: np.ndarray,
     R_cam_from_icrs: np.ndarray,
@@ -63,8 +69,7 @@ def match_catalog(
     """Pair bearings with reprojected catalog stars within ``radius_rad``, one to one, with
     the least total squared distance (so close doubles are not both given one star)."""
     boresight = R_cam_from_icrs[2]
-    cos_field = float(np.min(bearings[:, 2]))
-    field_rad = float(np.arccos(np.clip(cos_field, -1.0, 1.0))) + radius_rad
+    field_rad = field_radius_rad(bearings, radius_rad)
     cone = database.cone(boresight, field_rad)
     if len(cone) == 0:
         empty = np.empty(0, dtype=np.intp)
