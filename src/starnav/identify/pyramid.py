@@ -17,11 +17,14 @@ from dataclasses import replace
 
 import numpy as np
 
-from starnav.attitude.wahba import wahba
 from starnav.geometry import angle_between, chord_from_angle
-from starnav.identify.base import Identification, IdentifyOutcome, MatchSettings
+from starnav.identify.base import IdentifyOutcome, MatchSettings
 from starnav.identify.database import PairDatabase
-from starnav.identify.verify import false_match_probability, field_radius_rad, match_catalog
+from starnav.identify.verify import (
+    HypothesisTester,
+    false_match_probability,
+    field_radius_rad,
+)
 
 _SCREEN_CHUNK = 2000  # hypotheses screened per batch (bounds memory on wide fields)
 
@@ -115,15 +118,6 @@ def _screen(
     return np.isfinite(dist).reshape(len(parities), len(bearings)).sum(axis=1)
 
 
-def _mirror_agrees(bearings, ver, parity, database, settings, hypotheses) -> bool:
-    """Whether the mirror image of a verified hypothesis verifies too (collinear stars)."""
-    vectors = database.catalog.vectors
-    R = wahba(bearings[ver.obs_index], vectors[ver.cat_index], parity=-parity)
-    mirror = match_catalog(bearings, R, database, settings.match_radius_rad)
-    p = mirror.false_match_probability(len(bearings), 3, hypotheses, settings.match_radii_rad)
-    return p <= settings.max_false_match_probability
-
-
 def _triple_product(v: np.ndarray) -> np.ndarray:
     """det[v0, v1, v2] for arrays of shape (..., 3, 3)."""
     return np.einsum("...i,...i->...", v[..., 0, :], np.cross(v[..., 1, :], v[..., 2, :]))
@@ -159,9 +153,7 @@ class Pyramid:
             return IdentifyOutcome(None, "fewer than 3 stars", 0)
         tol = settings.pair_tol_rad
         vectors = database.catalog.vectors
-        hypotheses = 0
-        triangles_with_candidates = 0
-        best_p = 1.0
+        tester = HypothesisTester(bearings, database, settings)
         # the smallest chance agreement per star any hypothesis can have (a field holding a
         # single catalog star): hypotheses whose screen count cannot beat the threshold even
         # with it are not verified in full
@@ -177,7 +169,6 @@ class Pyramid:
             triples = catalog_triangles(database, sides[0], sides[1], sides[2], tol)
             if len(triples) == 0:
                 continue
-            triangles_with_candidates += 1
             det_obs = _triple_product(b)
             det_cat = _triple_product(vectors[triples])
             parities = np.where(np.sign(det_obs) == np.sign(det_cat), 1, -1)
@@ -189,40 +180,17 @@ class Pyramid:
                 triples, parities = triples[keep], parities[keep]
             if len(triples) == 0:
                 continue
-            hypotheses += len(triples)
+            tester.count(len(triples))
             agree = _screen(bearings, b, vectors[triples], parities, database, settings)
             for h in np.argsort(-agree, kind="stable"):
                 p_best_case = n_radii * false_match_probability(
-                    n_total, agree[h], 3, p_floor, hypotheses
+                    n_total, agree[h], 3, p_floor, tester.hypotheses
                 )
                 if p_best_case > settings.max_false_match_probability:
                     break  # neither this nor any later (lower) count can be convincing
-                parity = int(parities[h])
-                R = wahba(b, vectors[triples[h]], parity=parity)
-                ver = match_catalog(bearings, R, database, settings.match_radius_rad)
-                p = ver.false_match_probability(n_total, 3, hypotheses, settings.match_radii_rad)
-                best_p = min(best_p, p)
-                if p <= settings.max_false_match_probability:
-                    if settings.parity is None and _mirror_agrees(
-                        bearings, ver, parity, database, settings, hypotheses
-                    ):
-                        return IdentifyOutcome(
-                            None,
-                            "parity ambiguous: the identified stars are nearly collinear "
-                            "(give the parity to solve)",
-                            hypotheses,
-                        )
-                    found = Identification(ver.obs_index, ver.cat_index, R, parity, p, hypotheses)
-                    return IdentifyOutcome(found, "", hypotheses)
-            if hypotheses >= settings.max_hypotheses:
-                return IdentifyOutcome(None, f"gave up after {hypotheses} hypotheses", hypotheses)
-        if triangles_with_candidates == 0:
-            reason = "no star triangle matches the catalog"
-        elif best_p < 1.0:
-            reason = (
-                f"best hypothesis not convincing (false-match probability {best_p:.2g} > "
-                f"{settings.max_false_match_probability:g})"
-            )
-        else:
-            reason = "no hypothesis agreed with enough stars to be convincing"
-        return IdentifyOutcome(None, reason, hypotheses)
+                outcome = tester.test(idx, triples[h], int(parities[h]))
+                if outcome is not None:
+                    return outcome
+            if tester.exhausted:
+                break
+        return tester.outcome("no star triangle matches the catalog")

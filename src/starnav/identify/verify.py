@@ -18,7 +18,9 @@ import numpy as np
 from scipy.optimize import linear_sum_assignment
 from scipy.special import betainc
 
+from starnav.attitude.wahba import wahba
 from starnav.geometry import chord_from_angle
+from starnav.identify.base import Identification, IdentifyOutcome, MatchSettings
 from starnav.identify.database import PairDatabase
 
 
@@ -103,3 +105,87 @@ def false_match_probability(
     # P(X >= extra) for X ~ Binomial(trials, p) is the regularised incomplete beta function
     tail = float(betainc(extra, trials - extra + 1, p_chance))
     return min(1.0, tail * max(hypotheses, 1))
+
+
+class HypothesisTester:
+    """The verification step every identification algorithm shares.
+
+    An algorithm proposes hypotheses (measured rows paired with catalog rows, and a parity);
+    ``test`` builds the attitude (Wahba), reprojects the catalog, and accepts the hypothesis
+    when its false-match probability, corrected for every hypothesis counted so far, is below
+    the threshold and its mirror image does not verify too. ``outcome`` gives the reason when
+    nothing was accepted. Count hypotheses with ``count`` as they are generated (before
+    screening), so the correction covers all of them.
+    """
+
+    def __init__(
+        self, bearings: np.ndarray, database: PairDatabase, settings: MatchSettings
+    ) -> None:
+        self.bearings = bearings
+        self.database = database
+        self.settings = settings
+        self.hypotheses = 0
+        self.best_p = 1.0
+        self.proposed = 0  # hypotheses that reached ``test``
+
+    def count(self, n: int) -> None:
+        """Record ``n`` more hypotheses generated."""
+        self.hypotheses += int(n)
+
+    @property
+    def exhausted(self) -> bool:
+        """Whether the hypothesis budget of the settings is spent."""
+        return self.hypotheses >= self.settings.max_hypotheses
+
+    def _verify(self, R: np.ndarray, n_used: int) -> tuple[Verification, float]:
+        s = self.settings
+        ver = match_catalog(self.bearings, R, self.database, s.match_radius_rad)
+        p = ver.false_match_probability(
+            len(self.bearings), n_used, self.hypotheses, s.match_radii_rad
+        )
+        return ver, p
+
+    def test(
+        self, obs_rows: np.ndarray, cat_rows: np.ndarray, parity: int
+    ) -> IdentifyOutcome | None:
+        """Verify one hypothesis; an outcome when it is accepted or found ambiguous."""
+        self.proposed += 1
+        s = self.settings
+        vectors = self.database.catalog.vectors
+        n_used = len(obs_rows)
+        R = wahba(self.bearings[obs_rows], vectors[cat_rows], parity=parity)
+        ver, p = self._verify(R, n_used)
+        self.best_p = min(self.best_p, p)
+        if p > s.max_false_match_probability:
+            return None
+        if s.parity is None:
+            # collinear stars verify in the mirror image as well: then the parity is unknown
+            R_mirror = wahba(self.bearings[ver.obs_index], vectors[ver.cat_index], parity=-parity)
+            _, p_mirror = self._verify(R_mirror, n_used)
+            if p_mirror <= s.max_false_match_probability:
+                return IdentifyOutcome(
+                    None,
+                    "parity ambiguous: the identified stars are nearly collinear "
+                    "(give the parity to solve)",
+                    self.hypotheses,
+                )
+        found = Identification(ver.obs_index, ver.cat_index, R, parity, p, self.hypotheses)
+        return IdentifyOutcome(found, "", self.hypotheses)
+
+    def outcome(
+        self, nothing_matched: str = "no star pattern matches the catalog"
+    ) -> IdentifyOutcome:
+        """The outcome when no hypothesis was accepted."""
+        s = self.settings
+        if self.exhausted:
+            reason = f"gave up after {self.hypotheses} hypotheses"
+        elif self.hypotheses == 0:
+            reason = nothing_matched
+        elif self.best_p < 1.0:
+            reason = (
+                f"best hypothesis not convincing (false-match probability {self.best_p:.2g} > "
+                f"{s.max_false_match_probability:g})"
+            )
+        else:
+            reason = "no hypothesis agreed with enough stars to be convincing"
+        return IdentifyOutcome(None, reason, self.hypotheses)
