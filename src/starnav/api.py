@@ -14,11 +14,11 @@ from starnav.catalog import Catalog, load_catalog
 from starnav.errors import CatalogError, StarnavError
 from starnav.geometry import radec_roll_from_attitude
 from starnav.identify import (
-    ALGORITHMS,
     DEFAULT_ALGORITHM,
     MatchSettings,
     PairDatabase,
     build_database,
+    make_identifier,
 )
 from starnav.identify.database import database_angle_deg
 from starnav.identify.verify import match_catalog
@@ -141,6 +141,7 @@ def solve_verbose(
     max_false_match_probability: float = DEFAULT_MAX_FALSE_MATCH_PROBABILITY,
     min_matched_fraction: float = DEFAULT_MIN_MATCHED_FRACTION,
     algorithm: str = DEFAULT_ALGORITHM,
+    triangle_selection: str = "optimized",
 ) -> SolveResult:
     """Like ``solve`` but always returns a ``SolveResult`` with the reason when unsolved.
 
@@ -151,7 +152,9 @@ def solve_verbose(
     ``max_false_match_probability``: refuse less certain identifications;
     ``min_matched_fraction``: refuse when fewer of the stars that should be seen (the smaller
     of the number of points and of catalog stars inside the image) agree;
-    ``algorithm``: identification algorithm by name.
+    ``algorithm``: identification algorithm by name (``starnav.identify.ALGORITHMS``);
+    ``triangle_selection``: ``"brightest"`` or ``"optimized"``, how the ``triangle``
+    algorithm picks its star triangles.
     """
     camera = make_camera(width=width, height=height, fov_deg=fov_deg)
     stars = check_star_list(
@@ -161,8 +164,9 @@ def solve_verbose(
         raise StarnavError(f"sigma_px must be a positive number of pixels, got {sigma_px!r}")
     if parity not in (None, 1, -1):
         raise StarnavError(f"parity must be +1, -1 or None, got {parity!r}")
-    if algorithm not in ALGORITHMS:
-        raise StarnavError(f"unknown algorithm {algorithm!r}; known: {', '.join(ALGORITHMS)}")
+    identifier = make_identifier(
+        algorithm, **({"selection": triangle_selection} if algorithm == "triangle" else {})
+    )
     if not 0.0 <= min_matched_fraction <= 1.0:
         raise StarnavError(f"min_matched_fraction must be in [0, 1], got {min_matched_fraction!r}")
     if not 0.0 < max_false_match_probability < 1.0:
@@ -187,13 +191,14 @@ def solve_verbose(
         ),
         max_false_match_probability=max_false_match_probability,
         parity=parity,
+        pixel_rad=1.0 / camera.focal_px,
     )
     order = (
         np.argsort(-stars.brightness, kind="stable")
         if stars.brightness is not None
         else np.arange(len(bearings))
     )
-    outcome = ALGORITHMS[algorithm]().identify(bearings, order, database, settings)
+    outcome = identifier.identify(bearings, order, database, settings)
     found = outcome.identification
     if found is None:
         ms = (time.perf_counter() - t0) * 1e3

@@ -136,7 +136,18 @@ def _build_parser() -> argparse.ArgumentParser:
         default=DEFAULT_MAX_FALSE_MATCH_PROBABILITY,
         help="refuse less certain answers (default %(default)g)",
     )
-    p.add_argument("--algorithm", choices=sorted(ALGORITHMS), default=DEFAULT_ALGORITHM)
+    p.add_argument(
+        "--algorithm",
+        choices=list(ALGORITHMS),
+        default=DEFAULT_ALGORITHM,
+        help="identification algorithm (default %(default)s)",
+    )
+    p.add_argument(
+        "--triangle-selection",
+        choices=("brightest", "optimized"),
+        default="optimized",
+        help="how --algorithm triangle picks its triangles (default %(default)s)",
+    )
     p.add_argument(
         "--plot", metavar="PNG", type=_png_path, help="draw the identified map into this PNG file"
     )
@@ -273,6 +284,7 @@ def _cmd_identify(args) -> int:
         fit_focal=args.fit_focal,
         max_false_match_probability=args.max_false_match_probability,
         algorithm=args.algorithm,
+        triangle_selection=args.triangle_selection,
     )
     s = result.solution
     if s is None and args.plot:

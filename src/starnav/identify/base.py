@@ -31,6 +31,7 @@ class MatchSettings:
     max_stars: int = 25
     max_screen_stars: int = 50
     max_hypotheses: int = 20000
+    pixel_rad: float | None = None
 
     @property
     def match_radius_rad(self) -> float:
@@ -78,4 +79,8 @@ class Identifier(Protocol):
         settings: MatchSettings,
     ) -> IdentifyOutcome:
         """Identify ``bearings`` (n, 3); ``order`` lists rows best-first (e.g. brightest)."""
+        ...
+
+    def database_nbytes(self, database: PairDatabase) -> int:
+        """Bytes of the tables this algorithm searches (the pair database and its own)."""
         ...

@@ -128,6 +128,10 @@ class Pyramid:
 
     name = "pyramid"
 
+    def database_nbytes(self, database: PairDatabase) -> int:
+        """Bytes of the pair database (the only table this searches)."""
+        return database.nbytes
+
     def identify(
         self,
         bearings: np.ndarray,
