@@ -9,6 +9,7 @@ import math
 import os
 import sys
 import time
+from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
@@ -199,6 +200,56 @@ def _build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=_count, default=0)
     p.add_argument("--out-dir", default=".", help="where the PNG figures go")
     p.add_argument("--json", action="store_true")
+
+    p = sub.add_parser(
+        "evaluate", help="lost-in-space evaluation over the whole sky (simulated frames)"
+    )
+    p.add_argument("--sampling", choices=("grid", "uniform"), default="grid")
+    p.add_argument(
+        "--grid-step-deg",
+        type=_finite,
+        default=3.0,
+        help="RA/Dec grid step (default 3: 7200 boresights)",
+    )
+    p.add_argument(
+        "--frames", type=_positive_int, default=1000, help="frames of --sampling uniform"
+    )
+    p.add_argument("--fov-deg", type=_finite, default=12.0, help="horizontal FOV (default 12)")
+    p.add_argument("--width", type=_positive_int, default=512, help="image width (default 512)")
+    p.add_argument("--height", type=_positive_int, help="image height (px; default: width)")
+    p.add_argument(
+        "--mag-limit", type=_finite, default=DEFAULT_MAG_LIMIT, help="Hipparcos Hp limit"
+    )
+    p.add_argument(
+        "--noise-px", type=_finite, default=0.5, help="centroid noise, 1 sigma (default 0.5)"
+    )
+    p.add_argument("--false-stars", type=_count, default=2, help="per frame (default 2)")
+    p.add_argument("--missing-frac", type=_finite, default=0.1, help="stars dropped (default 0.1)")
+    p.add_argument(
+        "--mag-noise", type=_finite, default=0.0, help="magnitude noise, 1 sigma (default 0)"
+    )
+    p.add_argument(
+        "--sigma-px", type=_finite, help="centroid sigma told to the solver (default: the noise)"
+    )
+    p.add_argument(
+        "--algorithm",
+        choices=list(ALGORITHMS),
+        default=DEFAULT_ALGORITHM,
+        help="identification algorithm (default %(default)s)",
+    )
+    p.add_argument("--triangle-selection", choices=("brightest", "optimized"), default="optimized")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument(
+        "--workers", type=_positive_int, help="processes (default: all cores; 1: this process)"
+    )
+    p.add_argument(
+        "--dask",
+        metavar="ADDRESS",
+        help="run on this Dask scheduler (e.g. tcp://host:8786), or 'local' for a LocalCluster",
+    )
+    p.add_argument("--frames-csv", metavar="CSV", help="write one row per frame here")
+    p.add_argument("--sky-map", metavar="PNG", type=_png_path, help="whole-sky outcome map")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
 
     p = sub.add_parser("database", help="build (or load) the pair database and report it")
     _add_camera(p)
@@ -583,11 +634,51 @@ def _cmd_pointing_study(args) -> int:
     return EXIT_OK
 
 
+def _cmd_evaluate(args) -> int:
+    from starnav.evaluate import EvalConfig, evaluate, grid_boresights, uniform_boresights
+    from starnav.evaluate.report import describe, markdown, plot_sky_map, write_frames_csv
+
+    config = EvalConfig(
+        fov_deg=args.fov_deg,
+        width=args.width,
+        height=args.height,
+        mag_limit=args.mag_limit,
+        noise_px=args.noise_px,
+        false_stars=args.false_stars,
+        missing_frac=args.missing_frac,
+        mag_noise=args.mag_noise,
+        algorithm=args.algorithm,
+        triangle_selection=args.triangle_selection,
+        sigma_px=args.sigma_px,
+        seed=args.seed,
+    )
+    for option, path in (("--frames-csv", args.frames_csv), ("--sky-map", args.sky_map)):
+        if path and not Path(path).resolve().parent.is_dir():
+            raise StarnavError(f"{option}: the directory of {path!r} does not exist")
+    if args.sampling == "grid":
+        boresights = grid_boresights(args.grid_step_deg, seed=args.seed)
+        sampling = f"{len(boresights)} boresights on a {args.grid_step_deg:g}° RA/Dec grid"
+    else:
+        boresights = uniform_boresights(args.frames, seed=args.seed)
+        sampling = f"{len(boresights)} boresights uniform on the sphere"
+    summary, results = evaluate(config, boresights, workers=args.workers, dask_address=args.dask)
+    if args.frames_csv:
+        write_frames_csv(results, args.frames_csv)
+    if args.sky_map:
+        plot_sky_map(results, args.sky_map, title=describe(config, sampling))
+    if args.json:
+        print(_json({**summary.to_dict(), "config": asdict(config), "sampling": sampling}))
+    else:
+        print(markdown(config, sampling, summary))
+    return EXIT_OK
+
+
 _COMMANDS = {
     "identify": _cmd_identify,
     "simulate": _cmd_simulate,
     "demo": _cmd_demo,
     "database": _cmd_database,
+    "evaluate": _cmd_evaluate,
     "pointing": _cmd_pointing,
     "pointing-study": _cmd_pointing_study,
 }

@@ -1,0 +1,387 @@
+"""Lost-in-space evaluation: simulate frames, solve them with the real solve path, score them.
+
+Frames are remade from (seed, index) wherever they are solved, so a run is the same on one core,
+on N processes or on a Dask cluster. Each frame's outcome is data (``FrameResult``), never an
+exception half way through a run (the sgp4 batch style): a frame the simulator leaves with fewer
+than 3 points is scored "none" with that reason.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import time
+from collections.abc import Callable, Iterator, Sequence
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import asdict, dataclass
+
+import numpy as np
+from tqdm import tqdm
+
+from starnav.api import (
+    DEFAULT_MAX_FALSE_MATCH_PROBABILITY,
+    get_database,
+    make_camera,
+    solve_verbose,
+)
+from starnav.catalog import load_catalog
+from starnav.errors import StarnavError
+from starnav.evaluate.sampling import Boresights, frame_rng
+from starnav.geometry import angle_between, attitude_difference_deg
+from starnav.identify import make_identifier
+from starnav.simulate import FALSE_STAR_ID, simulate_frame
+
+CORRECT_BORESIGHT_DEG = 0.05  # a solution is correct within this and ...
+CORRECT_ROLL_DEG = 0.5  # ... this of the truth; wrong beyond either
+OUTCOMES = ("correct", "wrong", "none")
+_CHUNK = 40  # frames per task sent to a worker
+
+
+@dataclass(frozen=True)
+class EvalConfig:
+    """Everything that defines the frames and how they are solved.
+
+    Camera: ``fov_deg`` (horizontal), ``width``/``height`` (px), Hipparcos ``mag_limit``.
+    Errors: ``noise_px`` (1-sigma centroid noise), ``false_stars`` per frame, ``missing_frac``
+    of stars dropped, ``mag_noise`` (1-sigma, magnitudes; changes the brightness order).
+    Solver: ``algorithm`` (``triangle_selection`` for "triangle"), ``sigma_px`` told to it,
+    ``max_false_match_probability``. ``seed`` makes every frame reproducible.
+    """
+
+    fov_deg: float = 12.0
+    width: int = 512
+    height: int | None = None
+    mag_limit: float = 6.0
+    noise_px: float = 0.5
+    false_stars: int = 2
+    missing_frac: float = 0.1
+    mag_noise: float = 0.0
+    algorithm: str = "pyramid"
+    triangle_selection: str = "optimized"
+    sigma_px: float | None = None
+    max_false_match_probability: float = DEFAULT_MAX_FALSE_MATCH_PROBABILITY
+    seed: int = 0
+
+    @property
+    def solver_sigma_px(self) -> float:
+        """The centroid sigma the solver is told: ``sigma_px``, else the noise (>= 0.1 px)."""
+        return self.sigma_px if self.sigma_px is not None else max(self.noise_px, 0.1)
+
+    def check(self) -> None:
+        """Raise ``StarnavError`` naming the first bad value."""
+        make_camera(width=self.width, height=self.height, fov_deg=self.fov_deg)
+        make_identifier(self.algorithm, **self.identifier_options)
+        if not (np.isfinite(self.mag_limit) and -2.0 <= self.mag_limit <= 12.0):
+            raise StarnavError(f"mag limit must be between -2 and 12, got {self.mag_limit!r}")
+        if self.sigma_px is not None and not (np.isfinite(self.sigma_px) and self.sigma_px > 0):
+            raise StarnavError(f"sigma_px must be a positive number of pixels, got {self.sigma_px}")
+        # the simulator checks noise, false stars and the missing fraction
+        simulate_frame(
+            load_catalog(None, mag_limit=self.mag_limit),
+            make_camera(width=self.width, height=self.height, fov_deg=self.fov_deg),
+            noise_px=self.noise_px,
+            false_stars=self.false_stars,
+            missing_frac=self.missing_frac,
+            mag_noise=self.mag_noise,
+            seed=0,
+        )
+
+    @property
+    def identifier_options(self) -> dict:
+        return {"selection": self.triangle_selection} if self.algorithm == "triangle" else {}
+
+
+@dataclass(frozen=True)
+class FrameResult:
+    """One frame: its boresight and roll (degrees), ``n_in_view`` catalog stars inside the
+    image, ``n_points`` points given to the solver of which ``n_true`` are real stars,
+    ``outcome`` (correct / wrong / none), ``time_ms`` (identification and fit), stars
+    identified and wrongly identified, attitude errors (None when not solved), and the
+    solver's reason when it refused."""
+
+    index: int
+    ra_deg: float
+    dec_deg: float
+    roll_deg: float
+    n_in_view: int
+    n_points: int
+    n_true: int
+    outcome: str
+    time_ms: float
+    n_identified: int
+    n_wrong_ids: int
+    boresight_error_arcsec: float | None
+    roll_error_arcsec: float | None
+    reason: str
+
+
+def solve_frame(config: EvalConfig, boresights: Boresights, index: int) -> FrameResult:
+    """Simulate frame ``index`` of ``boresights`` and score the solver's answer."""
+    catalog = load_catalog(None, mag_limit=config.mag_limit)
+    camera = make_camera(width=config.width, height=config.height, fov_deg=config.fov_deg)
+    ra, dec, roll = (
+        float(boresights.ra_deg[index]),
+        float(boresights.dec_deg[index]),
+        float(boresights.roll_deg[index]),
+    )
+    frame = simulate_frame(
+        catalog,
+        camera,
+        ra_deg=ra,
+        dec_deg=dec,
+        roll_deg=roll,
+        noise_px=config.noise_px,
+        false_stars=config.false_stars,
+        missing_frac=config.missing_frac,
+        mag_noise=config.mag_noise,
+        seed=frame_rng(config.seed, index),
+    )
+    n_true = int(np.sum(frame.true_id != FALSE_STAR_ID))
+    common = dict(
+        index=index,
+        ra_deg=ra,
+        dec_deg=dec,
+        roll_deg=roll,
+        n_in_view=frame.n_in_view,
+        n_points=len(frame.xy),
+        n_true=n_true,
+    )
+    if len(frame.xy) < 3:
+        return FrameResult(
+            **common,
+            outcome="none",
+            time_ms=0.0,
+            n_identified=0,
+            n_wrong_ids=0,
+            boresight_error_arcsec=None,
+            roll_error_arcsec=None,
+            reason=f"{len(frame.xy)} points in the image (3 needed)",
+        )
+    result = solve_verbose(
+        frame.xy,
+        width=config.width,
+        height=config.height,
+        fov_deg=config.fov_deg,
+        brightness=frame.brightness,
+        catalog=catalog,
+        sigma_px=config.solver_sigma_px,
+        max_false_match_probability=config.max_false_match_probability,
+        algorithm=config.algorithm,
+        triangle_selection=config.triangle_selection,
+    )
+    s = result.solution
+    if s is None:
+        return FrameResult(
+            **common,
+            outcome="none",
+            time_ms=result.time_ms,
+            n_identified=0,
+            n_wrong_ids=0,
+            boresight_error_arcsec=None,
+            roll_error_arcsec=None,
+            reason=result.reason,
+        )
+    boresight_deg, roll_deg = attitude_difference_deg(s.R_cam_from_icrs, frame.R_cam_from_icrs)
+    ids = np.array([-1 if m.catalog_id is None else m.catalog_id for m in s.stars])
+    correct = boresight_deg < CORRECT_BORESIGHT_DEG and roll_deg < CORRECT_ROLL_DEG
+    return FrameResult(
+        **common,
+        outcome="correct" if correct else "wrong",
+        time_ms=s.time_ms,
+        n_identified=int(np.sum(ids != -1)),
+        n_wrong_ids=_wrong_ids(ids, frame.true_id, catalog, camera, config.noise_px),
+        boresight_error_arcsec=boresight_deg * 3600.0,
+        roll_error_arcsec=roll_deg * 3600.0,
+        reason="",
+    )
+
+
+def _wrong_ids(ids, true_ids, catalog, camera, noise_px: float) -> int:
+    """Points given a catalog id other than their own. A star confused with a catalog
+    neighbour closer than max(1 px, 3 noise sigma) is not counted: such doubles cannot be told
+    apart at that noise (the neighbour may be the one the simulator dropped)."""
+    differ = np.flatnonzero((ids != -1) & (ids != true_ids))
+    if len(differ) == 0:
+        return 0
+    close_rad = max(1.0, 3.0 * noise_px) / camera.focal_px
+    wrong = 0
+    for n in differ:
+        if true_ids[n] == FALSE_STAR_ID:
+            wrong += 1
+            continue
+        a, b = catalog.vectors[catalog.rows([ids[n], true_ids[n]])]
+        wrong += bool(angle_between(a, b) > close_rad)
+    return wrong
+
+
+def solve_chunk(
+    config: EvalConfig, boresights: Boresights, indices: Sequence[int]
+) -> list[FrameResult]:
+    """``solve_frame`` for each of ``indices`` (one task of a worker)."""
+    return [solve_frame(config, boresights, int(i)) for i in indices]
+
+
+def prepare(config: EvalConfig) -> int:
+    """Load the catalog and build (or load) every table the algorithm searches, so workers
+    find them in the disk cache; returns their size in bytes."""
+    config.check()
+    catalog = load_catalog(None, mag_limit=config.mag_limit)
+    camera = make_camera(width=config.width, height=config.height, fov_deg=config.fov_deg)
+    database = get_database(catalog, camera)
+    return make_identifier(config.algorithm, **config.identifier_options).database_nbytes(database)
+
+
+def _chunks(n: int, size: int) -> list[list[int]]:
+    return [list(range(k, min(k + size, n))) for k in range(0, n, size)]
+
+
+def _serial(config, boresights, chunks) -> Iterator[list[FrameResult]]:
+    for chunk in chunks:
+        yield solve_chunk(config, boresights, chunk)
+
+
+def _processes(config, boresights, chunks, workers) -> Iterator[list[FrameResult]]:
+    with ProcessPoolExecutor(max_workers=workers) as pool:
+        futures = [pool.submit(solve_chunk, config, boresights, c) for c in chunks]
+        for future in as_completed(futures):
+            yield future.result()
+
+
+def _dask(config, boresights, chunks, address, workers) -> Iterator[list[FrameResult]]:
+    try:
+        from distributed import Client, LocalCluster
+        from distributed import as_completed as dask_completed
+    except ImportError:
+        raise StarnavError(
+            "--dask needs the distributed package: pip install 'starnav[dask]'"
+        ) from None
+    cluster = None
+    try:
+        if address == "local":
+            cluster = LocalCluster(
+                n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None
+            )
+            client = Client(cluster)
+        else:
+            client = Client(address, timeout="10s")
+    except OSError as exc:
+        if cluster is not None:
+            cluster.close()
+        raise StarnavError(f"cannot reach the Dask scheduler at {address!r}: {exc}") from None
+    try:
+        # the workers build their own tables from their disk cache (or once, if remote)
+        futures = client.map(
+            solve_chunk, [config] * len(chunks), [boresights] * len(chunks), chunks, pure=False
+        )
+        for future in dask_completed(futures):
+            yield future.result()
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+
+
+def run_evaluation(
+    config: EvalConfig,
+    boresights: Boresights,
+    *,
+    workers: int | None = None,
+    dask_address: str | None = None,
+    progress: Callable[[int], None] | None = None,
+) -> list[FrameResult]:
+    """Solve every frame of ``boresights``; results in frame order.
+
+    ``workers``: processes (default all cores; 1 runs in this process); ``dask_address``: a
+    Dask scheduler address, or "local" for a LocalCluster of ``workers`` processes;
+    ``progress``: called with the number of frames finished by each task.
+    """
+    workers = workers or os.cpu_count() or 1
+    chunks = _chunks(len(boresights), _CHUNK)
+    if dask_address:
+        stream = _dask(config, boresights, chunks, dask_address, workers)
+    elif workers == 1:
+        stream = _serial(config, boresights, chunks)
+    else:
+        stream = _processes(config, boresights, chunks, workers)
+    results: list[FrameResult] = []
+    for chunk in stream:
+        results.extend(chunk)
+        if progress:
+            progress(len(chunk))
+    return sorted(results, key=lambda r: r.index)
+
+
+@dataclass(frozen=True)
+class Summary:
+    """Counts and rates of an evaluation (rates are fractions of ``frames``); ``*_ge4``: the
+    same over frames with at least 4 real stars among the points; times in ms over frames that
+    reached the solver; ``db_bytes``: the tables searched; ``wall_s``: elapsed time."""
+
+    frames: int
+    correct: int
+    wrong: int
+    none: int
+    correct_rate: float
+    wrong_rate: float
+    frames_ge4: int
+    correct_rate_ge4: float
+    wrong_ids: int
+    median_ms: float
+    p95_ms: float
+    max_ms: float
+    median_boresight_error_arcsec: float | None
+    db_bytes: int
+    wall_s: float
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+def summarize(results: Sequence[FrameResult], *, db_bytes: int, wall_s: float) -> Summary:
+    """Aggregate frame results."""
+    n = len(results)
+    count = {k: sum(r.outcome == k for r in results) for k in OUTCOMES}
+    ge4 = [r for r in results if r.n_true >= 4]
+    times = np.array([r.time_ms for r in results if r.n_points >= 3] or [np.nan])
+    errors = [r.boresight_error_arcsec for r in results if r.outcome == "correct"]
+    return Summary(
+        frames=n,
+        correct=count["correct"],
+        wrong=count["wrong"],
+        none=count["none"],
+        correct_rate=count["correct"] / n if n else 0.0,
+        wrong_rate=count["wrong"] / n if n else 0.0,
+        frames_ge4=len(ge4),
+        correct_rate_ge4=(sum(r.outcome == "correct" for r in ge4) / len(ge4)) if ge4 else 0.0,
+        wrong_ids=sum(r.n_wrong_ids for r in results),
+        median_ms=float(np.nanmedian(times)),
+        p95_ms=float(np.nanpercentile(times, 95)),
+        max_ms=float(np.nanmax(times)),
+        median_boresight_error_arcsec=float(np.median(errors)) if errors else None,
+        db_bytes=db_bytes,
+        wall_s=wall_s,
+    )
+
+
+def evaluate(
+    config: EvalConfig,
+    boresights: Boresights,
+    *,
+    workers: int | None = None,
+    dask_address: str | None = None,
+    progress_bar: bool = True,
+) -> tuple[Summary, list[FrameResult]]:
+    """Prepare the tables, run every frame (progress bar on stderr) and summarise."""
+    db_bytes = prepare(config)
+    t0 = time.perf_counter()
+    with tqdm(
+        total=len(boresights),
+        desc=f"{config.algorithm}",
+        unit="frame",
+        file=sys.stderr,
+        disable=not progress_bar,
+    ) as bar:
+        results = run_evaluation(
+            config, boresights, workers=workers, dask_address=dask_address, progress=bar.update
+        )
+    return summarize(results, db_bytes=db_bytes, wall_s=time.perf_counter() - t0), results

@@ -1,0 +1,148 @@
+import csv
+import json
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from starnav.cli import main
+from starnav.errors import StarnavError
+from starnav.evaluate import (
+    EvalConfig,
+    grid_boresights,
+    run_evaluation,
+    runner,
+    solve_frame,
+    summarize,
+    uniform_boresights,
+)
+
+
+def test_published_grid_has_7200_boresights_inside_the_sky():
+    b = grid_boresights(3.0)
+    assert len(b) == 7200
+    assert b.ra_deg.min() == 0.0 and b.ra_deg.max() == 357.0
+    assert b.dec_deg.min() == -88.5 and b.dec_deg.max() == 88.5
+    assert len({(r, d) for r, d in zip(b.ra_deg, b.dec_deg, strict=True)}) == 7200
+
+
+def test_uniform_sampling_is_uniform_on_the_sphere_and_reproducible():
+    a = uniform_boresights(4000, seed=3)
+    b = uniform_boresights(4000, seed=3)
+    assert np.array_equal(a.ra_deg, b.ra_deg) and np.array_equal(a.roll_deg, b.roll_deg)
+    # uniform on the sphere: sin(dec) uniform, so half the frames within |dec| < 30°
+    assert abs(np.mean(np.abs(a.dec_deg) < 30.0) - 0.5) < 0.03
+
+
+@pytest.mark.parametrize("bad", [0.0, -3.0, float("nan")])
+def test_bad_grid_step_is_refused(bad):
+    with pytest.raises(StarnavError, match="grid step"):
+        grid_boresights(bad)
+
+
+def test_frames_are_the_same_wherever_they_are_solved():
+    """Serial and two processes give the same outcome and stars for every frame."""
+    config = EvalConfig(noise_px=0.5, false_stars=2, missing_frac=0.1, seed=4)
+    b = uniform_boresights(40, seed=4)
+    serial = run_evaluation(config, b, workers=1)
+    pooled = run_evaluation(config, b, workers=2)
+    key = [(r.index, r.outcome, r.n_points, r.n_identified) for r in serial]
+    assert key == [(r.index, r.outcome, r.n_points, r.n_identified) for r in pooled]
+    s = summarize(serial, db_bytes=1, wall_s=1.0)
+    assert s.frames == 40 and s.correct + s.wrong + s.none == 40
+    assert s.wrong == 0 and s.correct >= 36
+
+
+def test_frame_with_too_few_points_is_scored_none_not_raised():
+    config = EvalConfig(fov_deg=2.0, noise_px=0.0, false_stars=0, missing_frac=0.0, seed=1)
+    b = uniform_boresights(30, seed=1)
+    results = [solve_frame(config, b, i) for i in range(30)]
+    few = [r for r in results if r.n_points < 3]
+    assert few, "a 2° field at Hp 6 is usually nearly empty"
+    assert all(r.outcome == "none" and "3 needed" in r.reason for r in few)
+
+
+def test_scorer_counts_right_and_wrong_attitudes(monkeypatch):
+    """A frame solved right is correct; the same solution turned by 0.2° is wrong."""
+    config = EvalConfig(noise_px=0.2, false_stars=0, missing_frac=0.0, seed=2)
+    b = uniform_boresights(5, seed=2)
+    r = solve_frame(config, b, 0)
+    assert r.outcome == "correct" and r.boresight_error_arcsec < 60.0
+    assert r.n_identified >= 3 and r.n_wrong_ids == 0
+
+    real = runner.solve_verbose
+
+    def turned(*args, **kwargs):
+        result = real(*args, **kwargs)
+        R = (
+            Rotation.from_euler("x", 0.2, degrees=True).as_matrix()
+            @ result.solution.R_cam_from_icrs
+        )
+        return replace(result, solution=replace(result.solution, R_cam_from_icrs=R))
+
+    monkeypatch.setattr(runner, "solve_verbose", turned)
+    wrong = solve_frame(config, b, 0)
+    assert wrong.outcome == "wrong" and 0.1 < wrong.boresight_error_arcsec / 3600 < 0.3
+
+
+def test_cli_evaluate_json_csv_and_sky_map(tmp_path, capsys):
+    csv_path, png = tmp_path / "frames.csv", tmp_path / "sky.png"
+    code = main(
+        [
+            "evaluate",
+            "--grid-step-deg",
+            "30",
+            "--workers",
+            "1",
+            "--frames-csv",
+            str(csv_path),
+            "--sky-map",
+            str(png),
+            "--json",
+        ]
+    )
+    assert code == 0
+    out = json.loads(capsys.readouterr().out)
+    for key in ("frames", "correct", "wrong", "none", "correct_rate", "wrong_rate"):
+        assert key in out
+    assert out["frames"] == 72 and out["wrong"] == 0
+    assert out["median_ms"] > 0 and out["p95_ms"] >= out["median_ms"] and out["db_bytes"] > 1e6
+    with csv_path.open() as fh:
+        rows = list(csv.DictReader(fh))
+    assert len(rows) == 72
+    assert sum(r["outcome"] == "correct" for r in rows) == out["correct"]
+    assert png.stat().st_size > 10_000
+
+
+def test_cli_evaluate_markdown(capsys):
+    assert main(["evaluate", "--sampling", "uniform", "--frames", "8", "--workers", "1"]) == 0
+    out = capsys.readouterr().out
+    assert "| pyramid | 8 |" in out and "uniform on the sphere" in out
+
+
+def test_cli_evaluate_on_a_local_dask_cluster(capsys):
+    pytest.importorskip("distributed")
+    args = ["evaluate", "--sampling", "uniform", "--frames", "20", "--json", "--seed", "5"]
+    assert main([*args, "--dask", "local", "--workers", "2"]) == 0
+    dask = json.loads(capsys.readouterr().out)
+    assert main([*args, "--workers", "1"]) == 0
+    serial = json.loads(capsys.readouterr().out)
+    assert (dask["correct"], dask["none"]) == (serial["correct"], serial["none"])
+
+
+@pytest.mark.parametrize(
+    "args,message",
+    [
+        (["--missing-frac", "1.5"], "missing_frac"),
+        (["--noise-px", "-1"], "noise_px"),
+        (["--fov-deg", "0"], "fov_deg"),
+        (["--mag-limit", "40"], "mag limit"),
+        (["--grid-step-deg", "0"], "grid step"),
+        (["--sky-map", "/nonexistent/dir/x.png"], "does not exist"),
+    ],
+)
+def test_cli_evaluate_bad_input_is_one_line_exit_2(args, message, capsys):
+    assert main(["evaluate", "--workers", "1", *args]) == 2
+    err = capsys.readouterr().err.strip()
+    assert message in err and "\n" not in err and "Traceback" not in err
