@@ -146,3 +146,14 @@ def test_cli_evaluate_bad_input_is_one_line_exit_2(args, message, capsys):
     assert main(["evaluate", "--workers", "1", *args]) == 2
     err = capsys.readouterr().err.strip()
     assert message in err and "\n" not in err and "Traceback" not in err
+
+
+@pytest.mark.parametrize("index", [4963, 1098])
+def test_attitude_from_stars_in_one_corner_takes_in_the_rest(index):
+    """Regression: frames of the 3° grid whose first verified stars sat in one part of the
+    image; a poorly fixed roll put the far stars outside the match radius, leaving a wrong
+    (3-sigma) attitude. The rematch now gates by the attitude's own uncertainty."""
+    config = EvalConfig(noise_px=0.5, false_stars=2, missing_frac=0.1, seed=0)
+    r = solve_frame(config, grid_boresights(3.0, seed=0), index)
+    assert r.outcome == "correct" and r.boresight_error_arcsec < 60.0
+    assert r.n_identified >= r.n_true - 1

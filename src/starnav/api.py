@@ -211,16 +211,27 @@ def solve_verbose(
         found.R_cam_from_icrs, cat.vectors[cat_rows], stars.xy[obs], camera, fit_focal=fit_focal
     )
     for _ in range(_MAX_REMATCH):
+        # gate by the attitude's own uncertainty as well (at least the told sigma's)
+        scale = max(1.0, sigma_px**2 / fit.variance_px2) if fit.variance_px2 > 0 else 1.0
         ver = match_catalog(
             fit.camera.pixels_to_bearings(stars.xy),
             fit.R_cam_from_icrs,
             database,
             settings.match_radius_rad,
+            rotation_cov_rad2=fit.rotation_cov_rad2 * scale,
         )
         same = np.array_equal(ver.obs_index, obs) and np.array_equal(ver.cat_index, cat_rows)
         if same or len(ver.obs_index) < len(obs):
             break
         obs, cat_rows = ver.obs_index, ver.cat_index
+        fit = refine_attitude(
+            fit.R_cam_from_icrs, cat.vectors[cat_rows], stars.xy[obs], camera, fit_focal=fit_focal
+        )
+    # a pair let in by a wide gate that the final fit does not bear out is dropped
+    radius_px = settings.match_radius_rad * camera.focal_px
+    bad = np.linalg.norm(fit.residuals_px, axis=1) > radius_px
+    if bad.any() and np.count_nonzero(~bad) >= 3:
+        obs, cat_rows = obs[~bad], cat_rows[~bad]
         fit = refine_attitude(
             fit.R_cam_from_icrs, cat.vectors[cat_rows], stars.xy[obs], camera, fit_focal=fit_focal
         )

@@ -18,14 +18,17 @@ from starnav.camera import Camera
 from starnav.geometry import ARCSEC_PER_RAD
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class Refinement:
     """Result of the least-squares refinement.
 
     ``residuals_px`` (n, 2): projected minus measured; ``rms_px``: root mean square of the
     residual length; ``sigma_boresight_arcsec``: 1-sigma total angular error of the boresight
     (both cross-axes combined); ``sigma_roll_arcsec``: 1-sigma of the rotation about it;
-    ``sigma_focal_px``: 1-sigma of the focal length (0 when it was held fixed).
+    ``sigma_focal_px``: 1-sigma of the focal length (0 when it was held fixed);
+    ``rotation_cov_rad2`` (3, 3): covariance of the small rotation about the camera axes
+    (radians squared) that took the a-posteriori variance ``variance_px2`` (px squared) per
+    coordinate.
     """
 
     R_cam_from_icrs: np.ndarray
@@ -35,6 +38,8 @@ class Refinement:
     sigma_boresight_arcsec: float
     sigma_roll_arcsec: float
     sigma_focal_px: float
+    rotation_cov_rad2: np.ndarray
+    variance_px2: float
 
 
 def _rotate(omega: np.ndarray, R0: np.ndarray) -> np.ndarray:
@@ -121,4 +126,6 @@ def refine_attitude(
         sigma_boresight_arcsec=float(sigma_boresight),
         sigma_roll_arcsec=float(sigma_roll),
         sigma_focal_px=float(sigma_focal),
+        rotation_cov_rad2=cov[:3, :3],
+        variance_px2=s2,
     )

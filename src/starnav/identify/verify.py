@@ -67,9 +67,18 @@ def match_catalog(
     R_cam_from_icrs: np.ndarray,
     database: PairDatabase,
     radius_rad: float,
+    *,
+    rotation_cov_rad2: np.ndarray | None = None,
+    gate_sigmas: float = 3.0,
 ) -> Verification:
     """Pair bearings with reprojected catalog stars within ``radius_rad``, one to one, with
-    the least total squared distance (so close doubles are not both given one star)."""
+    the least total squared distance (so close doubles are not both given one star).
+
+    ``rotation_cov_rad2`` (3, 3): the covariance of the attitude (a small rotation about the
+    camera axes, radians squared); when given, each catalog star's radius grows by
+    ``gate_sigmas`` times its predicted position error, so that a star far from the ones that
+    made a poorly fixed attitude (e.g. all in one corner) can still be found.
+    """
     boresight = R_cam_from_icrs[2]
     field_rad = field_radius_rad(bearings, radius_rad)
     cone = database.cone(boresight, field_rad)
@@ -78,7 +87,13 @@ def match_catalog(
         return Verification(empty, empty, np.empty(0), 0, 1.0 - np.cos(field_rad))
     cam = database.catalog.vectors[cone] @ R_cam_from_icrs.T
     d2 = np.sum((bearings[:, None, :] - cam[None, :, :]) ** 2, axis=2)  # chord squared
-    within = d2 <= chord_from_angle(radius_rad) ** 2
+    radius2 = np.full(len(cone), chord_from_angle(radius_rad) ** 2)
+    if rotation_cov_rad2 is not None and np.all(np.isfinite(rotation_cov_rad2)):
+        # a rotation omega moves c by omega x c: E|omega x c|^2 = tr(C) - c^T C c
+        C = np.asarray(rotation_cov_rad2)
+        var = np.trace(C) - np.einsum("ni,ij,nj->n", cam, C, cam)
+        radius2 += gate_sigmas**2 * np.maximum(var, 0.0)
+    within = d2 <= radius2[None, :]
     rows = np.flatnonzero(within.any(axis=1))
     cols = np.flatnonzero(within.any(axis=0))
     # one-to-one pairing of least total squared distance (matters for close double stars)
