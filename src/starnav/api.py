@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import time
+from collections.abc import Mapping
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
@@ -141,7 +142,7 @@ def solve_verbose(
     max_false_match_probability: float = DEFAULT_MAX_FALSE_MATCH_PROBABILITY,
     min_matched_fraction: float = DEFAULT_MIN_MATCHED_FRACTION,
     algorithm: str = DEFAULT_ALGORITHM,
-    triangle_selection: str = "optimized",
+    algorithm_options: Mapping[str, object] | None = None,
 ) -> SolveResult:
     """Like ``solve`` but always returns a ``SolveResult`` with the reason when unsolved.
 
@@ -153,8 +154,8 @@ def solve_verbose(
     ``min_matched_fraction``: refuse when fewer of the stars that should be seen (the smaller
     of the number of points and of catalog stars inside the image) agree;
     ``algorithm``: identification algorithm by name (``starnav.identify.ALGORITHMS``);
-    ``triangle_selection``: ``"brightest"`` or ``"optimized"``, how the ``triangle``
-    algorithm picks its star triangles.
+    ``algorithm_options``: keyword options of that algorithm's class (e.g.
+    ``{"selection": "brightest"}`` for ``triangle``).
     """
     camera = make_camera(width=width, height=height, fov_deg=fov_deg)
     stars = check_star_list(
@@ -164,9 +165,10 @@ def solve_verbose(
         raise StarnavError(f"sigma_px must be a positive number of pixels, got {sigma_px!r}")
     if parity not in (None, 1, -1):
         raise StarnavError(f"parity must be +1, -1 or None, got {parity!r}")
-    identifier = make_identifier(
-        algorithm, **({"selection": triangle_selection} if algorithm == "triangle" else {})
-    )
+    try:
+        identifier = make_identifier(algorithm, **dict(algorithm_options or {}))
+    except TypeError as exc:  # an option the algorithm does not have
+        raise StarnavError(f"algorithm {algorithm!r}: {exc}") from None
     if not 0.0 <= min_matched_fraction <= 1.0:
         raise StarnavError(f"min_matched_fraction must be in [0, 1], got {min_matched_fraction!r}")
     if not 0.0 < max_false_match_probability < 1.0:

@@ -335,7 +335,9 @@ def _cmd_identify(args) -> int:
         fit_focal=args.fit_focal,
         max_false_match_probability=args.max_false_match_probability,
         algorithm=args.algorithm,
-        triangle_selection=args.triangle_selection,
+        algorithm_options=(
+            {"selection": args.triangle_selection} if args.algorithm == "triangle" else None
+        ),
     )
     s = result.solution
     if s is None and args.plot:

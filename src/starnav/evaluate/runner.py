@@ -167,7 +167,7 @@ def solve_frame(config: EvalConfig, boresights: Boresights, index: int) -> Frame
         sigma_px=config.solver_sigma_px,
         max_false_match_probability=config.max_false_match_probability,
         algorithm=config.algorithm,
-        triangle_selection=config.triangle_selection,
+        algorithm_options=config.identifier_options,
     )
     s = result.solution
     if s is None:

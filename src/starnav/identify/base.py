@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import functools
+from collections.abc import Callable
+from dataclasses import dataclass, replace
 from typing import Protocol
 
 import numpy as np
@@ -84,3 +86,22 @@ class Identifier(Protocol):
     def database_nbytes(self, database: PairDatabase) -> int:
         """Bytes of the tables this algorithm searches (the pair database and its own)."""
         ...
+
+
+def screen_stars_only(identify: Callable[..., IdentifyOutcome]) -> Callable[..., IdentifyOutcome]:
+    """Decorate an ``identify`` method so it sees only the first ``settings.max_screen_stars``
+    stars of ``order`` (the caller matches the rest once the attitude is known); the rows of
+    its answer are mapped back to the full list."""
+
+    @functools.wraps(identify)
+    def wrapper(self, bearings, order, database, settings):
+        used = np.asarray(order)[: settings.max_screen_stars]
+        if len(used) >= len(bearings):
+            return identify(self, bearings, np.asarray(order), database, settings)
+        outcome = identify(self, bearings[used], np.arange(len(used)), database, settings)
+        found = outcome.identification
+        if found is not None:
+            found = replace(found, obs_index=used[found.obs_index])
+        return replace(outcome, identification=found)
+
+    return wrapper

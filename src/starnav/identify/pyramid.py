@@ -12,13 +12,12 @@ product) and is tested both ways when the triangle is too flat to tell.
 
 from __future__ import annotations
 
-from collections.abc import Iterator
-from dataclasses import replace
+from collections.abc import Iterable, Iterator
 
 import numpy as np
 
 from starnav.geometry import angle_between, chord_from_angle
-from starnav.identify.base import IdentifyOutcome, MatchSettings
+from starnav.identify.base import IdentifyOutcome, MatchSettings, screen_stars_only
 from starnav.identify.database import PairDatabase
 from starnav.identify.verify import (
     HypothesisTester,
@@ -123,6 +122,62 @@ def _triple_product(v: np.ndarray) -> np.ndarray:
     return np.einsum("...i,...i->...", v[..., 0, :], np.cross(v[..., 1, :], v[..., 2, :]))
 
 
+def match_triangles(
+    bearings: np.ndarray,
+    triangles: Iterable[np.ndarray],
+    database: PairDatabase,
+    settings: MatchSettings,
+) -> IdentifyOutcome:
+    """Try measured triangles (rows of ``bearings``, 3 each) in the order given: look up the
+    catalog triangles of each, screen them all at once, verify the best until one is accepted
+    or the hypothesis budget is spent. Shared by Pyramid and Liebe's triangle method, which
+    differ in the order of the triangles."""
+    n_total = len(bearings)
+    tol = settings.pair_tol_rad
+    vectors = database.catalog.vectors
+    tester = HypothesisTester(bearings, database, settings)
+    # the smallest chance agreement per star any hypothesis can have (a field holding a
+    # single catalog star): hypotheses whose screen count cannot beat the threshold even
+    # with it are not verified in full
+    field_rad = field_radius_rad(bearings, settings.match_radius_rad)
+    p_floor = (1.0 - np.cos(min(settings.match_radii_rad))) / (1.0 - np.cos(field_rad))
+    n_radii = len(settings.match_radii_rad)
+    for idx in triangles:
+        b = bearings[idx]
+        sides = angle_between(b[[0, 0, 1]], b[[1, 2, 2]])
+        # a side within the tolerance of zero matches nearly every catalog pair
+        if sides.min() < 2.0 * tol or sides.max() > database.max_angle_rad + tol:
+            continue
+        triples = catalog_triangles(database, sides[0], sides[1], sides[2], tol)
+        if len(triples) == 0:
+            continue
+        det_obs = _triple_product(b)
+        det_cat = _triple_product(vectors[triples])
+        parities = np.where(np.sign(det_obs) == np.sign(det_cat), 1, -1)
+        if abs(det_obs) < 3.0 * tol * sides.max():  # too flat to tell the orientation
+            triples = np.concatenate([triples, triples])
+            parities = np.concatenate([parities, -parities])
+        if settings.parity is not None:
+            keep = parities == settings.parity
+            triples, parities = triples[keep], parities[keep]
+        if len(triples) == 0:
+            continue
+        tester.count(len(triples))
+        agree = _screen(bearings, b, vectors[triples], parities, database, settings)
+        for h in np.argsort(-agree, kind="stable"):
+            p_best_case = n_radii * false_match_probability(
+                n_total, agree[h], 3, p_floor, tester.hypotheses
+            )
+            if p_best_case > settings.max_false_match_probability:
+                break  # neither this nor any later (lower) count can be convincing
+            outcome = tester.test(idx, triples[h], int(parities[h]))
+            if outcome is not None:
+                return outcome
+        if tester.exhausted:
+            break
+    return tester.outcome("no star triangle matches the catalog")
+
+
 class Pyramid:
     """Triangle search on the pair database with whole-field verification (the default)."""
 
@@ -132,6 +187,7 @@ class Pyramid:
         """Bytes of the pair database (the only table this searches)."""
         return database.nbytes
 
+    @screen_stars_only
     def identify(
         self,
         bearings: np.ndarray,
@@ -144,57 +200,8 @@ class Pyramid:
         Only the first ``settings.max_screen_stars`` stars in ``order`` take part (the caller
         matches the rest once the attitude is known).
         """
-        used = np.asarray(order)[: settings.max_screen_stars]
-        if len(used) < len(bearings):
-            outcome = self.identify(bearings[used], np.arange(len(used)), database, settings)
-            found = outcome.identification
-            if found is not None:
-                found = replace(found, obs_index=used[found.obs_index])
-            return replace(outcome, identification=found)
         order = np.asarray(order)[: settings.max_stars]
-        n_total = len(bearings)
         if len(order) < 3:
             return IdentifyOutcome(None, "fewer than 3 stars", 0)
-        tol = settings.pair_tol_rad
-        vectors = database.catalog.vectors
-        tester = HypothesisTester(bearings, database, settings)
-        # the smallest chance agreement per star any hypothesis can have (a field holding a
-        # single catalog star): hypotheses whose screen count cannot beat the threshold even
-        # with it are not verified in full
-        field_rad = field_radius_rad(bearings, settings.match_radius_rad)
-        p_floor = (1.0 - np.cos(min(settings.match_radii_rad))) / (1.0 - np.cos(field_rad))
-        n_radii = len(settings.match_radii_rad)
-        for i, j, k in triangle_order(len(order)):
-            idx = order[[i, j, k]]
-            b = bearings[idx]
-            sides = angle_between(b[[0, 0, 1]], b[[1, 2, 2]])
-            if sides.min() < 2.0 * tol or sides.max() > database.max_angle_rad + tol:
-                continue
-            triples = catalog_triangles(database, sides[0], sides[1], sides[2], tol)
-            if len(triples) == 0:
-                continue
-            det_obs = _triple_product(b)
-            det_cat = _triple_product(vectors[triples])
-            parities = np.where(np.sign(det_obs) == np.sign(det_cat), 1, -1)
-            if abs(det_obs) < 3.0 * tol * sides.max():  # too flat to tell the orientation
-                triples = np.concatenate([triples, triples])
-                parities = np.concatenate([parities, -parities])
-            if settings.parity is not None:
-                keep = parities == settings.parity
-                triples, parities = triples[keep], parities[keep]
-            if len(triples) == 0:
-                continue
-            tester.count(len(triples))
-            agree = _screen(bearings, b, vectors[triples], parities, database, settings)
-            for h in np.argsort(-agree, kind="stable"):
-                p_best_case = n_radii * false_match_probability(
-                    n_total, agree[h], 3, p_floor, tester.hypotheses
-                )
-                if p_best_case > settings.max_false_match_probability:
-                    break  # neither this nor any later (lower) count can be convincing
-                outcome = tester.test(idx, triples[h], int(parities[h]))
-                if outcome is not None:
-                    return outcome
-            if tester.exhausted:
-                break
-        return tester.outcome("no star triangle matches the catalog")
+        triangles = (order[list(t)] for t in triangle_order(len(order)))
+        return match_triangles(bearings, triangles, database, settings)
