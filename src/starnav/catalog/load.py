@@ -185,7 +185,8 @@ def load_catalog(
     ``mag_limit``: keep stars with ``mag <= mag_limit`` (Hipparcos default 6.0, others: all);
     ``epoch_year``: for Hipparcos only (a CSV or ``Catalog`` is used at its own epoch).
     """
-    if source is None or str(source).lower() == "hipparcos":
+    # (a Catalog is never turned into a string: its repr holds every array)
+    if source is None or (isinstance(source, str | Path) and str(source).lower() == "hipparcos"):
         cat = _cached_hipparcos(
             DEFAULT_MAG_LIMIT if mag_limit is None else float(mag_limit),
             default_epoch_year() if epoch_year is None else float(epoch_year),

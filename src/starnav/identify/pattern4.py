@@ -1,0 +1,540 @@
+"""Lost-in-space identification by 4-star patterns hashed on their edge ratios.
+
+The idea of tetra3 (G. Pettersson, ESA) and its descendants cedar-solve and tetra3rs: four
+stars span six angular edges; sorted and divided by the largest, they give five ratios that do
+not depend on the attitude (nor on the parity). The database holds, for catalog patterns that
+a camera can see among its brightest stars, those five ratios quantised into bins as one
+integer key; identification computes the ratios of observed 4-star patterns, looks up every
+bin the measurement tolerance reaches, and keeps the catalog patterns whose six edges agree.
+The stars of a pattern are stored in a canonical order (by distance from the pattern's
+centroid), so the observed stars, put in the same order, pair with them directly.
+
+Which patterns (cedar-solve's lattice fields): field centres spread evenly over the sky (a
+Fibonacci lattice, oversampled so that every pointing is close to some centre); in each
+circular field the brightest ``stars_per_field`` catalog stars; every 4-subset of them is a
+pattern. Observed patterns are formed from the brightest measured stars in the same
+"brightest first" order, so they are the ones the database holds. Dense clusters cannot flood
+the table: each field contributes at most C(stars_per_field, 4) patterns.
+
+Every match proposes a hypothesis (4 measured stars paired with 4 catalog stars, and a parity
+from the orientation of the pattern), verified on the whole field by ``HypothesisTester``.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import itertools
+import math
+import os
+import tempfile
+import time
+from dataclasses import dataclass, replace
+from functools import cache
+from pathlib import Path
+
+import numpy as np
+
+from starnav.errors import CatalogError, StarnavError
+from starnav.geometry import angle_between, chord_from_angle
+from starnav.identify.base import IdentifyOutcome, MatchSettings
+from starnav.identify.database import PairDatabase, cache_dir
+from starnav.identify.verify import HypothesisTester
+
+_FORMAT_VERSION = 1
+# the six edges of a pattern (star pairs) and its four triangles
+_PAIRS = np.array([(0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)])
+_TRIPLES = np.array([(0, 1, 2), (0, 1, 3), (0, 2, 3), (1, 2, 3)])
+# the 24 ways to pair 4 observed stars with 4 catalog stars (the identity first), and for each
+# the observed edge that corresponds to each catalog edge
+_PERMS = np.array(list(itertools.permutations(range(4))))
+_EDGE_INDEX = {(int(i), int(j)): e for e, (i, j) in enumerate(_PAIRS)}
+_EDGE_INDEX.update({(j, i): e for (i, j), e in list(_EDGE_INDEX.items())})
+_PERM_EDGES = np.array([[_EDGE_INDEX[(int(p[i]), int(p[j]))] for i, j in _PAIRS] for p in _PERMS])
+_MAX_PROBES = 200_000  # bin look-ups per batch of observed patterns (bounds memory)
+_BUILD_BLOCK = 4096  # lattice fields expanded at once while building
+_MAX_PATTERN_ROWS = 5e7  # patterns expanded before removing duplicates (about 0.4 GB)
+
+
+@cache
+def breadth_first_combinations(n: int) -> np.ndarray:
+    """Every 4-subset of ``range(n)``, shape (C(n, 4), 4), in tetra3's breadth-first order:
+    all subsets of the first m stars come before any subset holding star m, so the brightest
+    stars are exhausted first and a false star costs only the subsets that hold it."""
+    c = np.array(list(itertools.combinations(range(n), 4)), dtype=np.intp).reshape(-1, 4)
+    return c[np.lexsort((c[:, 0], c[:, 1], c[:, 2], c[:, 3]))]
+
+
+def pattern_edges(v: np.ndarray) -> np.ndarray:
+    """The six edge angles (radians) of 4-star patterns ``v`` (..., 4, 3), pairs as ``_PAIRS``."""
+    d = np.take(v, _PAIRS[:, 0], axis=-2) - np.take(v, _PAIRS[:, 1], axis=-2)
+    # from the chord: accurate for small angles, where the arccos of a dot product is not
+    return 2.0 * np.arcsin(np.minimum(0.5 * np.sqrt(np.einsum("...i,...i->...", d, d)), 1.0))
+
+
+def centroid_distances(v: np.ndarray) -> np.ndarray:
+    """Angle (radians) of each star of patterns ``v`` (..., 4, 3) from the pattern centroid
+    (the normalised mean direction): the canonical order sorts stars by it."""
+    c = v.sum(axis=-2)
+    c /= np.linalg.norm(c, axis=-1, keepdims=True)
+    return angle_between(v, c[..., None, :])
+
+
+def _triple_products(v: np.ndarray) -> np.ndarray:
+    """det of the four star triangles of patterns ``v`` (..., 4, 3), triangles as ``_TRIPLES``."""
+    a, b, c = (v[..., _TRIPLES[:, k], :] for k in range(3))
+    return np.einsum("...i,...i->...", a, np.cross(b, c))
+
+
+def fibonacci_lattice(n: int) -> np.ndarray:
+    """``n`` unit vectors spread evenly over the sphere (golden-angle spiral), shape (n, 3)."""
+    i = np.arange(n) + 0.5
+    z = 1.0 - 2.0 * i / n
+    phi = i * np.pi * (3.0 - np.sqrt(5.0))
+    r = np.sqrt(1.0 - z * z)
+    return np.column_stack([r * np.cos(phi), r * np.sin(phi), z])
+
+
+@dataclass(frozen=True, eq=False)
+class PatternTable:
+    """4-star catalog patterns sorted by their edge-ratio key.
+
+    ``keys`` (m,) ascending: the five sorted edge ratios (each edge / the largest), quantised
+    into ``bins`` bins each, as the base-``bins`` number with the smallest ratio most
+    significant; ``stars`` (m, 4): catalog rows in canonical order (ascending distance from the
+    pattern centroid); ``largest_edge_rad`` (m,): the largest edge (radians). ``build_s``:
+    seconds the build took; ``from_cache``, ``path``: as for ``PairDatabase``.
+    """
+
+    keys: np.ndarray
+    stars: np.ndarray
+    largest_edge_rad: np.ndarray
+    bins: int
+    build_s: float
+    from_cache: bool
+    path: Path | None
+
+    @property
+    def nbytes(self) -> int:
+        """Bytes of the arrays searched (keys, star rows, largest edges)."""
+        return int(self.keys.nbytes + self.stars.nbytes + self.largest_edge_rad.nbytes)
+
+    def __len__(self) -> int:
+        return len(self.keys)
+
+
+def _key_dtype(bins: int) -> type:
+    return np.uint32 if bins**5 <= np.iinfo(np.uint32).max else np.uint64
+
+
+def _field_patterns(
+    database: PairDatabase, stars_per_field: int, field_radius_rad: float, oversampling: float
+) -> np.ndarray:
+    """The distinct 4-subsets (catalog rows, ascending, shape (m, 4)) of the brightest
+    ``stars_per_field`` stars of every lattice field of radius ``field_radius_rad``."""
+    catalog = database.catalog
+    n_cat = len(catalog)
+    # the number of fields: ``oversampling`` times the number of field-sized squares on the sky
+    n_fields = max(1, math.ceil(oversampling * 4.0 * np.pi / (2.0 * field_radius_rad) ** 2))
+    centres = fibonacci_lattice(n_fields)
+    rank = np.empty(n_cat, dtype=np.intp)
+    rank[np.argsort(catalog.mag, kind="stable")] = np.arange(n_cat)
+    sets = []
+    for f0 in range(0, n_fields, _BUILD_BLOCK):
+        lists = database.tree.query_ball_point(
+            centres[f0 : f0 + _BUILD_BLOCK], chord_from_angle(field_radius_rad)
+        )
+        counts = np.fromiter(map(len, lists), dtype=np.intp, count=len(lists))
+        members = np.fromiter(itertools.chain.from_iterable(lists), np.intp, int(counts.sum()))
+        field = np.repeat(np.arange(len(lists)), counts)
+        # members of each field brightest first, then the first stars_per_field of each
+        o = np.lexsort((rank[members], field))
+        members, field = members[o], field[o]
+        pos = np.arange(len(members)) - np.repeat(np.cumsum(counts) - counts, counts)
+        keep = pos < stars_per_field
+        top = np.full((len(lists), stars_per_field), n_cat, dtype=np.int64)  # n_cat: empty
+        top[field[keep], pos[keep]] = members[keep]
+        sets.append(np.sort(top, axis=1))
+    # neighbouring fields of an oversampled lattice mostly hold the same stars
+    top = _unique(np.concatenate(sets))
+    combos = breadth_first_combinations(stars_per_field)
+    if len(top) * len(combos) > _MAX_PATTERN_ROWS:
+        raise CatalogError(
+            f"{len(top)} distinct fields of {stars_per_field} stars make up to "
+            f"{len(top) * len(combos):.2g} 4-star patterns (limit {_MAX_PATTERN_ROWS:.0e}): use "
+            "fewer stars per field or a brighter magnitude limit"
+        )
+    # rows ascending in each set, so every subset comes out ascending and duplicates are equal
+    bits = max(1, math.ceil(math.log2(n_cat + 1)))
+    if 4 * bits > 63:
+        p = top[:, combos].reshape(-1, 4)
+        return _unique(p[p[:, 3] < n_cat])
+    code = top[:, combos[:, 0]]
+    for k in (1, 2, 3):
+        code = (code << bits) | top[:, combos[:, k]]
+    code = _unique(code[top[:, combos[:, 3]] < n_cat])
+    mask = (1 << bits) - 1
+    return np.column_stack([(code >> (k * bits)) & mask for k in (3, 2, 1, 0)])
+
+
+def _unique(a: np.ndarray) -> np.ndarray:
+    """Distinct values (1-d) or rows (2-d) of ``a``, sorted (a sort and a comparison of
+    neighbours: faster than ``np.unique`` on millions of integers)."""
+    if a.ndim == 1:
+        a = np.sort(a)
+        return a[np.concatenate([[True], a[1:] != a[:-1]])] if len(a) else a
+    a = a[np.lexsort(a.T[::-1])]
+    return a[np.concatenate([[True], (a[1:] != a[:-1]).any(axis=1)])] if len(a) else a
+
+
+def _pattern_keys(
+    vectors: np.ndarray, patterns: np.ndarray, bins: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Keys, canonical star order and largest edge of catalog ``patterns`` (m, 4)."""
+    keys, stars, largest = [], [], []
+    for k in range(0, len(patterns), 200_000):  # bounds the memory of the (m, 4, 3) vectors
+        p = patterns[k : k + 200_000]
+        v = vectors[p]
+        edges = np.sort(pattern_edges(v), axis=1)
+        ratios = edges[:, :5] / edges[:, 5:]
+        digits = np.minimum((ratios * bins).astype(np.int64), bins - 1)
+        key = np.zeros(len(p), dtype=np.int64)
+        for d in range(5):
+            key = key * bins + digits[:, d]
+        keys.append(key)
+        # canonical order: nearest the centroid first (the largest projection on the mean)
+        closeness = np.einsum("mki,mi->mk", v, v.sum(axis=1))
+        stars.append(np.take_along_axis(p, np.argsort(-closeness, axis=1), axis=1))
+        largest.append(edges[:, 5])
+    key = np.concatenate(keys)
+    order = np.argsort(key, kind="stable")
+    return key[order], np.concatenate(stars)[order], np.concatenate(largest)[order]
+
+
+_TABLES: dict[tuple, PatternTable] = {}  # in-memory, per process
+
+
+def build_pattern_table(
+    database: PairDatabase,
+    *,
+    stars_per_field: int = 10,
+    field_radius_fraction: float = 0.85,
+    oversampling: float = 100.0,
+    bins: int = 50,
+    use_cache: bool = True,
+) -> PatternTable:
+    """The pattern table for ``database``'s catalog and field (its ``max_angle_rad`` is the
+    field diagonal). Lattice fields have a radius of ``field_radius_fraction`` times half the
+    diagonal (0.85: a little larger than the circle inscribed in a square field, 0.71).
+
+    Kept in memory per (catalog, angle, options) and cached on disk next to the pair
+    databases.
+    """
+    catalog = database.catalog
+    options = (stars_per_field, round(field_radius_fraction, 6), round(oversampling, 6), bins)
+    mem_key = (catalog.fingerprint, round(float(np.degrees(database.max_angle_rad)), 3), options)
+    if use_cache and mem_key in _TABLES:
+        return _TABLES[mem_key]
+    key = hashlib.sha1(f"{_FORMAT_VERSION}|{mem_key}".encode()).hexdigest()[:20]
+    path = cache_dir() / f"pattern4-{key}.npz"
+    if use_cache and path.exists():
+        try:
+            with np.load(path) as data:
+                table = PatternTable(
+                    data["keys"],
+                    data["stars"],
+                    data["largest_edge_rad"],
+                    int(data["bins"]),
+                    float(data["build_s"]),
+                    True,
+                    path,
+                )
+            _TABLES[mem_key] = table
+            return table
+        except (OSError, KeyError, ValueError):
+            pass  # a damaged cache file is rebuilt below
+    t0 = time.perf_counter()
+    radius = 0.5 * field_radius_fraction * database.max_angle_rad
+    patterns = _field_patterns(database, stars_per_field, radius, oversampling)
+    keys, stars, largest = _pattern_keys(catalog.vectors, patterns, bins)
+    index_type = np.uint16 if len(catalog) <= np.iinfo(np.uint16).max else np.int32
+    keys = keys.astype(_key_dtype(bins))
+    stars = stars.astype(index_type)
+    largest = largest.astype(np.float32)
+    build_s = time.perf_counter() - t0
+    saved: Path | None = None
+    if use_cache:
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            # write then rename, so a concurrent reader never sees half a file
+            with tempfile.NamedTemporaryFile(dir=path.parent, suffix=".npz", delete=False) as fh:
+                np.savez(
+                    fh,
+                    keys=keys,
+                    stars=stars,
+                    largest_edge_rad=largest,
+                    bins=bins,
+                    build_s=build_s,
+                )
+            os.replace(fh.name, path)
+            saved = path
+        except OSError:
+            saved = None  # a read-only home still works, just without the cache
+    table = PatternTable(keys, stars, largest, bins, build_s, False, saved)
+    if use_cache:
+        _TABLES[mem_key] = table
+    return table
+
+
+@dataclass(frozen=True)
+class PatternMatches:
+    """Matches of a batch of observed patterns: for hypothesis h, observed pattern
+    ``pattern[h]``, its stars ``obs_local[h]`` (positions 0-3 in the pattern) paired with
+    catalog rows ``cat_rows[h]``, and the ``parity``; grouped by pattern, best first."""
+
+    pattern: np.ndarray
+    obs_local: np.ndarray
+    cat_rows: np.ndarray
+    parity: np.ndarray
+
+
+def _no_matches() -> PatternMatches:
+    e = np.empty(0, dtype=np.intp)
+    return PatternMatches(e, np.empty((0, 4), dtype=np.intp), np.empty((0, 4), dtype=np.intp), e)
+
+
+def _concat(parts: list[PatternMatches], offsets: list[int]) -> PatternMatches:
+    return PatternMatches(
+        np.concatenate([h.pattern + o for h, o in zip(parts, offsets, strict=True)]),
+        np.concatenate([h.obs_local for h in parts]),
+        np.concatenate([h.cat_rows for h in parts]),
+        np.concatenate([h.parity for h in parts]),
+    )
+
+
+def match_patterns(
+    obs: np.ndarray,
+    table: PatternTable,
+    vectors: np.ndarray,
+    tol_rad: float,
+    max_angle_rad: float,
+    parity: int | None,
+) -> PatternMatches:
+    """Catalog patterns agreeing with the observed patterns ``obs`` (p, 4, 3), each edge
+    within ``tol_rad`` (radians) of the measured one; ``vectors``: catalog unit vectors."""
+    p = len(obs)
+    edges = pattern_edges(obs)
+    largest = edges.max(axis=1)
+    usable = (edges.min(axis=1) >= 2.0 * tol_rad) & (largest <= max_angle_rad + tol_rad)
+    # the ratio e / L of edges measured within tol: off by at most tol (1 + e/L) / (L - tol)
+    ratios = np.sort(edges, axis=1)[:, :5] / largest[:, None]
+    slack = tol_rad * (1.0 + ratios) / np.maximum(largest - tol_rad, tol_rad)[:, None]
+    B = table.bins
+    lo = np.clip(np.floor((ratios - slack) * B), 0, B - 1).astype(np.int64)
+    hi = np.clip(np.floor((ratios + slack) * B), 0, B - 1).astype(np.int64)
+    span = hi - lo + 1
+    # the bins of the first four ratios are enumerated; the fifth is a contiguous key range
+    n_prefix = np.where(usable, np.prod(span[:, :4], axis=1), 0)
+    if n_prefix.sum() > _MAX_PROBES and p > 1:
+        half = p // 2
+        parts = [
+            match_patterns(obs[:half], table, vectors, tol_rad, max_angle_rad, parity),
+            match_patterns(obs[half:], table, vectors, tol_rad, max_angle_rad, parity),
+        ]
+        return _concat(parts, [0, half])
+    total = int(n_prefix.sum())
+    if total == 0:
+        return _no_matches()
+    pat = np.repeat(np.arange(p), n_prefix)
+    rest = np.arange(total) - np.repeat(np.cumsum(n_prefix) - n_prefix, n_prefix)
+    prefix = np.zeros(total, dtype=np.int64)
+    place = np.ones(total, dtype=np.int64)
+    for d in (3, 2, 1, 0):
+        s = span[pat, d]
+        prefix += (lo[pat, d] + rest % s) * place
+        rest //= s
+        place *= B
+    key_lo = (prefix * B + lo[pat, 4]).astype(table.keys.dtype)
+    key_hi = (prefix * B + hi[pat, 4]).astype(table.keys.dtype)
+    start = np.searchsorted(table.keys, key_lo, side="left")
+    count = np.searchsorted(table.keys, key_hi, side="right") - start
+    n_cand = int(count.sum())
+    if n_cand == 0:
+        return _no_matches()
+    cand_pat = np.repeat(pat, count)
+    cand_row = np.repeat(start, count) + (
+        np.arange(n_cand) - np.repeat(np.cumsum(count) - count, count)
+    )
+    # the stored largest edge is a quick first test (float32: 1e-7 rad of rounding)
+    ok = np.abs(table.largest_edge_rad[cand_row] - largest[cand_pat]) <= tol_rad + 1e-7
+    cand_pat, cand_row = cand_pat[ok], cand_row[ok]
+    if len(cand_row) == 0:
+        return _no_matches()
+    cat_stars = table.stars[cand_row].astype(np.intp)
+    cat_vec = vectors[cat_stars]
+    cat_edges = pattern_edges(cat_vec)
+
+    # the observed stars in canonical order; where centroid distances are closer than their
+    # error allows to tell apart, every order consistent with them is tried
+    dist = centroid_distances(obs)
+    canon = np.argsort(dist, axis=1)
+    dist_sorted = np.take_along_axis(dist, canon, axis=1)
+    canon_edges = pattern_edges(np.take_along_axis(obs, canon[:, :, None], axis=1))
+    # a distance from the centroid is off by at most two star errors (the star's and the
+    # centroid's), each below tol / sqrt(2): a difference of two by 2 sqrt(2) tol
+    tie_rad = 3.0 * tol_rad
+    d_perm = dist_sorted[:, _PERMS]  # (p, 24, 4)
+    consistent = np.ones((p, len(_PERMS)), dtype=bool)
+    for i, j in _PAIRS:
+        consistent &= d_perm[:, :, i] <= d_perm[:, :, j] + tie_rad
+    hyp_cand, hyp_perm, hyp_err = [], [], []
+    for k in np.flatnonzero(consistent[cand_pat].any(axis=0)):
+        c = np.flatnonzero(consistent[cand_pat, k])
+        err = np.abs(canon_edges[cand_pat[c]][:, _PERM_EDGES[k]] - cat_edges[c]).max(axis=1)
+        good = err <= tol_rad
+        hyp_cand.append(c[good])
+        hyp_perm.append(np.full(int(good.sum()), k))
+        hyp_err.append(err[good])
+    if not hyp_cand:
+        return _no_matches()
+    c = np.concatenate(hyp_cand)
+    k = np.concatenate(hyp_perm)
+    err = np.concatenate(hyp_err)
+    if len(c) == 0:
+        return _no_matches()
+    pat_h = cand_pat[c]
+    obs_local = canon[pat_h[:, None], _PERMS[k]]  # observed star paired with catalog star k
+    cat_rows = cat_stars[c]
+    # parity from the orientation of the pattern's best-spread triangle
+    det_obs = _triple_products(obs[pat_h[:, None], obs_local])
+    det_cat = _triple_products(cat_vec[c])
+    best = np.argmax(np.abs(det_obs), axis=1)
+    d_obs = det_obs[np.arange(len(c)), best]
+    par = np.where(np.sign(d_obs) == np.sign(det_cat[np.arange(len(c)), best]), 1, -1)
+    flat = np.abs(d_obs) < 3.0 * tol_rad * largest[pat_h]
+    if flat.any():  # too flat to tell the orientation: both
+        f = np.flatnonzero(flat)
+        pat_h = np.concatenate([pat_h, pat_h[f]])
+        obs_local = np.concatenate([obs_local, obs_local[f]])
+        cat_rows = np.concatenate([cat_rows, cat_rows[f]])
+        par = np.concatenate([par, -par[f]])
+        err = np.concatenate([err, err[f]])
+    if parity is not None:
+        keep = par == parity
+        pat_h, obs_local, cat_rows, par, err = (
+            pat_h[keep],
+            obs_local[keep],
+            cat_rows[keep],
+            par[keep],
+            err[keep],
+        )
+    # grouped by observed pattern, the closest edge agreement first
+    o = np.lexsort((err, pat_h))
+    return PatternMatches(pat_h[o], obs_local[o], cat_rows[o], par[o])
+
+
+class Pattern4:
+    """4-star patterns hashed on their edge ratios (tetra3 / cedar-solve), verified on the
+    whole field.
+
+    Options: ``pattern_stars``: observed patterns are made of the brightest this many stars
+    (tetra3's "pattern checking stars"; also capped by ``MatchSettings.max_stars``);
+    ``stars_per_field``, ``field_radius_fraction``, ``oversampling``, ``bins``: how the
+    pattern table is built (see ``build_pattern_table``).
+    """
+
+    name = "pattern4"
+
+    def __init__(
+        self,
+        *,
+        pattern_stars: int = 15,
+        stars_per_field: int = 10,
+        field_radius_fraction: float = 0.85,
+        oversampling: float = 100.0,
+        bins: int = 50,
+    ) -> None:
+        checks = (
+            ("pattern_stars", pattern_stars, pattern_stars >= 4),
+            ("stars_per_field", stars_per_field, stars_per_field >= 4),
+            ("field_radius_fraction", field_radius_fraction, 0.0 < field_radius_fraction <= 1.0),
+            ("oversampling", oversampling, oversampling > 0.0),
+            ("bins", bins, 2 <= bins <= 6000),
+        )
+        for name, value, ok in checks:
+            if not ok:
+                raise StarnavError(f"{name}={value!r} is out of range")
+        self.pattern_stars = pattern_stars
+        self.table_options = {
+            "stars_per_field": stars_per_field,
+            "field_radius_fraction": field_radius_fraction,
+            "oversampling": oversampling,
+            "bins": bins,
+        }
+
+    def table(self, database: PairDatabase) -> PatternTable:
+        """The pattern table for ``database``'s catalog and field (built on first use)."""
+        return build_pattern_table(database, **self.table_options)
+
+    def database_nbytes(self, database: PairDatabase) -> int:
+        """Bytes of the pattern table and the catalog vectors (the pair table is not used)."""
+        return self.table(database).nbytes + int(database.catalog.vectors.nbytes)
+
+    def identify(
+        self,
+        bearings: np.ndarray,
+        order: np.ndarray,
+        database: PairDatabase,
+        settings: MatchSettings,
+    ) -> IdentifyOutcome:
+        """Identify camera-frame ``bearings`` (n, 3); ``order`` lists rows best-first.
+
+        Only the first ``settings.max_screen_stars`` stars in ``order`` take part (the caller
+        matches the rest once the attitude is known).
+        """
+        used = np.asarray(order)[: settings.max_screen_stars]
+        if len(used) < len(bearings):
+            outcome = self.identify(bearings[used], np.arange(len(used)), database, settings)
+            found = outcome.identification
+            if found is not None:
+                found = replace(found, obs_index=used[found.obs_index])
+            return replace(outcome, identification=found)
+        order = np.asarray(order)[: min(settings.max_stars, self.pattern_stars)]
+        if len(order) < 4:
+            return IdentifyOutcome(None, "fewer than 4 stars", 0)
+        table = self.table(database)
+        vectors = database.catalog.vectors
+        tester = HypothesisTester(bearings, database, settings)
+        combos = breadth_first_combinations(len(order))
+        # batches end where a new star joins (C(m, 4) for m = 5, 7, 9, ...): most fields are
+        # identified by the first few patterns, so the first batch is small
+        ends = [math.comb(m, 4) for m in range(5, len(order), 2)] + [len(combos)]
+        start = 0
+        for end in ends:
+            if end <= start:
+                continue
+            rows = order[combos[start:end]]  # (p, 4) bearing rows of each observed pattern
+            hyp = match_patterns(
+                bearings[rows],
+                table,
+                vectors,
+                settings.pair_tol_rad,
+                database.max_angle_rad,
+                settings.parity,
+            )
+            start = end
+            if len(hyp.pattern) == 0:
+                continue
+            bounds = np.flatnonzero(np.diff(hyp.pattern)) + 1
+            for group in np.split(np.arange(len(hyp.pattern)), bounds):
+                tester.count(len(group))  # every hypothesis of the pattern, before testing
+                for h in group:
+                    outcome = tester.test(
+                        rows[hyp.pattern[h], hyp.obs_local[h]],
+                        hyp.cat_rows[h],
+                        int(hyp.parity[h]),
+                    )
+                    if outcome is not None:
+                        return outcome
+                    if tester.exhausted:
+                        return tester.outcome()
+        return tester.outcome("no 4-star pattern matches the catalog")
