@@ -89,3 +89,9 @@ def attitude_difference_deg(R_a: np.ndarray, R_b: np.ndarray) -> tuple[float, fl
     D = R_a @ R_b.T
     droll = np.degrees(np.arctan2(D[1, 0] - D[0, 1], D[0, 0] + D[1, 1]))
     return boresight, float(abs(droll))
+
+
+def triple_product(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """a · (b × c) along the last axis: the orientation of three bearings (its sign is the
+    parity of the triangle they make)."""
+    return np.einsum("...i,...i->...", a, np.cross(b, c))

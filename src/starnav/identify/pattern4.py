@@ -28,15 +28,15 @@ import math
 import os
 import tempfile
 import time
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from functools import cache
 from pathlib import Path
 
 import numpy as np
 
 from starnav.errors import CatalogError, StarnavError
-from starnav.geometry import angle_between, chord_from_angle
-from starnav.identify.base import IdentifyOutcome, MatchSettings
+from starnav.geometry import angle_between, chord_from_angle, triple_product
+from starnav.identify.base import IdentifyOutcome, MatchSettings, screen_stars_only
 from starnav.identify.database import PairDatabase, cache_dir
 from starnav.identify.verify import HypothesisTester
 
@@ -81,8 +81,7 @@ def centroid_distances(v: np.ndarray) -> np.ndarray:
 
 def _triple_products(v: np.ndarray) -> np.ndarray:
     """det of the four star triangles of patterns ``v`` (..., 4, 3), triangles as ``_TRIPLES``."""
-    a, b, c = (v[..., _TRIPLES[:, k], :] for k in range(3))
-    return np.einsum("...i,...i->...", a, np.cross(b, c))
+    return triple_product(*(v[..., _TRIPLES[:, k], :] for k in range(3)))
 
 
 def fibonacci_lattice(n: int) -> np.ndarray:
@@ -479,6 +478,7 @@ class Pattern4:
         """Bytes of the pattern table and the catalog vectors (the pair table is not used)."""
         return self.table(database).nbytes + int(database.catalog.vectors.nbytes)
 
+    @screen_stars_only
     def identify(
         self,
         bearings: np.ndarray,
@@ -491,13 +491,6 @@ class Pattern4:
         Only the first ``settings.max_screen_stars`` stars in ``order`` take part (the caller
         matches the rest once the attitude is known).
         """
-        used = np.asarray(order)[: settings.max_screen_stars]
-        if len(used) < len(bearings):
-            outcome = self.identify(bearings[used], np.arange(len(used)), database, settings)
-            found = outcome.identification
-            if found is not None:
-                found = replace(found, obs_index=used[found.obs_index])
-            return replace(outcome, identification=found)
         order = np.asarray(order)[: min(settings.max_stars, self.pattern_stars)]
         if len(order) < 4:
             return IdentifyOutcome(None, "fewer than 4 stars", 0)

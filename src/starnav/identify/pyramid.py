@@ -16,7 +16,7 @@ from collections.abc import Iterable, Iterator
 
 import numpy as np
 
-from starnav.geometry import angle_between, chord_from_angle
+from starnav.geometry import angle_between, chord_from_angle, triple_product
 from starnav.identify.base import IdentifyOutcome, MatchSettings, screen_stars_only
 from starnav.identify.database import PairDatabase
 from starnav.identify.verify import (
@@ -119,7 +119,7 @@ def _screen(
 
 def _triple_product(v: np.ndarray) -> np.ndarray:
     """det[v0, v1, v2] for arrays of shape (..., 3, 3)."""
-    return np.einsum("...i,...i->...", v[..., 0, :], np.cross(v[..., 1, :], v[..., 2, :]))
+    return triple_product(v[..., 0, :], v[..., 1, :], v[..., 2, :])
 
 
 def match_triangles(
