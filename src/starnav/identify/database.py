@@ -52,13 +52,17 @@ class PairDatabase:
 
     @property
     def nbytes(self) -> int:
-        """Size in bytes of the pair arrays and catalog vectors held in memory."""
-        return int(
-            self.pair_a.nbytes
-            + self.pair_b.nbytes
-            + self.pair_angle_rad.nbytes
-            + self.catalog.vectors.nbytes
+        """Size in bytes of the pair arrays, the catalog vectors and the KD-tree's arrays held
+        in memory."""
+        return (
+            int(self.pair_a.nbytes + self.pair_b.nbytes + self.pair_angle_rad.nbytes)
+            + self.verification_nbytes
         )
+
+    @property
+    def verification_nbytes(self) -> int:
+        """Bytes of what every verification searches: catalog vectors and their KD-tree."""
+        return int(self.catalog.vectors.nbytes + self.tree.data.nbytes + self.tree.indices.nbytes)
 
     def pairs_within(self, angle_rad: float, tol_rad: float) -> tuple[np.ndarray, np.ndarray]:
         """Catalog pairs (a, b) whose separation is within ``tol_rad`` of ``angle_rad``."""

@@ -476,7 +476,7 @@ class Pattern4:
 
     def database_nbytes(self, database: PairDatabase) -> int:
         """Bytes of the pattern table and the catalog vectors (the pair table is not used)."""
-        return self.table(database).nbytes + int(database.catalog.vectors.nbytes)
+        return self.table(database).nbytes + database.verification_nbytes
 
     @screen_stars_only
     def identify(

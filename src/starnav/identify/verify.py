@@ -196,6 +196,8 @@ class HypothesisTester:
             reason = f"gave up after {self.hypotheses} hypotheses"
         elif self.hypotheses == 0:
             reason = nothing_matched
+        elif self.proposed == 0:
+            reason = "no hypothesis had enough agreeing stars to be worth verifying"
         elif self.best_p < 1.0:
             reason = (
                 f"best hypothesis not convincing (false-match probability {self.best_p:.2g} > "
