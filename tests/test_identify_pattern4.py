@@ -104,9 +104,12 @@ def test_table_is_cached_in_memory_and_on_disk(database, table, monkeypatch):
     assert np.array_equal(again.keys, table.keys) and np.array_equal(again.stars, table.stars)
 
 
-def test_database_nbytes_counts_table_and_catalog(database, table):
+def test_database_nbytes_counts_table_catalog_and_tree(database, table):
+    """The pattern table plus what verification searches (vectors and KD-tree), not pairs."""
     nbytes = make_identifier("pattern4").database_nbytes(database)
-    assert nbytes == table.nbytes + database.catalog.vectors.nbytes
+    assert nbytes == table.nbytes + database.verification_nbytes
+    assert database.verification_nbytes > 2 * database.catalog.vectors.nbytes
+    assert nbytes < table.nbytes + database.nbytes
 
 
 def test_bad_options_are_refused():
