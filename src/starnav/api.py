@@ -32,6 +32,8 @@ DEFAULT_MAX_FALSE_MATCH_PROBABILITY = 1e-4
 DEFAULT_MIN_MATCHED_FRACTION = 0.5
 MAX_PAIRS = 3e7  # largest pair database built (about 0.5 GB)
 _MAX_REMATCH = 5
+_MIN_FIT_STARS = 4  # outliers are only looked for when a fit keeps at least this many stars
+_OUTLIER_ALPHA = 1e-3  # chance of dropping a right pair somewhere in a frame
 _MIN_STARS_SCALE_CHECK = 6
 _SCALE_TOLERANCE = 0.005  # relative focal-length error tolerated without --fit-focal
 
@@ -206,37 +208,21 @@ def solve_verbose(
         ms = (time.perf_counter() - t0) * 1e3
         return SolveResult(None, outcome.reason, ms, outcome.hypotheses, database)
 
-    # least squares on the image; take in the stars the better attitude brings in range and
-    # fit again, until the set of matches stops changing
-    obs, cat_rows = found.obs_index, found.cat_index
-    fit = refine_attitude(
-        found.R_cam_from_icrs, cat.vectors[cat_rows], stars.xy[obs], camera, fit_focal=fit_focal
+    # least squares on the image, taking in the stars the better attitude brings in range
+    fitter = _Fitter(cat, stars.xy, camera, database, settings, sigma_px, fit_focal)
+    obs, cat_rows, fit, ver = fitter.converge(
+        found.obs_index, found.cat_index, found.R_cam_from_icrs
     )
-    for _ in range(_MAX_REMATCH):
-        # gate by the attitude's own uncertainty as well (at least the told sigma's)
-        scale = max(1.0, sigma_px**2 / fit.variance_px2) if fit.variance_px2 > 0 else 1.0
-        ver = match_catalog(
-            fit.camera.pixels_to_bearings(stars.xy),
-            fit.R_cam_from_icrs,
-            database,
-            settings.match_radius_rad,
-            rotation_cov_rad2=fit.rotation_cov_rad2 * scale,
-        )
-        same = np.array_equal(ver.obs_index, obs) and np.array_equal(ver.cat_index, cat_rows)
-        if same or len(ver.obs_index) < len(obs):
-            break
-        obs, cat_rows = ver.obs_index, ver.cat_index
-        fit = refine_attitude(
-            fit.R_cam_from_icrs, cat.vectors[cat_rows], stars.xy[obs], camera, fit_focal=fit_focal
-        )
-    # a pair let in by a wide gate that the final fit does not bear out is dropped
-    radius_px = settings.match_radius_rad * camera.focal_px
-    bad = np.linalg.norm(fit.residuals_px, axis=1) > radius_px
-    if bad.any() and np.count_nonzero(~bad) >= 3:
-        obs, cat_rows = obs[~bad], cat_rows[~bad]
-        fit = refine_attitude(
-            fit.R_cam_from_icrs, cat.vectors[cat_rows], stars.xy[obs], camera, fit_focal=fit_focal
-        )
+    # a wrong star of a close pair in the first match can bend the fit so that the far stars
+    # fall just outside the radius; a wide search from the result finds them. The other set
+    # wins when it explains more stars and fits the stars both share about as well (a point
+    # pulled in from far bends the fit away from the shared stars instead)
+    wide = fitter.match(fit, 3.0 * settings.match_radius_rad)
+    if len(wide.obs_index) > len(obs):
+        other = fitter.converge(wide.obs_index, wide.cat_index, fit.R_cam_from_icrs)
+        shared_rms = _shared_rms((obs, cat_rows, fit), other)
+        if len(other[0]) > len(obs) and shared_rms[1] <= 1.5 * shared_rms[0] + 0.1 * sigma_px:
+            obs, cat_rows, fit, ver = other
     R = fit.R_cam_from_icrs
     # score the final pairs (the last verification may hold a slightly different set)
     final = replace(
@@ -303,6 +289,83 @@ def solve_verbose(
         catalog=cat.name,
     )
     return SolveResult(solution, "", ms, outcome.hypotheses, database)
+
+
+def _shared_rms(a, b) -> tuple[float, float]:
+    """Residual rms (px) of the pairs two fits ``(obs, cat_rows, fit, ...)`` share, under
+    each fit (inf when they share none)."""
+    keys = [
+        {pair: n for n, pair in enumerate(zip(x[0].tolist(), x[1].tolist(), strict=True))}
+        for x in (a, b)
+    ]
+    shared = [k for k in keys[0] if k in keys[1]]
+    if not shared:
+        return float("inf"), float("inf")
+    out = []
+    for x, key in zip((a, b), keys, strict=True):
+        r = x[2].residuals_px[[key[k] for k in shared]]
+        out.append(float(np.sqrt(np.mean(np.sum(r**2, axis=1)))))
+    return out[0], out[1]
+
+
+class _Fitter:
+    """The attitude fit of an identification: least squares on the matched stars, outliers
+    dropped, and the stars the better attitude brings within range taken in, until the set of
+    matches stops changing."""
+
+    def __init__(self, cat, xy, camera, database, settings, sigma_px, fit_focal) -> None:
+        self.cat, self.xy, self.camera, self.database = cat, xy, camera, database
+        self.settings, self.sigma_px, self.fit_focal = settings, sigma_px, fit_focal
+
+    def fit(self, obs, cat_rows, R):
+        return refine_attitude(
+            R, self.cat.vectors[cat_rows], self.xy[obs], self.camera, fit_focal=self.fit_focal
+        )
+
+    def match(self, fit, radius_rad: float, *, gate: bool = False):
+        """Pairs within ``radius_rad`` of the fitted attitude; with ``gate``, each catalog
+        star's radius also grows with the attitude's uncertainty (at least the told sigma's)."""
+        cov = None
+        if gate:
+            scale = max(1.0, self.sigma_px**2 / fit.variance_px2) if fit.variance_px2 > 0 else 1
+            cov = fit.rotation_cov_rad2 * scale
+        return match_catalog(
+            fit.camera.pixels_to_bearings(self.xy),
+            fit.R_cam_from_icrs,
+            self.database,
+            radius_rad,
+            rotation_cov_rad2=cov,
+        )
+
+    def drop_outliers(self, obs, cat_rows, fit):
+        """Drop, one at a time, the pair whose studentized residual is beyond what the told
+        sigma allows (chi-square, 2 degrees of freedom, 1e-3 over all pairs), refitting each
+        time. A wide gate can let in a false star near a real one; the fit then bends
+        towards it and its plain residual looks small, its studentized residual does not."""
+        while len(obs) > _MIN_FIT_STARS:
+            t = fit.studentized(self.sigma_px)
+            worst = int(np.argmax(t))
+            if t[worst] <= 2.0 * np.log(len(obs) / _OUTLIER_ALPHA):  # P(chi2_2 > x) = e^(-x/2)
+                break
+            keep = np.arange(len(obs)) != worst
+            obs, cat_rows = obs[keep], cat_rows[keep]
+            fit = self.fit(obs, cat_rows, fit.R_cam_from_icrs)
+        return obs, cat_rows, fit
+
+    def converge(self, obs, cat_rows, R):
+        """Fit, drop outliers, rematch; repeat until the matches stop changing. Returns the
+        pairs, the fit and the last verification."""
+        fit = self.fit(obs, cat_rows, R)
+        obs, cat_rows, fit = self.drop_outliers(obs, cat_rows, fit)
+        ver = None
+        for _ in range(_MAX_REMATCH):
+            ver = self.match(fit, self.settings.match_radius_rad, gate=True)
+            same = np.array_equal(ver.obs_index, obs) and np.array_equal(ver.cat_index, cat_rows)
+            if same or len(ver.obs_index) < len(obs):
+                break
+            fit = self.fit(ver.obs_index, ver.cat_index, fit.R_cam_from_icrs)
+            obs, cat_rows, fit = self.drop_outliers(ver.obs_index, ver.cat_index, fit)
+        return obs, cat_rows, fit, ver
 
 
 def _refusal(

@@ -31,7 +31,7 @@ class Refinement:
     ``sigma_focal_px``: 1-sigma of the focal length (0 when it was held fixed);
     ``rotation_cov_rad2`` (3, 3): covariance of the small rotation about the camera axes
     (radians squared) that took the a-posteriori variance ``variance_px2`` (px squared) per
-    coordinate.
+    coordinate; ``leverage`` (n, 2, 2): each star's block of the hat matrix.
     """
 
     R_cam_from_icrs: np.ndarray
@@ -43,6 +43,18 @@ class Refinement:
     sigma_focal_px: float
     rotation_cov_rad2: np.ndarray
     variance_px2: float
+    leverage: np.ndarray
+
+    def studentized(self, sigma_px: float) -> np.ndarray:
+        """Each star's residual over its own expected spread when the centroid error is
+        ``sigma_px``: r^T (I - H_ii)^-1 r / sigma^2, chi-square with 2 degrees of freedom for
+        a right match (``H_ii`` the star's 2x2 block of the hat matrix: a star far from the
+        others pulls the fit to itself, and its small residual still hides a large error)."""
+        spread = np.eye(2)[None] * (1.0 + 1e-9) - self.leverage
+        if not np.all(np.isfinite(spread)):
+            return np.zeros(len(self.residuals_px))  # the fit fixes nothing: no test
+        r = self.residuals_px
+        return np.einsum("ni,nij,nj->n", r, np.linalg.inv(spread), r) / sigma_px**2
 
 
 def _rotate(omega: np.ndarray, R0: np.ndarray) -> np.ndarray:
@@ -137,10 +149,14 @@ def refine_attitude(
     residuals = np.column_stack([res[: len(xy)], res[len(xy) :]])
     dof = max(2 * len(xy) - n_params, 1)
     s2 = float(res @ res) / dof
+    n = len(xy)
     try:
-        cov = s2 * np.linalg.inv(J.T @ J)
+        normal_inv = np.linalg.inv(J.T @ J)
     except np.linalg.LinAlgError:
-        cov = np.full((n_params, n_params), np.inf)
+        normal_inv = np.full((n_params, n_params), np.inf)
+    cov = s2 * normal_inv
+    J_star = np.stack([J[:n], J[n:]], axis=1)  # (n, 2, params): star i's two rows
+    leverage = np.einsum("nip,pq,njq->nij", J_star, normal_inv, J_star)
     sigma_boresight = np.sqrt(max(cov[0, 0] + cov[1, 1], 0.0)) * ARCSEC_PER_RAD
     sigma_roll = np.sqrt(max(cov[2, 2], 0.0)) * ARCSEC_PER_RAD
     # focal = f0 exp(p3): sigma_f = f sigma_p3
@@ -155,4 +171,5 @@ def refine_attitude(
         sigma_focal_px=float(sigma_focal),
         rotation_cov_rad2=cov[:3, :3],
         variance_px2=s2,
+        leverage=leverage,
     )
