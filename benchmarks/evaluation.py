@@ -75,7 +75,8 @@ def part_grid(algorithms, workers) -> tuple[str, list[dict]]:
         config = replace(TARGET, algorithm=name)
         summary, results = _run(config, boresights, workers, f"grid {name}")
         rows.append(table_row(name, summary) + f" {summary.wall_s:.0f} |")
-        out.append({"algorithm": name, **summary.to_dict()})
+        wrong = [r.index for r in results if r.outcome == "wrong"]
+        out.append({"algorithm": name, **summary.to_dict(), "wrong_frames": wrong})
         if name == DEFAULT_ALGORITHM:
             plot_sky_map(
                 results,
