@@ -166,7 +166,10 @@ def test_first_match_on_one_side_or_with_a_wrong_double_is_repaired(seed, index,
       it (now: studentized residuals drop it);
     - 662: the first match took the faint star of a 4 px pair, and the fit bent so that the
       far stars fell outside the radius (now: a wide search from the result, kept when it
-      explains more stars and fits the shared ones as well)."""
+      explains more stars and fits the shared ones as well);
+    - 6629 (neighbor-sum): a false match of 5 stars (2 of them false stars) accepted at p 6e-5
+      because only the 4 feature pairs were counted as hypotheses, not the 3-star hypotheses
+      chosen among (now all counted)."""
     config = EvalConfig(
         noise_px=0.5, false_stars=2, missing_frac=0.1, seed=seed, algorithm=algorithm
     )

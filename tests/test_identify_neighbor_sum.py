@@ -1,51 +1,23 @@
-"""Neighbour-sum identification: the features, and identification on simulated frames
-(correct, never wrong, nothing on random points)."""
+"""Neighbour-sum identification: the features and the table. (Solve rates and safety:
+test_identify_algorithms.py.)"""
 
 import numpy as np
 import pytest
 
-import starnav
 from starnav.api import get_database, make_camera
 from starnav.camera import Camera
 from starnav.errors import StarnavError
-from starnav.geometry import angle_between, attitude_difference_deg
+from starnav.geometry import angle_between
 from starnav.identify import make_identifier
 from starnav.identify.neighbor_sum import (
     NeighborSum,
     catalog_neighbor_sums,
     observed_neighbor_sums,
 )
-from starnav.simulate import FALSE_STAR_ID, simulate_frame
+from starnav.simulate import simulate_frame
 
 ALGORITHM = "neighbor-sum"
 CAMERA = Camera.from_fov(12.0, 512)
-
-
-def _solve(frame, catalog, sigma_px, **options):
-    return starnav.solve_verbose(
-        frame.xy,
-        width=512,
-        fov_deg=12.0,
-        brightness=frame.brightness,
-        catalog=catalog,
-        sigma_px=sigma_px,
-        algorithm=ALGORITHM,
-        **options,
-    )
-
-
-def _assert_right(solution, frame, catalog):
-    """The attitude and every identified star are the truth (false stars stay unmatched);
-    the two stars of a double closer than 1 px (Albireo) may swap under the noise."""
-    boresight_deg, roll_deg = attitude_difference_deg(
-        solution.R_cam_from_icrs, frame.R_cam_from_icrs
-    )
-    assert boresight_deg < 0.05 and roll_deg < 0.5
-    for star, true_id in zip(solution.stars, frame.true_id, strict=True):
-        if star.catalog_id is not None and star.catalog_id != true_id:
-            assert true_id != FALSE_STAR_ID
-            pair = catalog.vectors[catalog.rows([star.catalog_id, true_id])]
-            assert angle_between(*pair) < 1.0 / CAMERA.focal_px
 
 
 def test_catalog_features_are_sorted_neighbour_sums(hip_1991):
@@ -93,60 +65,6 @@ def test_inside_features_agree_with_the_catalog(hip_1991):
         np.testing.assert_allclose(feature[inside], true, atol=1e-4 / CAMERA.focal_px)
         checked += len(inside)
     assert checked >= 30
-
-
-def test_simulated_frames_correct_and_never_wrong(hip_1991):
-    rng = np.random.default_rng(2026)
-    solved = 0
-    for _ in range(30):
-        frame = simulate_frame(hip_1991, CAMERA, noise_px=0.3, seed=rng)
-        result = _solve(frame, hip_1991, 0.3)
-        if result.solution is not None:
-            solved += 1
-            _assert_right(result.solution, frame, hip_1991)
-    assert solved >= 27  # all 30 solved when measured
-
-
-def test_false_and_missing_stars_never_give_a_wrong_answer(hip_1991):
-    """The known weakness: a missing or false neighbour corrupts a star's feature, so fewer
-    frames solve, but none wrongly."""
-    rng = np.random.default_rng(7)
-    solved = 0
-    for _ in range(30):
-        frame = simulate_frame(
-            hip_1991, CAMERA, noise_px=0.5, false_stars=2, missing_frac=0.1, seed=rng
-        )
-        result = _solve(frame, hip_1991, 0.5)
-        if result.solution is not None:
-            solved += 1
-            _assert_right(result.solution, frame, hip_1991)
-    assert solved >= 22  # 26 of these 30 solved when measured
-
-
-def test_mirrored_frame_found_with_its_parity_and_refused_with_the_wrong_one(hip_1991):
-    rng = np.random.default_rng(5)
-    tried = 0
-    for _ in range(8):
-        frame = simulate_frame(hip_1991, CAMERA, parity=-1, noise_px=0.3, seed=rng)
-        if np.sum(frame.true_id > 0) < 8:
-            continue
-        tried += 1
-        found = _solve(frame, hip_1991, 0.3).solution
-        assert found is not None and found.parity == -1
-        _assert_right(found, frame, hip_1991)
-        assert _solve(frame, hip_1991, 0.3, parity=1).solution is None
-    assert tried >= 4
-
-
-@pytest.mark.parametrize("sigma_px", [0.5, 1.0])
-def test_random_points_are_refused(hip_1991, sigma_px):
-    rng = np.random.default_rng(99)
-    for _ in range(15):
-        xy = rng.uniform(0, 512, (int(rng.integers(6, 16)), 2))
-        result = starnav.solve_verbose(
-            xy, width=512, fov_deg=12.0, catalog=hip_1991, sigma_px=sigma_px, algorithm=ALGORITHM
-        )
-        assert result.solution is None
 
 
 def test_database_nbytes_counts_the_feature_table(hip_1991):

@@ -33,7 +33,8 @@ from starnav.identify import make_identifier
 from starnav.simulate import FALSE_STAR_ID, simulate_frame
 
 CORRECT_BORESIGHT_DEG = 0.05  # a solution is correct within this and ...
-CORRECT_ROLL_DEG = 0.5  # ... this of the truth; wrong beyond either
+CORRECT_ROLL_DEG = 0.5  # ... this of the truth,
+CORRECT_SIGMAS = 5.0  # or within this many of its own reported 1-sigma errors; else wrong
 OUTCOMES = ("correct", "wrong", "none")
 _CHUNK = 40  # frames per task sent to a worker
 
@@ -97,8 +98,10 @@ class FrameResult:
     """One frame: its boresight and roll (degrees), ``n_in_view`` catalog stars inside the
     image, ``n_points`` points given to the solver of which ``n_true`` are real stars,
     ``outcome`` (correct / wrong / none), ``time_ms`` (identification and fit), stars
-    identified and wrongly identified, attitude errors (None when not solved), and the
-    solver's reason when it refused."""
+    identified and wrongly identified, attitude errors (None when not solved), whether the
+    errors are beyond the fixed tolerance (0.05° / 0.5°: "correct" then means within 5 of
+    the solver's own 1-sigma, as with 2 px noise and few stars), and the solver's reason
+    when it refused."""
 
     index: int
     ra_deg: float
@@ -113,6 +116,7 @@ class FrameResult:
     n_wrong_ids: int
     boresight_error_arcsec: float | None
     roll_error_arcsec: float | None
+    beyond_tolerance: bool
     reason: str
 
 
@@ -156,6 +160,7 @@ def solve_frame(config: EvalConfig, boresights: Boresights, index: int) -> Frame
             n_wrong_ids=0,
             boresight_error_arcsec=None,
             roll_error_arcsec=None,
+            beyond_tolerance=False,
             reason=f"{len(frame.xy)} points in the image (3 needed)",
         )
     result = solve_verbose(
@@ -180,11 +185,18 @@ def solve_frame(config: EvalConfig, boresights: Boresights, index: int) -> Frame
             n_wrong_ids=0,
             boresight_error_arcsec=None,
             roll_error_arcsec=None,
+            beyond_tolerance=False,
             reason=result.reason,
         )
     boresight_deg, roll_deg = attitude_difference_deg(s.R_cam_from_icrs, frame.R_cam_from_icrs)
     ids = np.array([-1 if m.catalog_id is None else m.catalog_id for m in s.stars])
-    correct = boresight_deg < CORRECT_BORESIGHT_DEG and roll_deg < CORRECT_ROLL_DEG
+    within_tolerance = boresight_deg < CORRECT_BORESIGHT_DEG and roll_deg < CORRECT_ROLL_DEG
+    # NaN sigmas (undetermined) never vouch for an answer
+    within_sigmas = (
+        boresight_deg * 3600.0 <= CORRECT_SIGMAS * s.sigma_boresight_arcsec
+        and roll_deg * 3600.0 <= CORRECT_SIGMAS * s.sigma_roll_arcsec
+    )
+    correct = within_tolerance or within_sigmas
     return FrameResult(
         **common,
         outcome="correct" if correct else "wrong",
@@ -193,6 +205,7 @@ def solve_frame(config: EvalConfig, boresights: Boresights, index: int) -> Frame
         n_wrong_ids=_wrong_ids(ids, frame.true_id, catalog, camera, config.noise_px),
         boresight_error_arcsec=boresight_deg * 3600.0,
         roll_error_arcsec=roll_deg * 3600.0,
+        beyond_tolerance=not within_tolerance,
         reason="",
     )
 
@@ -326,13 +339,15 @@ def run_evaluation(
 @dataclass(frozen=True)
 class Summary:
     """Counts and rates of an evaluation (rates are fractions of ``frames``); ``*_ge4``: the
-    same over frames with at least 4 real stars among the points; times in ms over frames that
-    reached the solver; ``db_bytes``: the tables searched; ``wall_s``: elapsed time."""
+    same over frames with at least 4 real stars among the points; ``imprecise``: correct
+    frames beyond the fixed tolerance (within 5 of their reported sigmas); times in ms over
+    frames that reached the solver; ``db_bytes``: the tables searched; ``wall_s``: elapsed time."""
 
     frames: int
     correct: int
     wrong: int
     none: int
+    imprecise: int
     correct_rate: float
     wrong_rate: float
     frames_ge4: int
@@ -361,6 +376,7 @@ def summarize(results: Sequence[FrameResult], *, db_bytes: int, wall_s: float) -
         correct=count["correct"],
         wrong=count["wrong"],
         none=count["none"],
+        imprecise=sum(r.outcome == "correct" and r.beyond_tolerance for r in results),
         correct_rate=count["correct"] / n if n else 0.0,
         wrong_rate=count["wrong"] / n if n else 0.0,
         frames_ge4=len(ge4),
