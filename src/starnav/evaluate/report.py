@@ -93,10 +93,10 @@ def plot_sky_map(results: Sequence[FrameResult], path: str | Path, *, title: str
     size = max(1.0, min(12.0, 30000.0 / max(len(results), 1)))
     fig = plt.figure(figsize=(14, 4.6))
     ax = fig.add_subplot(1, 2, 1, projection="mollweide")
-    styles = {"correct": ("tab:green", "correct"), "none": ("0.6", "not solved")}
-    for kind, (colour, label) in styles.items():
-        m = outcome == kind
-        ax.scatter(x[m], y[m], s=size, c=colour, lw=0, label=f"{label} ({m.sum()})")
+    m = outcome == "correct"
+    ax.scatter(x[m], y[m], s=size, c="#9fd49f", lw=0, label=f"correct ({m.sum()})")
+    m = outcome == "none"  # the few that matter are drawn larger, on top
+    ax.scatter(x[m], y[m], s=3 * size + 6, c="black", lw=0, label=f"not solved ({m.sum()})")
     m = outcome == "wrong"
     ax.scatter(x[m], y[m], s=4 * size + 8, c="red", marker="x", label=f"wrong ({m.sum()})")
     ax.legend(loc="lower right", fontsize=8, markerscale=2, framealpha=0.9)

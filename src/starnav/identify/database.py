@@ -76,6 +76,30 @@ class PairDatabase:
         )
 
 
+def load_cached(path: Path) -> dict[str, np.ndarray] | None:
+    """The arrays of a cached table, or None when it is missing or damaged (then rebuilt)."""
+    if not path.exists():
+        return None
+    try:
+        with np.load(path) as data:
+            return {name: data[name] for name in data.files}
+    except (OSError, KeyError, ValueError):
+        return None
+
+
+def save_cached(path: Path, **arrays) -> Path | None:
+    """Write a table's arrays to ``path`` (written then renamed, so a concurrent reader never
+    sees half a file); None when it cannot be written (a read-only home still works)."""
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with tempfile.NamedTemporaryFile(dir=path.parent, suffix=".npz", delete=False) as fh:
+            np.savez(fh, **arrays)
+        os.replace(fh.name, path)
+        return path
+    except OSError:
+        return None
+
+
 def database_angle_deg(max_angle_deg: float) -> float:
     """The largest pair angle a database for ``max_angle_deg`` is built with (rounded up)."""
     return float(np.ceil(max_angle_deg / _ANGLE_STEP_DEG - 1e-9) * _ANGLE_STEP_DEG)
@@ -109,28 +133,21 @@ def build_database(
         f"{_FORMAT_VERSION}|{catalog.fingerprint}|{max_angle_deg:.3f}".encode()
     ).hexdigest()[:20]
     path = cache_dir() / f"pairs-{key}.npz"
-    if use_cache and path.exists():
-        try:
-            with np.load(path) as data:
-                a, b, ang = data["a"], data["b"], data["angle"]
-                build_s = float(data["build_s"])
-            return PairDatabase(
-                catalog, max_angle_rad, a, b, ang, cKDTree(catalog.vectors), build_s, True, path
-            )
-        except (OSError, KeyError, ValueError):
-            pass  # a damaged cache file is rebuilt below
+    data = load_cached(path) if use_cache else None
+    if data is not None and {"a", "b", "angle", "build_s"} <= data.keys():
+        return PairDatabase(
+            catalog,
+            max_angle_rad,
+            data["a"],
+            data["b"],
+            data["angle"],
+            cKDTree(catalog.vectors),
+            float(data["build_s"]),
+            True,
+            path,
+        )
     t0 = time.perf_counter()
     a, b, ang, tree = _build_pairs(catalog.vectors, max_angle_rad)
     build_s = time.perf_counter() - t0
-    saved: Path | None = None
-    if use_cache:
-        try:
-            path.parent.mkdir(parents=True, exist_ok=True)
-            # write then rename, so a concurrent reader never sees half a file
-            with tempfile.NamedTemporaryFile(dir=path.parent, suffix=".npz", delete=False) as fh:
-                np.savez(fh, a=a, b=b, angle=ang, build_s=build_s)
-            os.replace(fh.name, path)
-            saved = path
-        except OSError:
-            saved = None  # a read-only home still works, just without the cache
+    saved = save_cached(path, a=a, b=b, angle=ang, build_s=build_s) if use_cache else None
     return PairDatabase(catalog, max_angle_rad, a, b, ang, tree, build_s, False, saved)

@@ -25,8 +25,6 @@ from __future__ import annotations
 import hashlib
 import itertools
 import math
-import os
-import tempfile
 import time
 from dataclasses import dataclass
 from functools import cache
@@ -37,7 +35,7 @@ import numpy as np
 from starnav.errors import CatalogError, StarnavError
 from starnav.geometry import angle_between, chord_from_angle, triple_product
 from starnav.identify.base import IdentifyOutcome, MatchSettings, screen_stars_only
-from starnav.identify.database import PairDatabase, cache_dir
+from starnav.identify.database import PairDatabase, cache_dir, load_cached, save_cached
 from starnav.identify.verify import HypothesisTester
 
 _FORMAT_VERSION = 1
@@ -235,22 +233,19 @@ def build_pattern_table(
         return _TABLES[mem_key]
     key = hashlib.sha1(f"{_FORMAT_VERSION}|{mem_key}".encode()).hexdigest()[:20]
     path = cache_dir() / f"pattern4-{key}.npz"
-    if use_cache and path.exists():
-        try:
-            with np.load(path) as data:
-                table = PatternTable(
-                    data["keys"],
-                    data["stars"],
-                    data["largest_edge_rad"],
-                    int(data["bins"]),
-                    float(data["build_s"]),
-                    True,
-                    path,
-                )
-            _TABLES[mem_key] = table
-            return table
-        except (OSError, KeyError, ValueError):
-            pass  # a damaged cache file is rebuilt below
+    data = load_cached(path) if use_cache else None
+    if data is not None and {"keys", "stars", "largest_edge_rad", "bins", "build_s"} <= data.keys():
+        table = PatternTable(
+            data["keys"],
+            data["stars"],
+            data["largest_edge_rad"],
+            int(data["bins"]),
+            float(data["build_s"]),
+            True,
+            path,
+        )
+        _TABLES[mem_key] = table
+        return table
     t0 = time.perf_counter()
     radius = 0.5 * field_radius_fraction * database.max_angle_rad
     patterns = _field_patterns(database, stars_per_field, radius, oversampling)
@@ -260,24 +255,13 @@ def build_pattern_table(
     stars = stars.astype(index_type)
     largest = largest.astype(np.float32)
     build_s = time.perf_counter() - t0
-    saved: Path | None = None
-    if use_cache:
-        try:
-            path.parent.mkdir(parents=True, exist_ok=True)
-            # write then rename, so a concurrent reader never sees half a file
-            with tempfile.NamedTemporaryFile(dir=path.parent, suffix=".npz", delete=False) as fh:
-                np.savez(
-                    fh,
-                    keys=keys,
-                    stars=stars,
-                    largest_edge_rad=largest,
-                    bins=bins,
-                    build_s=build_s,
-                )
-            os.replace(fh.name, path)
-            saved = path
-        except OSError:
-            saved = None  # a read-only home still works, just without the cache
+    saved = (
+        save_cached(
+            path, keys=keys, stars=stars, largest_edge_rad=largest, bins=bins, build_s=build_s
+        )
+        if use_cache
+        else None
+    )
     table = PatternTable(keys, stars, largest, bins, build_s, False, saved)
     if use_cache:
         _TABLES[mem_key] = table

@@ -31,7 +31,7 @@ from itertools import combinations
 
 import numpy as np
 
-from starnav.geometry import angle_between
+from starnav.geometry import angle_between, triple_product
 from starnav.identify.base import IdentifyOutcome, MatchSettings, screen_stars_only
 from starnav.identify.database import PairDatabase
 from starnav.identify.verify import HypothesisTester
@@ -134,7 +134,7 @@ def triangle_hypotheses(
         wedges += 4.0 * n[p, q] * n[p, r] / n_catalog * closing
     expected = 1.0 + _TRIANGLE_COUNT_SAFETY * wedges / 3.0
     if not parity_known:
-        det = np.einsum("mi,mi->m", bearings[i], np.cross(bearings[j], bearings[k]))
+        det = triple_product(bearings[i], bearings[j], bearings[k])
         longest = np.max([a[i, j], a[i, k], a[j, k]], axis=0)
         expected *= np.where(np.abs(det) < 3.0 * tol_rad * longest, 2.0, 1.0)
     ok = windows.valid[i, j] & windows.valid[i, k] & windows.valid[j, k]
@@ -191,7 +191,7 @@ def widest_triangles(bearings: np.ndarray, keep: np.ndarray | None = None) -> np
     if keep is not None:
         t = t[np.any(t == keep, axis=1)]
     b = bearings[t]
-    det = np.abs(np.einsum("mi,mi->m", b[:, 0], np.cross(b[:, 1], b[:, 2])))
+    det = np.abs(triple_product(b[:, 0], b[:, 1], b[:, 2]))
     return t[np.argsort(-det, kind="stable")]
 
 
@@ -203,8 +203,8 @@ def try_triangle(
     s = tester.settings
     b = tester.bearings[obs_rows]
     v = tester.database.catalog.vectors[cat_rows]
-    det_obs = float(np.dot(b[0], np.cross(b[1], b[2])))
-    det_cat = float(np.dot(v[0], np.cross(v[1], v[2])))
+    det_obs = float(triple_product(*b))
+    det_cat = float(triple_product(*v))
     parity = 1 if np.sign(det_obs) == np.sign(det_cat) else -1
     sides = angle_between(b[[0, 0, 1]], b[[1, 2, 2]])
     parities = [parity]
