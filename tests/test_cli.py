@@ -7,6 +7,7 @@ import pytest
 
 from conftest import CONTEST
 from starnav.cli import main
+from starnav.identify import ALGORITHMS
 
 CATALOG = str(CONTEST / "catalog.csv")
 MAP1 = str(CONTEST / "images" / "xingtu01.csv")
@@ -115,6 +116,8 @@ def test_bad_star_list_exits_2_with_one_line(capsys, tmp_path, case):
         (["--plot", "map.jpg"], "ending in .png"),
         (["--epoch", "2000"], "epoch applies"),
         (["--mag-limit", "-9"], "holds 0 stars"),
+        (["--algorithm", "nope"], "invalid choice"),
+        (["--triangle-selection", "dimmest"], "invalid choice"),
     ],
 )
 def test_bad_options_exit_2(capsys, argv, needle):
@@ -320,3 +323,35 @@ def test_flux_column_orders_the_search(capsys, tmp_path):
     )
     result = json.loads(out)
     assert code == 0 and abs(result["ra_deg"] - 250) < 0.01 and abs(result["dec_deg"] - 36) < 0.01
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [["--algorithm", name] for name in ALGORITHMS]
+    + [["--algorithm", "triangle", "--triangle-selection", "brightest"]],
+    ids=lambda argv: "-".join(argv[1::2]),
+)
+def test_every_algorithm_from_the_cli_on_contest_map_1(capsys, argv):
+    """Each algorithm, chosen by name, identifies all 15 points of map 1 at its published
+    attitude (RA 109.6°, Dec 34.5°)."""
+    assert (
+        main(
+            [
+                "identify",
+                MAP1,
+                "--fov-deg",
+                "12",
+                "--width",
+                "512",
+                "--catalog",
+                CATALOG,
+                "--json",
+                *argv,
+            ]
+        )
+        == 0
+    )
+    out = json.loads(capsys.readouterr().out)
+    assert out["algorithm"] == argv[1] and out["n_matched"] == 15
+    assert out["ra_deg"] == pytest.approx(109.6, abs=0.01)
+    assert out["dec_deg"] == pytest.approx(34.5, abs=0.01)

@@ -111,6 +111,21 @@ def _add_catalog(p: argparse.ArgumentParser) -> None:
     )
 
 
+def _add_algorithm(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--algorithm",
+        choices=list(ALGORITHMS),
+        default=DEFAULT_ALGORITHM,
+        help="identification algorithm (default %(default)s)",
+    )
+    p.add_argument(
+        "--triangle-selection",
+        choices=("brightest", "optimized"),
+        default="optimized",
+        help="how --algorithm triangle picks its triangles (default %(default)s)",
+    )
+
+
 def _build_parser() -> argparse.ArgumentParser:
     parser = _Parser(
         prog="starnav",
@@ -137,18 +152,7 @@ def _build_parser() -> argparse.ArgumentParser:
         default=DEFAULT_MAX_FALSE_MATCH_PROBABILITY,
         help="refuse less certain answers (default %(default)g)",
     )
-    p.add_argument(
-        "--algorithm",
-        choices=list(ALGORITHMS),
-        default=DEFAULT_ALGORITHM,
-        help="identification algorithm (default %(default)s)",
-    )
-    p.add_argument(
-        "--triangle-selection",
-        choices=("brightest", "optimized"),
-        default="optimized",
-        help="how --algorithm triangle picks its triangles (default %(default)s)",
-    )
+    _add_algorithm(p)
     p.add_argument(
         "--plot", metavar="PNG", type=_png_path, help="draw the identified map into this PNG file"
     )
@@ -231,13 +235,7 @@ def _build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--sigma-px", type=_finite, help="centroid sigma told to the solver (default: the noise)"
     )
-    p.add_argument(
-        "--algorithm",
-        choices=list(ALGORITHMS),
-        default=DEFAULT_ALGORITHM,
-        help="identification algorithm (default %(default)s)",
-    )
-    p.add_argument("--triangle-selection", choices=("brightest", "optimized"), default="optimized")
+    _add_algorithm(p)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument(
         "--workers", type=_positive_int, help="processes (default: all cores; 1: this process)"
