@@ -249,6 +249,19 @@ def _build_parser() -> argparse.ArgumentParser:
     p.add_argument("--sky-map", metavar="PNG", type=_png_path, help="whole-sky outcome map")
     p.add_argument("--json", action="store_true", help="print one JSON object")
 
+    p = sub.add_parser(
+        "locate", help="latitude, longitude and heading from star cameras, gravity and UTC"
+    )
+    p.add_argument("observation", help="observation JSON (see docs/locate.md)")
+    p.add_argument(
+        "--sigma-px",
+        type=_finite,
+        default=DEFAULT_SIGMA_PX,
+        help=f"centroid error, 1 sigma (px; default {DEFAULT_SIGMA_PX:g})",
+    )
+    _add_catalog(p)
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+
     p = sub.add_parser("database", help="build (or load) the pair database and report it")
     _add_camera(p)
     _add_catalog(p)
@@ -673,12 +686,52 @@ def _cmd_evaluate(args) -> int:
     return EXIT_OK
 
 
+def _cmd_locate(args) -> int:
+    from starnav.navigation import FixError, locate, read_observation
+
+    if not args.sigma_px > 0:
+        raise StarnavError(f"--sigma-px must be positive, got {args.sigma_px:g}")
+    if args.epoch is not None:
+        raise StarnavError("--epoch is taken from the observation's utc for locate")
+    observation = read_observation(args.observation)
+    try:
+        fix = locate(
+            observation, catalog=args.catalog, mag_limit=args.mag_limit, sigma_px=args.sigma_px
+        )
+    except FixError as exc:
+        if args.json:
+            print(_json({"solved": False, "reason": str(exc)}))
+        else:
+            print(f"no fix: {exc}")
+        return EXIT_NOT_SOLVED
+    if args.json:
+        print(_json({"solved": True, "reason": None, **fix.to_dict()}))
+        return EXIT_OK
+    print(f"fix: lat {fix.lat_deg:+.6f}°  lon {fix.lon_deg:+.6f}°  heading {fix.azimuth_deg:.4f}°")
+    print(
+        f"  1σ ellipse {fix.ellipse_major_m:.1f} x {fix.ellipse_minor_m:.1f} m (major axis at "
+        f"{fix.ellipse_angle_deg:.0f}° from North), heading 1σ {fix.sigma_azimuth_arcsec:.2f}″, "
+        f"{fix.n_stars} stars, rms {fix.rms_arcsec:.2f}″, {fix.time_ms:.0f} ms"
+    )
+    print("  (stars only: a tilt error of the gravity vector adds about 31 m per arcsecond)")
+    for c in fix.cameras:
+        status = (
+            f"{c.stars_used} of {c.n_points} points identified, boresight RA {c.ra_deg:.3f}° "
+            f"Dec {c.dec_deg:+.3f}°"
+            if c.stars_used
+            else f"not used: {c.reason}"
+        )
+        print(f"  {c.name}: {status}")
+    return EXIT_OK
+
+
 _COMMANDS = {
     "identify": _cmd_identify,
     "simulate": _cmd_simulate,
     "demo": _cmd_demo,
     "database": _cmd_database,
     "evaluate": _cmd_evaluate,
+    "locate": _cmd_locate,
     "pointing": _cmd_pointing,
     "pointing-study": _cmd_pointing_study,
 }

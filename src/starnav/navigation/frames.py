@@ -1,0 +1,103 @@
+"""Star directions at a UTC in the Earth-fixed and local frames, with astropy / ERFA.
+
+Catalog positions (ICRS at the epoch of the observation, proper motion already applied) go to
+``ITRS`` (precession-nutation, annual aberration, Earth rotation with UT1, polar motion) or to
+the local ``AltAz`` frame of a site (adding diurnal aberration and, with a pressure, refraction).
+Earth-orientation data come from the IERS tables that the astropy-iers-data package ships: a
+download is never attempted (``auto_download`` off while these run).
+"""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+from astropy import units as u
+from astropy.coordinates import ITRS, AltAz, EarthLocation, SkyCoord
+from astropy.time import Time
+from astropy.utils import iers
+
+from starnav.errors import StarnavError
+
+# WGS84
+_A_M = 6378137.0
+_F = 1.0 / 298.257223563
+_E2 = _F * (2.0 - _F)
+
+
+def parse_utc(utc: str) -> Time:
+    """An astropy ``Time`` from an ISO 8601 UTC string (a trailing Z is accepted)."""
+    text = utc.strip()
+    if text.endswith(("Z", "z")):
+        text = text[:-1]
+    try:
+        t = Time(text, format="isot", scale="utc")
+    except ValueError:
+        raise StarnavError(
+            f"utc {utc!r} is not an ISO 8601 time (e.g. 2026-03-14T21:30:00Z)"
+        ) from None
+    if not 1900 <= t.decimalyear <= 2200:
+        raise StarnavError(f"utc {utc!r} is outside 1900-2200")
+    return t
+
+
+def _offline():
+    return iers.conf.set_temp("auto_download", False)
+
+
+def itrs_directions(ra_deg: np.ndarray, dec_deg: np.ndarray, time: Time) -> np.ndarray:
+    """Geocentric apparent directions (n, 3) of stars in the ITRS (Earth-fixed) frame."""
+    with _offline(), warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # "tried to get polar motions for times after IERS data"
+        c = SkyCoord(ra=ra_deg * u.deg, dec=dec_deg * u.deg, frame="icrs")
+        v = c.transform_to(ITRS(obstime=time)).cartesian.xyz.value.T
+    return v / np.linalg.norm(v, axis=1, keepdims=True)
+
+
+def enu_directions(
+    ra_deg: np.ndarray,
+    dec_deg: np.ndarray,
+    time: Time,
+    *,
+    lat_deg: float,
+    lon_deg: float,
+    height_m: float = 0.0,
+    pressure_hpa: float = 0.0,
+    temperature_c: float = 15.0,
+) -> np.ndarray:
+    """Topocentric apparent directions (n, 3) as (East, North, Up) at a site (geodetic WGS84),
+    refracted when ``pressure_hpa`` > 0 (astropy's model at 0.55 µm, dry air)."""
+    site = EarthLocation.from_geodetic(lon_deg * u.deg, lat_deg * u.deg, height_m * u.m)
+    frame = AltAz(
+        obstime=time,
+        location=site,
+        pressure=pressure_hpa * u.hPa,
+        temperature=temperature_c * u.deg_C,
+        relative_humidity=0.0,
+        obswl=0.55 * u.micron,
+    )
+    with _offline(), warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        aa = SkyCoord(ra=ra_deg * u.deg, dec=dec_deg * u.deg, frame="icrs").transform_to(frame)
+    alt, az = aa.alt.rad, aa.az.rad
+    return np.column_stack([np.cos(alt) * np.sin(az), np.cos(alt) * np.cos(az), np.sin(alt)])
+
+
+def enu_axes(lat_deg: float, lon_deg: float) -> np.ndarray:
+    """Rows: the East, North and Up unit vectors of a site in the ITRS (geodetic latitude)."""
+    lat, lon = np.radians(lat_deg), np.radians(lon_deg)
+    return np.array(
+        [
+            [-np.sin(lon), np.cos(lon), 0.0],
+            [-np.sin(lat) * np.cos(lon), -np.sin(lat) * np.sin(lon), np.cos(lat)],
+            [np.cos(lat) * np.cos(lon), np.cos(lat) * np.sin(lon), np.sin(lat)],
+        ]
+    )
+
+
+def radii_of_curvature_m(lat_deg: float) -> tuple[float, float]:
+    """WGS84 meridian (north-south) and prime-vertical (east-west) radii of curvature, metres:
+    a small angle on the ground times these is a distance."""
+    s2 = np.sin(np.radians(lat_deg)) ** 2
+    w = np.sqrt(1.0 - _E2 * s2)
+    return float(_A_M * (1.0 - _E2) / w**3), float(_A_M / w)
