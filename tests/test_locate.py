@@ -175,3 +175,26 @@ def test_cli_json_and_text(capsys):
     assert set(out["stars_used"]) == {"camera 1", "camera 2", "camera 3"}
     assert main(["locate", str(DATA / "reference_level.json")]) == 0
     assert "fix: lat +47.3700" in capsys.readouterr().out
+
+
+def test_study_tilt_maps_to_31_m_per_arcsec_and_stars_average_down():
+    """1″ of tilt about one axis moves the fix by 1″ of arc on the ground (30.9 m); about each
+    of two axes, sqrt(2) times that. More stars, smaller error."""
+    from starnav.navigation.study import run_locate_study
+
+    tables = run_locate_study(trials=4, fovs_deg=(10.0, 30.0), progress=False)
+    for row, tilt in zip(tables["tilt"], (3, 5, 10, 15, 20), strict=True):
+        assert row.mean_position_m == pytest.approx(30.87 * tilt, rel=0.03)
+    for row, tilt in zip(tables["tilt2"], (3, 5, 10, 15, 20), strict=True):
+        assert row.mean_position_m == pytest.approx(30.87 * np.sqrt(2) * tilt, rel=0.03)
+    assert tables["star"][0].mean_position_m < tables["star3"][0].mean_position_m
+    narrow, wide = tables["fov"]
+    assert wide.stars > narrow.stars
+
+
+def test_cli_locate_study(capsys, tmp_path):
+    png = tmp_path / "study.png"
+    assert main(["locate-study", "--trials", "2", "--plot", str(png)]) == 0
+    out = capsys.readouterr().out
+    assert "| 3″ | 126.99 |" in out and png.stat().st_size > 10_000
+    assert main(["locate-study", "--fov-deg", "0"]) == 2

@@ -262,6 +262,15 @@ def _build_parser() -> argparse.ArgumentParser:
     _add_catalog(p)
     p.add_argument("--json", action="store_true", help="print one JSON object")
 
+    p = sub.add_parser(
+        "locate-study", help="sensitivity of the fix to tilt and star errors (Monte Carlo)"
+    )
+    p.add_argument("--trials", type=_positive_int, default=50, help="per setting (default 50)")
+    p.add_argument("--fov-deg", type=_finite, default=20.0, help="camera FOV (default 20)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--plot", metavar="PNG", type=_png_path, help="draw the two curves here")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+
     p = sub.add_parser("database", help="build (or load) the pair database and report it")
     _add_camera(p)
     _add_catalog(p)
@@ -725,6 +734,23 @@ def _cmd_locate(args) -> int:
     return EXIT_OK
 
 
+def _cmd_locate_study(args) -> int:
+    from starnav.navigation.study import format_tables, plot_study, run_locate_study
+
+    if not 1.0 <= args.fov_deg <= 60.0:
+        raise StarnavError(f"--fov-deg must be between 1 and 60, got {args.fov_deg:g}")
+    if args.plot and not Path(args.plot).resolve().parent.is_dir():
+        raise StarnavError(f"--plot: the directory of {args.plot!r} does not exist")
+    tables = run_locate_study(trials=args.trials, fov_deg=args.fov_deg, seed=args.seed)
+    if args.plot:
+        plot_study(tables, args.plot)
+    if args.json:
+        print(_json({name: [asdict(r) for r in rows] for name, rows in tables.items()}))
+    else:
+        print(format_tables(tables))
+    return EXIT_OK
+
+
 _COMMANDS = {
     "identify": _cmd_identify,
     "simulate": _cmd_simulate,
@@ -732,6 +758,7 @@ _COMMANDS = {
     "database": _cmd_database,
     "evaluate": _cmd_evaluate,
     "locate": _cmd_locate,
+    "locate-study": _cmd_locate_study,
     "pointing": _cmd_pointing,
     "pointing-study": _cmd_pointing_study,
 }
