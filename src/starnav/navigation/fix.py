@@ -185,9 +185,12 @@ def locate(
     t0 = _time.perf_counter()
     t = parse_utc(observation.utc)
     if catalog is None:
-        cat = load_catalog(None, mag_limit=mag_limit, epoch_year=float(t.decimalyear))
+        # identification at the year's epoch (its pair database is then built once a year);
+        # the fix with positions at the observation's own date
+        cat = load_catalog(None, mag_limit=mag_limit, epoch_year=float(round(t.decimalyear)))
+        cat_fix = load_catalog(None, mag_limit=mag_limit, epoch_year=float(t.decimalyear))
     else:
-        cat = load_catalog(catalog, mag_limit=mag_limit)
+        cat = cat_fix = load_catalog(catalog, mag_limit=mag_limit)
     reports, body, rows = [], [], []
     for view in observation.cameras:
         if len(view.xy) < 3:
@@ -209,7 +212,7 @@ def locate(
         camera = Camera(view.width, view.height, s.focal_px)
         c = camera.pixels_to_bearings(np.array([[m.x, m.y] for m in matched]))
         body.append(c @ view.R_cam_from_body)  # b = R^T c, row-wise
-        rows.append(cat.rows([m.catalog_id for m in matched]))
+        rows.append(cat_fix.rows([m.catalog_id for m in matched]))
         reports.append(CameraReport(view.name, len(view.xy), len(matched), "", s.ra_deg, s.dec_deg))
     if not body:
         raise FixError(
@@ -220,8 +223,8 @@ def locate(
     focal = min(Camera.from_fov(v.fov_deg, v.width, v.height).focal_px for v in observation.cameras)
     fix = fix_from_directions(
         np.vstack(body),
-        cat.ra_deg[rows_all],
-        cat.dec_deg[rows_all],
+        cat_fix.ra_deg[rows_all],
+        cat_fix.dec_deg[rows_all],
         observation.utc,
         observation.gravity_body,
         pressure_hpa=observation.pressure_hpa,
