@@ -22,6 +22,7 @@ from starnav.identify import (
     make_identifier,
 )
 from starnav.identify.database import database_angle_deg
+from starnav.identify.tracking import Tracking
 from starnav.identify.verify import match_catalog
 from starnav.pointing import Pointing, best_triple, three_star
 from starnav.simulate import project_catalog
@@ -145,6 +146,8 @@ def solve_verbose(
     min_matched_fraction: float = DEFAULT_MIN_MATCHED_FRACTION,
     algorithm: str = DEFAULT_ALGORITHM,
     algorithm_options: Mapping[str, object] | None = None,
+    prior: Solution | np.ndarray | None = None,
+    prior_sigma_deg: float = 1.0,
 ) -> SolveResult:
     """Like ``solve`` but always returns a ``SolveResult`` with the reason when unsolved.
 
@@ -157,7 +160,10 @@ def solve_verbose(
     of the number of points and of catalog stars inside the image) agree;
     ``algorithm``: identification algorithm by name (``starnav.identify.ALGORITHMS``);
     ``algorithm_options``: keyword options of that algorithm's class (e.g.
-    ``{"selection": "brightest"}`` for ``triangle``).
+    ``{"selection": "brightest"}`` for ``triangle``); ``prior``: the previous attitude (a
+    ``Solution`` or ``R_cam_from_icrs``), good to ``prior_sigma_deg`` (1-sigma): tracking mode
+    matches the catalog stars near it only, and falls back to ``algorithm`` when that fails
+    (``Solution.algorithm`` says which answered).
     """
     camera = make_camera(width=width, height=height, fov_deg=fov_deg)
     stars = check_star_list(
@@ -171,6 +177,17 @@ def solve_verbose(
         identifier = make_identifier(algorithm, **dict(algorithm_options or {}))
     except TypeError as exc:  # an option the algorithm does not have
         raise StarnavError(f"algorithm {algorithm!r}: {exc}") from None
+    R_prior = None
+    if prior is not None:
+        R_prior = np.asarray(
+            prior.R_cam_from_icrs if isinstance(prior, Solution) else prior, dtype=float
+        )
+        if R_prior.shape != (3, 3) or not np.allclose(R_prior @ R_prior.T, np.eye(3), atol=1e-6):
+            raise StarnavError("prior must be a Solution or a 3x3 rotation (R_cam_from_icrs)")
+        if not (np.isfinite(prior_sigma_deg) and 0.0 < prior_sigma_deg <= 30.0):
+            raise StarnavError(
+                f"prior_sigma_deg must be in (0, 30] degrees, got {prior_sigma_deg!r}"
+            )
     if not 0.0 <= min_matched_fraction <= 1.0:
         raise StarnavError(f"min_matched_fraction must be in [0, 1], got {min_matched_fraction!r}")
     if not 0.0 < max_false_match_probability < 1.0:
@@ -202,7 +219,14 @@ def solve_verbose(
         if stars.brightness is not None
         else np.arange(len(bearings))
     )
-    outcome = identifier.identify(bearings, order, database, settings)
+    outcome = None
+    if R_prior is not None:
+        tracker = Tracking(R_prior=R_prior, sigma_deg=prior_sigma_deg)
+        outcome = tracker.identify(bearings, order, database, settings)
+        if outcome.identification is not None:
+            algorithm = tracker.name
+    if outcome is None or outcome.identification is None:  # lost in space
+        outcome = identifier.identify(bearings, order, database, settings)
     found = outcome.identification
     if found is None:
         ms = (time.perf_counter() - t0) * 1e3

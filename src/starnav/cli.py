@@ -24,7 +24,7 @@ from starnav.api import (
 )
 from starnav.catalog import DEFAULT_MAG_LIMIT, load_catalog
 from starnav.errors import PointingError, StarnavError
-from starnav.geometry import attitude_difference_deg
+from starnav.geometry import attitude_difference_deg, attitude_from_radec_roll
 from starnav.identify import ALGORITHMS, DEFAULT_ALGORITHM
 from starnav.simulate import FALSE_STAR_ID, SimulatedFrame, simulate_frame
 from starnav.starlist import read_star_csv
@@ -153,6 +153,15 @@ def _build_parser() -> argparse.ArgumentParser:
         help="refuse less certain answers (default %(default)g)",
     )
     _add_algorithm(p)
+    p.add_argument("--prior-ra-deg", type=_finite, help="tracking: previous boresight RA")
+    p.add_argument("--prior-dec-deg", type=_finite, help="tracking: previous boresight Dec")
+    p.add_argument("--prior-roll-deg", type=_finite, help="tracking: previous roll")
+    p.add_argument(
+        "--prior-sigma-deg",
+        type=_finite,
+        default=1.0,
+        help="tracking: 1-sigma error of the previous attitude (default 1)",
+    )
     p.add_argument(
         "--plot", metavar="PNG", type=_png_path, help="draw the identified map into this PNG file"
     )
@@ -338,8 +347,22 @@ def _print_solution(s: Solution, *, file=None) -> None:
         print(f"{m.label:>8} {m.x:9.2f} {m.y:9.2f} {cid:>10} {res:>11}", file=file)
 
 
+def _prior(args) -> np.ndarray | None:
+    given = [args.prior_ra_deg, args.prior_dec_deg, args.prior_roll_deg]
+    if all(v is None for v in given):
+        return None
+    if any(v is None for v in given):
+        raise StarnavError(
+            "tracking needs all of --prior-ra-deg, --prior-dec-deg, --prior-roll-deg"
+        )
+    if not -90.0 <= args.prior_dec_deg <= 90.0:
+        raise StarnavError(f"--prior-dec-deg must be within ±90, got {args.prior_dec_deg:g}")
+    return attitude_from_radec_roll(*given, args.parity or 1)
+
+
 def _cmd_identify(args) -> int:
     stars = read_star_csv(args.stars)
+    prior = _prior(args)
     result = solve_verbose(
         stars.xy,
         width=args.width,
@@ -358,6 +381,8 @@ def _cmd_identify(args) -> int:
         algorithm_options=(
             {"selection": args.triangle_selection} if args.algorithm == "triangle" else None
         ),
+        prior=prior,
+        prior_sigma_deg=args.prior_sigma_deg,
     )
     s = result.solution
     if s is None and args.plot:

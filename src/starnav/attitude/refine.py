@@ -12,13 +12,12 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.optimize import least_squares
-from scipy.spatial.transform import Rotation
 
 from starnav.camera import Camera
 from starnav.geometry import ARCSEC_PER_RAD
 
 _MAX_STEPS = 10
-_STEP_TOL_RAD = 1e-11  # about 2e-8 px at f = 2500 px
+_STEP_TOL_RAD = 1e-9  # about 2e-6 px at f = 2500 px
 
 
 @dataclass(frozen=True, eq=False)
@@ -58,7 +57,13 @@ class Refinement:
 
 
 def _rotate(omega: np.ndarray, R0: np.ndarray) -> np.ndarray:
-    return Rotation.from_rotvec(omega).as_matrix() @ R0
+    """exp([omega]x) @ R0 (Rodrigues' formula; scipy's Rotation costs 30 µs a call here)."""
+    angle = float(np.sqrt(omega @ omega))
+    if angle < 1e-300:
+        return R0
+    k = omega / angle
+    K = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
+    return (np.eye(3) + np.sin(angle) * K + (1.0 - np.cos(angle)) * (K @ K)) @ R0
 
 
 def _residuals_and_jacobian(params, R0, icrs, xy, camera, fit_focal):

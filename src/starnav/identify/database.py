@@ -105,7 +105,9 @@ def database_angle_deg(max_angle_deg: float) -> float:
     return float(np.ceil(max_angle_deg / _ANGLE_STEP_DEG - 1e-9) * _ANGLE_STEP_DEG)
 
 
-def _build_pairs(vectors: np.ndarray, max_angle_rad: float):
+def build_pairs(vectors: np.ndarray, max_angle_rad: float):
+    """Pairs (a, b) of the unit ``vectors`` closer than ``max_angle_rad``, sorted by angle,
+    their angles (radians) and the KD-tree of the vectors."""
     tree = cKDTree(vectors)
     pairs = tree.query_pairs(chord_from_angle(max_angle_rad), output_type="ndarray")
     angles = angle_between(vectors[pairs[:, 0]], vectors[pairs[:, 1]])
@@ -147,7 +149,7 @@ def build_database(
             path,
         )
     t0 = time.perf_counter()
-    a, b, ang, tree = _build_pairs(catalog.vectors, max_angle_rad)
+    a, b, ang, tree = build_pairs(catalog.vectors, max_angle_rad)
     build_s = time.perf_counter() - t0
     saved = save_cached(path, a=a, b=b, angle=ang, build_s=build_s) if use_cache else None
     return PairDatabase(catalog, max_angle_rad, a, b, ang, tree, build_s, False, saved)
