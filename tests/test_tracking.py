@@ -120,3 +120,81 @@ def test_cli_tracking_on_contest_map_1(capsys):
     assert out["algorithm"] == "tracking" and out["n_matched"] == 15
     assert main([*base, "--prior-ra-deg", "10"]) == 2
     assert "needs all of" in capsys.readouterr().err
+
+
+def test_solve_batch_on_processes_matches_one_by_one(hip_1991):
+    rng = np.random.default_rng(11)
+    frames = [simulate_frame(hip_1991, CAMERA, noise_px=0.3, seed=rng) for _ in range(8)]
+    frames = [f for f in frames if len(f.xy) >= 3]
+    options = dict(width=512, fov_deg=12.0, catalog=hip_1991, sigma_px=0.3)
+    pooled = starnav.solve_batch(
+        [f.xy for f in frames], brightness=[f.brightness for f in frames], workers=2, **options
+    )
+    assert len(pooled) == len(frames)
+    for f, (solution, reason, ms) in zip(frames, pooled, strict=True):
+        one = starnav.solve_verbose(f.xy, brightness=f.brightness, **options).solution
+        assert (solution is None) == (one is None)
+        if solution is not None:
+            assert np.allclose(solution.R_cam_from_icrs, one.R_cam_from_icrs, atol=1e-9)
+            assert ms > 0 and reason == ""
+
+
+def test_batch_keeps_going_past_a_bad_frame(hip_1991):
+    results = starnav.solve_batch(
+        [np.array([[1.0, 2.0]]), np.array([[10.0, 10.0], [50.0, 60.0], [200.0, 300.0]])],
+        workers=1,
+        width=512,
+        fov_deg=12.0,
+        catalog=hip_1991,
+    )
+    assert results[0][0] is None and results[0][1].startswith("error:")
+    assert results[1][0] is None and not results[1][1].startswith("error:")
+
+
+def test_cli_identify_a_directory(tmp_path, capsys):
+    for seed in range(4):
+        assert (
+            main(
+                [
+                    "simulate",
+                    "--fov-deg",
+                    "12",
+                    "--width",
+                    "512",
+                    "--noise-px",
+                    "0.3",
+                    "--seed",
+                    str(seed),
+                    "-o",
+                    str(tmp_path / f"f{seed}.csv"),
+                ]
+            )
+            == 0
+        )
+    capsys.readouterr()
+    assert (
+        main(
+            [
+                "identify",
+                str(tmp_path),
+                "--fov-deg",
+                "12",
+                "--width",
+                "512",
+                "--json",
+                "--workers",
+                "2",
+            ]
+        )
+        == 0
+    )
+    lines = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
+    assert [line["file"].rsplit("/", 1)[1] for line in lines] == [f"f{k}.csv" for k in range(4)]
+    assert all(line["solved"] for line in lines)
+    (tmp_path / "bad.csv").write_text("x,y\n")
+    assert main(["identify", str(tmp_path), "--fov-deg", "12", "--width", "512"]) == 2
+    assert "bad.csv: not solved: error:" in capsys.readouterr().out
+    assert (
+        main(["identify", str(tmp_path), "--fov-deg", "12", "--width", "512", "--plot", "x.png"])
+        == 2
+    )

@@ -1,6 +1,14 @@
 """starnav: star identification, attitude and celestial navigation from star cameras."""
 
-from starnav.api import Solution, SolveResult, StarMatch, best_three_star, solve, solve_verbose
+from starnav.api import (
+    Solution,
+    SolveResult,
+    StarMatch,
+    best_three_star,
+    solve,
+    solve_batch,
+    solve_verbose,
+)
 from starnav.camera import Camera
 from starnav.catalog import Catalog, load_catalog
 from starnav.errors import CameraError, CatalogError, StarListError, StarnavError
@@ -23,5 +31,6 @@ __all__ = [
     "load_catalog",
     "simulate_frame",
     "solve",
+    "solve_batch",
     "solve_verbose",
 ]

@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+import multiprocessing
+import os
 import time
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping, Sequence
+from concurrent.futures import ProcessPoolExecutor
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
@@ -504,3 +507,57 @@ def best_three_star(
         parity=solution.parity,
     )
     return pointing, tuple(matched[k].label for k in triple)
+
+
+def _solve_one(job: tuple[np.ndarray, np.ndarray | None, dict]) -> tuple:
+    xy, brightness, options = job
+    try:
+        r = solve_verbose(xy, brightness=brightness, **options)
+    except StarnavError as exc:
+        return None, f"error: {exc}", 0.0, 0
+    return r.solution, r.reason, r.time_ms, r.hypotheses
+
+
+def solve_batch(
+    frames: Sequence[np.ndarray],
+    *,
+    brightness: Sequence[np.ndarray | None] | None = None,
+    workers: int | None = None,
+    progress: Callable[[int], None] | None = None,
+    **options,
+) -> list[tuple[Solution | None, str, float]]:
+    """Solve many frames (each an (n, 2) array of centroids) with the same camera and options
+    (those of ``solve_verbose``), on ``workers`` processes (default: all cores; 1: here).
+
+    Returns, per frame in order, ``(solution or None, reason, time_ms)``; a frame with bad
+    input gets None and a reason starting with "error:" instead of stopping the batch.
+    ``progress`` is called with the number of frames finished.
+    """
+    if isinstance(options.get("catalog"), str | Path) or options.get("catalog") is None:
+        # load once here, so the workers inherit it (and the database) instead of each loading
+        options["catalog"] = load_catalog(
+            options.get("catalog"),
+            mag_limit=options.pop("mag_limit", None),
+            epoch_year=options.pop("epoch_year", None),
+        )
+    camera = make_camera(
+        width=options["width"], height=options.get("height"), fov_deg=options["fov_deg"]
+    )
+    get_database(options["catalog"], camera)
+    lights = brightness if brightness is not None else [None] * len(frames)
+    jobs = [(np.asarray(xy, dtype=float), b, options) for xy, b in zip(frames, lights, strict=True)]
+    workers = workers or os.cpu_count() or 1
+    out = []
+    if workers == 1 or len(jobs) < 2:
+        for job in jobs:
+            out.append(_solve_one(job))
+            if progress:
+                progress(1)
+    else:
+        context = multiprocessing.get_context("fork" if os.name == "posix" else "spawn")
+        with ProcessPoolExecutor(max_workers=workers, mp_context=context) as pool:
+            for result in pool.map(_solve_one, jobs, chunksize=max(1, len(jobs) // (8 * workers))):
+                out.append(result)
+                if progress:
+                    progress(1)
+    return [(solution, reason, ms) for solution, reason, ms, _ in out]

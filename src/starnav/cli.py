@@ -135,7 +135,10 @@ def _build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
 
     p = sub.add_parser("identify", help="identify a star list (CSV) and solve the attitude")
-    p.add_argument("stars", help="CSV with header: x,y and optionally label, flux or mag")
+    p.add_argument(
+        "stars",
+        help="CSV with header: x,y and optionally label, flux or mag; or a directory of them",
+    )
     _add_camera(p)
     _add_catalog(p)
     p.add_argument(
@@ -153,6 +156,9 @@ def _build_parser() -> argparse.ArgumentParser:
         help="refuse less certain answers (default %(default)g)",
     )
     _add_algorithm(p)
+    p.add_argument(
+        "--workers", type=_positive_int, help="a directory: processes (default: all cores)"
+    )
     p.add_argument("--prior-ra-deg", type=_finite, help="tracking: previous boresight RA")
     p.add_argument("--prior-dec-deg", type=_finite, help="tracking: previous boresight Dec")
     p.add_argument("--prior-roll-deg", type=_finite, help="tracking: previous roll")
@@ -360,7 +366,81 @@ def _prior(args) -> np.ndarray | None:
     return attitude_from_radec_roll(*given, args.parity or 1)
 
 
+def _identify_many(args, paths: list[Path]) -> int:
+    """Every star list of a directory on all cores: one line (or JSON line) per file."""
+    from tqdm import tqdm
+
+    from starnav.api import solve_batch
+
+    if args.plot or _prior(args) is not None:
+        raise StarnavError("--plot and --prior-* take one star list, not a directory")
+    lists, problems = [], {}
+    for path in paths:
+        try:
+            lists.append(read_star_csv(path))
+        except StarnavError as exc:
+            problems[path] = str(exc)
+            lists.append(None)
+    good = [(p, s) for p, s in zip(paths, lists, strict=True) if s is not None]
+    t0 = time.perf_counter()
+    with tqdm(total=len(good), desc="identify", unit="file", file=sys.stderr) as bar:
+        results = solve_batch(
+            [s.xy for _, s in good],
+            brightness=[s.brightness for _, s in good],
+            workers=args.workers,
+            progress=bar.update,
+            width=args.width,
+            height=args.height,
+            fov_deg=args.fov_deg,
+            catalog=args.catalog,
+            mag_limit=args.mag_limit,
+            epoch_year=args.epoch,
+            parity=args.parity,
+            sigma_px=args.sigma_px,
+            fit_focal=args.fit_focal,
+            max_false_match_probability=args.max_false_match_probability,
+            algorithm=args.algorithm,
+            algorithm_options=(
+                {"selection": args.triangle_selection} if args.algorithm == "triangle" else None
+            ),
+        )
+    wall = time.perf_counter() - t0
+    by_path = dict(zip([p for p, _ in good], results, strict=True))
+    worst = EXIT_OK
+    for path in paths:
+        if path in problems:
+            worst = EXIT_BAD_INPUT
+            line = {"file": str(path), "solved": False, "reason": f"error: {problems[path]}"}
+        else:
+            s, reason, ms = by_path[path]
+            if s is None:
+                worst = max(worst, EXIT_BAD_INPUT if reason.startswith("error:") else 1)
+            line = {"file": str(path), **(_solution_dict(s) if s else {"solved": False})}
+            line.update(reason=None if s else reason, time_ms=ms)
+        if args.json:
+            print(_json(line))
+        elif line["solved"]:
+            print(
+                f"{path}: RA {line['ra_deg']:.5f}° Dec {line['dec_deg']:+.5f}° roll "
+                f"{line['roll_deg']:.4f}° parity {line['parity']:+d}, {line['n_matched']} stars, "
+                f"{line['time_ms']:.1f} ms"
+            )
+        else:
+            print(f"{path}: not solved: {line['reason']}")
+    print(
+        f"{len(paths)} files in {wall:.2f} s ({len(good) / max(wall, 1e-9):.0f} frames/s)",
+        file=sys.stderr,
+    )
+    return worst
+
+
 def _cmd_identify(args) -> int:
+    source = Path(args.stars)
+    if source.is_dir():
+        paths = sorted(source.glob("*.csv"))
+        if not paths:
+            raise StarnavError(f"{args.stars!r} holds no .csv star lists")
+        return _identify_many(args, paths)
     stars = read_star_csv(args.stars)
     prior = _prior(args)
     result = solve_verbose(
