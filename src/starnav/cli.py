@@ -366,6 +366,26 @@ def _prior(args) -> np.ndarray | None:
     return attitude_from_radec_roll(*given, args.parity or 1)
 
 
+def _solve_options(args) -> dict:
+    """The options of ``solve_verbose`` that ``identify`` takes from its command line."""
+    return dict(
+        width=args.width,
+        height=args.height,
+        fov_deg=args.fov_deg,
+        catalog=args.catalog,
+        mag_limit=args.mag_limit,
+        epoch_year=args.epoch,
+        parity=args.parity,
+        sigma_px=args.sigma_px,
+        fit_focal=args.fit_focal,
+        max_false_match_probability=args.max_false_match_probability,
+        algorithm=args.algorithm,
+        algorithm_options=(
+            {"selection": args.triangle_selection} if args.algorithm == "triangle" else None
+        ),
+    )
+
+
 def _identify_many(args, paths: list[Path]) -> int:
     """Every star list of a directory on all cores: one line (or JSON line) per file."""
     from tqdm import tqdm
@@ -389,20 +409,7 @@ def _identify_many(args, paths: list[Path]) -> int:
             brightness=[s.brightness for _, s in good],
             workers=args.workers,
             progress=bar.update,
-            width=args.width,
-            height=args.height,
-            fov_deg=args.fov_deg,
-            catalog=args.catalog,
-            mag_limit=args.mag_limit,
-            epoch_year=args.epoch,
-            parity=args.parity,
-            sigma_px=args.sigma_px,
-            fit_focal=args.fit_focal,
-            max_false_match_probability=args.max_false_match_probability,
-            algorithm=args.algorithm,
-            algorithm_options=(
-                {"selection": args.triangle_selection} if args.algorithm == "triangle" else None
-            ),
+            **_solve_options(args),
         )
     wall = time.perf_counter() - t0
     by_path = dict(zip([p for p, _ in good], results, strict=True))
@@ -445,22 +452,9 @@ def _cmd_identify(args) -> int:
     prior = _prior(args)
     result = solve_verbose(
         stars.xy,
-        width=args.width,
-        height=args.height,
-        fov_deg=args.fov_deg,
         brightness=stars.brightness,
         labels=stars.labels,
-        catalog=args.catalog,
-        mag_limit=args.mag_limit,
-        epoch_year=args.epoch,
-        parity=args.parity,
-        sigma_px=args.sigma_px,
-        fit_focal=args.fit_focal,
-        max_false_match_probability=args.max_false_match_probability,
-        algorithm=args.algorithm,
-        algorithm_options=(
-            {"selection": args.triangle_selection} if args.algorithm == "triangle" else None
-        ),
+        **_solve_options(args),
         prior=prior,
         prior_sigma_deg=args.prior_sigma_deg,
     )
