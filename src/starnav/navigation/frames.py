@@ -83,18 +83,6 @@ def enu_directions(
     return np.column_stack([np.cos(alt) * np.sin(az), np.cos(alt) * np.cos(az), np.sin(alt)])
 
 
-def enu_axes(lat_deg: float, lon_deg: float) -> np.ndarray:
-    """Rows: the East, North and Up unit vectors of a site in the ITRS (geodetic latitude)."""
-    lat, lon = np.radians(lat_deg), np.radians(lon_deg)
-    return np.array(
-        [
-            [-np.sin(lon), np.cos(lon), 0.0],
-            [-np.sin(lat) * np.cos(lon), -np.sin(lat) * np.sin(lon), np.cos(lat)],
-            [np.cos(lat) * np.cos(lon), np.cos(lat) * np.sin(lon), np.sin(lat)],
-        ]
-    )
-
-
 def radii_of_curvature_m(lat_deg: float) -> tuple[float, float]:
     """WGS84 meridian (north-south) and prime-vertical (east-west) radii of curvature, metres:
     a small angle on the ground times these is a distance."""
