@@ -108,6 +108,13 @@ class SolveResult:
 
 _DATABASES: dict[tuple[str, float], PairDatabase] = {}  # in-memory, per process
 
+# glibc's malloc serves blocks above its mmap threshold (128 KiB) with a fresh mmap, page
+# faults and all, until the process frees one large block, which raises the threshold to that
+# size. Numpy temporaries of the searches are often larger: the voting search ran 2x slower in
+# a process that had never freed a large block (it depended on how the catalog was loaded).
+# Freeing one 16 MiB block here makes timings independent of that history.
+np.empty(16 << 20, dtype=np.uint8)
+
 
 def get_database(catalog: Catalog, camera: Camera) -> PairDatabase:
     """The pair database for this catalog and field (memory, then disk cache, then built)."""
