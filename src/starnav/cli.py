@@ -25,7 +25,7 @@ from starnav.api import (
 from starnav.catalog import DEFAULT_MAG_LIMIT, load_catalog
 from starnav.errors import PointingError, StarnavError
 from starnav.geometry import attitude_difference_deg, attitude_from_radec_roll
-from starnav.identify import ALGORITHMS, DEFAULT_ALGORITHM
+from starnav.identify import ALGORITHMS, DEFAULT_ALGORITHM, cli_options
 from starnav.simulate import FALSE_STAR_ID, SimulatedFrame, simulate_frame
 from starnav.starlist import read_star_csv
 
@@ -380,9 +380,7 @@ def _solve_options(args) -> dict:
         fit_focal=args.fit_focal,
         max_false_match_probability=args.max_false_match_probability,
         algorithm=args.algorithm,
-        algorithm_options=(
-            {"selection": args.triangle_selection} if args.algorithm == "triangle" else None
-        ),
+        algorithm_options=cli_options(args.algorithm, args.triangle_selection),
     )
 
 

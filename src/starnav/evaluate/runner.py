@@ -29,7 +29,7 @@ from starnav.catalog import load_catalog
 from starnav.errors import StarnavError
 from starnav.evaluate.sampling import Boresights, frame_rng
 from starnav.geometry import angle_between, attitude_difference_deg
-from starnav.identify import make_identifier
+from starnav.identify import cli_options, make_identifier
 from starnav.simulate import FALSE_STAR_ID, simulate_frame
 
 CORRECT_BORESIGHT_DEG = 0.05  # a solution is correct within this and ...
@@ -90,7 +90,7 @@ class EvalConfig:
 
     @property
     def identifier_options(self) -> dict:
-        return {"selection": self.triangle_selection} if self.algorithm == "triangle" else {}
+        return cli_options(self.algorithm, self.triangle_selection)
 
 
 @dataclass(frozen=True)

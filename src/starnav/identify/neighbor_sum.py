@@ -133,10 +133,7 @@ class NeighborSum:
         database: PairDatabase,
         settings: MatchSettings,
     ) -> IdentifyOutcome:
-        """Identify camera-frame ``bearings`` (n, 3); ``order`` lists rows best-first.
-
-        Only the first ``settings.max_screen_stars`` stars in ``order`` take part.
-        """
+        """Identify camera-frame ``bearings`` (n, 3); ``order`` lists rows best-first."""
         order = np.asarray(order)
         if len(order) < 3:
             return IdentifyOutcome(None, "fewer than 3 stars", 0)

@@ -470,11 +470,7 @@ class Pattern4:
         database: PairDatabase,
         settings: MatchSettings,
     ) -> IdentifyOutcome:
-        """Identify camera-frame ``bearings`` (n, 3); ``order`` lists rows best-first.
-
-        Only the first ``settings.max_screen_stars`` stars in ``order`` take part (the caller
-        matches the rest once the attitude is known).
-        """
+        """Identify camera-frame ``bearings`` (n, 3); ``order`` lists rows best-first."""
         order = np.asarray(order)[: min(settings.max_stars, self.pattern_stars)]
         if len(order) < 4:
             return IdentifyOutcome(None, "fewer than 4 stars", 0)

@@ -195,11 +195,7 @@ class Pyramid:
         database: PairDatabase,
         settings: MatchSettings,
     ) -> IdentifyOutcome:
-        """Identify camera-frame ``bearings`` (n, 3); ``order`` lists rows best-first.
-
-        Only the first ``settings.max_screen_stars`` stars in ``order`` take part (the caller
-        matches the rest once the attitude is known).
-        """
+        """Identify camera-frame ``bearings`` (n, 3); ``order`` lists rows best-first."""
         order = np.asarray(order)[: settings.max_stars]
         if len(order) < 3:
             return IdentifyOutcome(None, "fewer than 3 stars", 0)

@@ -85,10 +85,7 @@ class StarLines:
         database: PairDatabase,
         settings: MatchSettings,
     ) -> IdentifyOutcome:
-        """Identify camera-frame ``bearings`` (n, 3); ``order`` lists rows best-first.
-
-        Only the first ``settings.max_screen_stars`` stars in ``order`` take part.
-        """
+        """Identify camera-frame ``bearings`` (n, 3); ``order`` lists rows best-first."""
         n = len(bearings)
         if n < 3:
             return IdentifyOutcome(None, "fewer than 3 stars", 0)

@@ -212,11 +212,7 @@ class Triangle:
         database: PairDatabase,
         settings: MatchSettings,
     ) -> IdentifyOutcome:
-        """Identify camera-frame ``bearings`` (n, 3); ``order`` lists rows best-first.
-
-        Only the first ``settings.max_screen_stars`` stars in ``order`` take part (the caller
-        matches the rest once the attitude is known).
-        """
+        """Identify camera-frame ``bearings`` (n, 3); ``order`` lists rows best-first."""
         if min(len(order), settings.max_stars) < 3:
             return IdentifyOutcome(None, "fewer than 3 stars", 0)
         triangles = self.triangles(bearings, order, settings)

@@ -337,11 +337,7 @@ class GeometricVoting:
         database: PairDatabase,
         settings: MatchSettings,
     ) -> IdentifyOutcome:
-        """Identify camera-frame ``bearings`` (n, 3); ``order`` lists rows best-first.
-
-        Only the first ``settings.max_screen_stars`` stars in ``order`` take part (the caller
-        matches the rest once the attitude is known).
-        """
+        """Identify camera-frame ``bearings`` (n, 3); ``order`` lists rows best-first."""
         stars = order[: min(settings.max_stars, self.max_vote_stars)]
         if len(stars) < 3:
             return IdentifyOutcome(None, "fewer than 3 stars", 0)
