@@ -1,0 +1,1 @@
+"""From image files to attitude: reading, star detection, rendering, WCS and annotation."""
