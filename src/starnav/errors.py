@@ -21,3 +21,7 @@ class CameraError(StarnavError):
 
 class PointingError(StarnavError):
     """Three stars that cannot give a boresight (wrong count, identical, collinear, ...)."""
+
+
+class ImageError(StarnavError):
+    """An image file that cannot be read or holds no usable picture."""
