@@ -1,0 +1,1 @@
+"""Image files to star centroids: reading, background, detection, sub-pixel centroids."""

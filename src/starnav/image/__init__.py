@@ -1,1 +1,0 @@
-"""From image files to attitude: reading, star detection, rendering, WCS and annotation."""
