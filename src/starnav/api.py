@@ -24,12 +24,13 @@ from starnav.identify import (
     build_database,
     make_identifier,
 )
+from starnav.identify.base import Identification
 from starnav.identify.database import database_angle_deg
 from starnav.identify.tracking import Tracking
 from starnav.identify.verify import match_catalog
 from starnav.pointing import Pointing, best_triple, three_star
 from starnav.simulate import project_catalog
-from starnav.starlist import check_star_list
+from starnav.starlist import StarList, check_star_list
 
 DEFAULT_SIGMA_PX = 1.0
 DEFAULT_MAX_FALSE_MATCH_PROBABILITY = 1e-4
@@ -64,7 +65,8 @@ class Solution:
     ``parity``: +1 the sky as seen, -1 mirrored. ``R_cam_from_icrs``: rows are the camera axes
     in ICRS (determinant = parity). ``rms_px``: residual rms of matched stars;
     ``sigma_*_arcsec``: 1-sigma from the fit (``sigma_focal_px`` 0 unless the focal length
-    was fitted); ``time_ms``: identification and fit, without
+    was fitted); ``k1``, ``k2``: radial distortion of the camera (fitted or given, see
+    ``starnav.camera``); ``time_ms``: identification and fit, without
     loading the catalog or database.
     """
 
@@ -85,6 +87,8 @@ class Solution:
     n_matched: int
     algorithm: str
     catalog: str
+    k1: float = 0.0
+    k2: float = 0.0
 
     def to_dict(self) -> dict:
         """JSON-ready dict of every field (the matrix as nested lists)."""
@@ -209,20 +213,11 @@ def solve_verbose(
 
     t0 = time.perf_counter()
     bearings = camera.pixels_to_bearings(stars.xy)
-    settings = MatchSettings(
-        # a measured angle carries two centroid errors: 3 sigma of their sum, at least 1 px
-        pair_tol_rad=max(3.0 * np.sqrt(2.0) * sigma_px, 1.0) / camera.focal_px,
-        # radial distance of a 2-D Gaussian error: beyond 3.5 sigma in 0.2 % of cases; the
-        # agreement is also scored within 1 and 2 sigma (at least 0.5 px)
-        match_radii_rad=tuple(
-            r / camera.focal_px
-            for r in sorted(
-                {max(sigma_px, 0.5), max(2.0 * sigma_px, 0.5), max(3.5 * sigma_px, 1.0)}
-            )
-        ),
+    settings = MatchSettings.for_focal(
+        sigma_px,
+        camera.focal_px,
         max_false_match_probability=max_false_match_probability,
         parity=parity,
-        pixel_rad=1.0 / camera.focal_px,
     )
     order = (
         np.argsort(-stars.brightness, kind="stable")
@@ -242,8 +237,47 @@ def solve_verbose(
         ms = (time.perf_counter() - t0) * 1e3
         return SolveResult(None, outcome.reason, ms, outcome.hypotheses, database)
 
+    return conclude(
+        found,
+        outcome.hypotheses,
+        stars,
+        camera,
+        cat,
+        database,
+        settings,
+        t0=t0,
+        sigma_px=sigma_px,
+        fit_focal=fit_focal,
+        algorithm=algorithm,
+        min_matched_fraction=min_matched_fraction,
+    )
+
+
+def conclude(
+    found: Identification,
+    hypotheses: int,
+    stars: StarList,
+    camera: Camera,
+    cat: Catalog,
+    database: PairDatabase,
+    settings: MatchSettings,
+    *,
+    t0: float,
+    sigma_px: float,
+    fit_focal: bool,
+    algorithm: str,
+    min_matched_fraction: float,
+    fit_distortion: bool = False,
+) -> SolveResult:
+    """From an identification to the reported solution: the attitude fit (least squares on
+    the image, outliers dropped, the stars the better attitude brings in range taken in),
+    the final false-match probability and the refusals. ``t0``: ``time.perf_counter()`` at
+    the start of the solve (for ``time_ms``)."""
+    max_false_match_probability = settings.max_false_match_probability
     # least squares on the image, taking in the stars the better attitude brings in range
-    fitter = _Fitter(cat, stars.xy, camera, database, settings, sigma_px, fit_focal)
+    fitter = _Fitter(
+        cat, stars.xy, camera, database, settings, sigma_px, fit_focal, fit_distortion
+    )
     obs, cat_rows, fit, ver = fitter.converge(
         found.obs_index, found.cat_index, found.R_cam_from_icrs
     )
@@ -270,7 +304,7 @@ def solve_verbose(
         ),
     )
     p_false = final.false_match_probability(
-        len(bearings), 3, found.hypotheses, settings.match_radii_rad
+        len(stars.xy), 3, found.hypotheses, settings.match_radii_rad
     )
     refusal = _refusal(
         fit,
@@ -286,7 +320,7 @@ def solve_verbose(
     )
     if refusal:
         ms = (time.perf_counter() - t0) * 1e3
-        return SolveResult(None, refusal, ms, outcome.hypotheses, database)
+        return SolveResult(None, refusal, ms, hypotheses, database)
     residual = dict(
         zip(obs.tolist(), np.linalg.norm(fit.residuals_px, axis=1).tolist(), strict=True)
     )
@@ -321,8 +355,10 @@ def solve_verbose(
         n_matched=len(obs),
         algorithm=algorithm,
         catalog=cat.name,
+        k1=fit.camera.k1,
+        k2=fit.camera.k2,
     )
-    return SolveResult(solution, "", ms, outcome.hypotheses, database)
+    return SolveResult(solution, "", ms, hypotheses, database)
 
 
 def _shared_rms(a, b) -> tuple[float, float]:
@@ -347,13 +383,21 @@ class _Fitter:
     dropped, and the stars the better attitude brings within range taken in, until the set of
     matches stops changing."""
 
-    def __init__(self, cat, xy, camera, database, settings, sigma_px, fit_focal) -> None:
+    def __init__(
+        self, cat, xy, camera, database, settings, sigma_px, fit_focal, fit_distortion=False
+    ) -> None:
         self.cat, self.xy, self.camera, self.database = cat, xy, camera, database
         self.settings, self.sigma_px, self.fit_focal = settings, sigma_px, fit_focal
+        self.fit_distortion = fit_distortion
 
     def fit(self, obs, cat_rows, R):
         return refine_attitude(
-            R, self.cat.vectors[cat_rows], self.xy[obs], self.camera, fit_focal=self.fit_focal
+            R,
+            self.cat.vectors[cat_rows],
+            self.xy[obs],
+            self.camera,
+            fit_focal=self.fit_focal,
+            fit_distortion=self.fit_distortion,
         )
 
     def match(self, fit, radius_rad: float, *, gate: bool = False):

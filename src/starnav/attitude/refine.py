@@ -18,6 +18,7 @@ from starnav.geometry import ARCSEC_PER_RAD
 
 _MAX_STEPS = 10
 _STEP_TOL_RAD = 1e-9  # about 2e-6 px at f = 2500 px
+MIN_DISTORTION_STARS = 12  # k1, k2 are only fitted with at least this many stars
 
 
 @dataclass(frozen=True, eq=False)
@@ -66,32 +67,61 @@ def _rotate(omega: np.ndarray, R0: np.ndarray) -> np.ndarray:
     return (np.eye(3) + np.sin(angle) * K + (1.0 - np.cos(angle)) * (K @ K)) @ R0
 
 
-def _residuals_and_jacobian(params, R0, icrs, xy, camera, fit_focal):
-    focal = camera.focal_px * np.exp(params[3]) if fit_focal else camera.focal_px
+def _updated(camera: Camera, params: np.ndarray, fit_focal: bool, fit_distortion: bool) -> Camera:
+    """The camera after a step: focal length scaled by exp(p3), k1, k2 moved by p4, p5."""
+    if not fit_focal:
+        return camera
+    focal = camera.focal_px * float(np.exp(params[3]))
+    k1, k2 = camera.k1, camera.k2
+    if fit_distortion:
+        k1, k2 = k1 + float(params[4]), k2 + float(params[5])
+    return Camera(camera.width, camera.height, focal, camera.cx, camera.cy, k1, k2)
+
+
+def _residuals_and_jacobian(params, R0, icrs, xy, camera, fit_focal, fit_distortion=False):
+    cam = _updated(camera, params, fit_focal, fit_distortion)
+    focal = cam.focal_px
     c = icrs @ _rotate(params[:3], R0).T
     inv_z = 1.0 / c[:, 2]
     u, v = c[:, 0] * inv_z, c[:, 1] * inv_z
-    res = np.concatenate([camera.cx + focal * u - xy[:, 0], camera.cy + focal * v - xy[:, 1]])
+    r2 = u * u + v * v
+    d = 1.0 + cam.k1 * r2 + cam.k2 * r2 * r2  # radial factor
+    dd = cam.k1 + 2.0 * cam.k2 * r2  # its derivative in r^2
+    res = np.concatenate([cam.cx + focal * u * d - xy[:, 0], cam.cy + focal * v * d - xy[:, 1]])
+    # derivatives of the distorted (u d, v d) in the undistorted (u, v)
+    dud_du, dud_dv = d + 2.0 * u * u * dd, 2.0 * u * v * dd
+    dvd_du, dvd_dv = 2.0 * u * v * dd, d + 2.0 * v * v * dd
     # projection derivatives of u = cx/cz, v = cy/cz
     n = len(c)
-    du_dc = np.column_stack([inv_z, np.zeros(n), -u * inv_z])
-    dv_dc = np.column_stack([np.zeros(n), inv_z, -v * inv_z])
+    zero = np.zeros(n)
+    du_dc = np.column_stack([inv_z, zero, -u * inv_z])
+    dv_dc = np.column_stack([zero, inv_z, -v * inv_z])
     cx, cy, cz = c.T
     # c' = c + omega x c, so d c / d omega_k = e_k x c
     dc = np.stack(
         [
-            np.column_stack([np.zeros(n), -cz, cy]),
-            np.column_stack([cz, np.zeros(n), -cx]),
-            np.column_stack([-cy, cx, np.zeros(n)]),
+            np.column_stack([zero, -cz, cy]),
+            np.column_stack([cz, zero, -cx]),
+            np.column_stack([-cy, cx, zero]),
         ],
         axis=2,
     )  # (n, 3 components, 3 params)
-    ju = focal * np.einsum("nc,ncp->np", du_dc, dc)
-    jv = focal * np.einsum("nc,ncp->np", dv_dc, dc)
+    ju0 = np.einsum("nc,ncp->np", du_dc, dc)
+    jv0 = np.einsum("nc,ncp->np", dv_dc, dc)
+    ju = focal * (dud_du[:, None] * ju0 + dud_dv[:, None] * jv0)
+    jv = focal * (dvd_du[:, None] * ju0 + dvd_dv[:, None] * jv0)
     jac = np.vstack([ju, jv])
     if fit_focal:
-        jac = np.column_stack([jac, np.concatenate([focal * u, focal * v])])
-    return res, jac, focal
+        jac = np.column_stack([jac, np.concatenate([focal * u * d, focal * v * d])])
+    if fit_distortion:
+        jac = np.column_stack(
+            [
+                jac,
+                np.concatenate([focal * u * r2, focal * v * r2]),
+                np.concatenate([focal * u * r2 * r2, focal * v * r2 * r2]),
+            ]
+        )
+    return res, jac, cam
 
 
 def refine_attitude(
@@ -101,56 +131,56 @@ def refine_attitude(
     camera: Camera,
     *,
     fit_focal: bool = False,
+    fit_distortion: bool = False,
 ) -> Refinement:
-    """Refine ``R0`` (and the focal length when ``fit_focal``) on matched stars.
+    """Refine ``R0`` (and the focal length when ``fit_focal``, and the radial distortion
+    k1, k2 with the focal length when ``fit_distortion``) on matched stars.
 
     ``icrs_vectors`` (n, 3) are the catalog stars of the centroids ``xy`` (n, 2, px), n >= 2.
-    The focal length is only freed with at least 4 stars. The covariance comes from the
-    derivatives at the solution.
+    The focal length is only freed with at least 4 stars, the distortion with at least
+    ``MIN_DISTORTION_STARS``. The covariance comes from the derivatives at the solution.
     """
     xy = np.asarray(xy, dtype=float)
     icrs = np.asarray(icrs_vectors, dtype=float)
-    fit_focal = fit_focal and len(xy) >= 4
-    n_params = 4 if fit_focal else 3
+    fit_distortion = fit_distortion and len(xy) >= MIN_DISTORTION_STARS
+    fit_focal = (fit_focal or fit_distortion) and len(xy) >= 4
+    n_params = 3 + int(fit_focal) + 2 * int(fit_distortion)
 
     # Gauss-Newton, relinearised about the current attitude at every step (the derivatives
     # are exact there); from a start within a pixel or so it converges in 2-4 steps, where
     # a general optimiser spends ~20 evaluations on the tolerance tests of a near-zero cost
-    R, focal = R0, camera.focal_px
+    R, cam = R0, camera
+    zero = np.zeros(n_params)
     cost0 = None
     for _ in range(_MAX_STEPS):
-        res, J, _ = _residuals_and_jacobian(
-            np.zeros(n_params), R, icrs, xy, camera.with_focal(focal), fit_focal
-        )
+        res, J, _ = _residuals_and_jacobian(zero, R, icrs, xy, cam, fit_focal, fit_distortion)
         cost = float(res @ res)
         if cost0 is None:
             cost0 = cost
         step = np.linalg.lstsq(J, -res, rcond=None)[0]
         R = _rotate(step[:3], R)
-        if fit_focal:
-            focal *= float(np.exp(step[3]))
-        if np.max(np.abs(step[:3])) < _STEP_TOL_RAD and (
-            not fit_focal or abs(step[3]) < _STEP_TOL_RAD
+        cam = _updated(cam, step, fit_focal, fit_distortion)
+        if np.max(np.abs(step[:4])) < _STEP_TOL_RAD and (
+            not fit_distortion or np.max(np.abs(step[4:])) < _STEP_TOL_RAD
         ):
             break
-    res_end = _residuals_and_jacobian(
-        np.zeros(n_params), R, icrs, xy, camera.with_focal(focal), fit_focal
-    )[0]
+    res_end = _residuals_and_jacobian(zero, R, icrs, xy, cam, fit_focal, fit_distortion)[0]
     if not np.isfinite(res_end).all() or float(res_end @ res_end) > cost0:
         # a start too far off for Gauss-Newton: let Levenberg-Marquardt find its way
         def fun(p):
-            return _residuals_and_jacobian(p, R0, icrs, xy, camera, fit_focal)[0]
+            return _residuals_and_jacobian(p, R0, icrs, xy, camera, fit_focal, fit_distortion)[0]
 
         def jac(p):
-            return _residuals_and_jacobian(p, R0, icrs, xy, camera, fit_focal)[1]
+            return _residuals_and_jacobian(p, R0, icrs, xy, camera, fit_focal, fit_distortion)[1]
 
-        fit = least_squares(fun, np.zeros(n_params), jac=jac, method="lm", x_scale="jac")
+        fit = least_squares(fun, zero, jac=jac, method="lm", x_scale="jac")
         R = _rotate(fit.x[:3], R0)
-        focal = camera.focal_px * np.exp(fit.x[3]) if fit_focal else camera.focal_px
+        cam = _updated(camera, fit.x, fit_focal, fit_distortion)
     # the Jacobian above is exact at omega = 0: linearise again about the solution for the
     # covariance
     zero = np.zeros(n_params)
-    res, J, focal = _residuals_and_jacobian(zero, R, icrs, xy, camera.with_focal(focal), fit_focal)
+    res, J, cam = _residuals_and_jacobian(zero, R, icrs, xy, cam, fit_focal, fit_distortion)
+    focal = cam.focal_px
     residuals = np.column_stack([res[: len(xy)], res[len(xy) :]])
     dof = max(2 * len(xy) - n_params, 1)
     s2 = float(res @ res) / dof
@@ -168,7 +198,7 @@ def refine_attitude(
     sigma_focal = focal * np.sqrt(max(cov[3, 3], 0.0)) if fit_focal else 0.0
     return Refinement(
         R_cam_from_icrs=R,
-        camera=camera.with_focal(focal),
+        camera=cam,
         residuals_px=residuals,
         rms_px=float(np.sqrt(np.mean(np.sum(residuals**2, axis=1)))),
         sigma_boresight_arcsec=float(sigma_boresight),

@@ -35,6 +35,33 @@ class MatchSettings:
     max_hypotheses: int = 20000
     pixel_rad: float | None = None
 
+    @classmethod
+    def for_focal(
+        cls,
+        sigma_px: float,
+        focal_px: float,
+        *,
+        max_false_match_probability: float = 1e-4,
+        parity: int | None = None,
+    ) -> MatchSettings:
+        """Tolerances for centroids good to ``sigma_px`` (1-sigma, px) seen with a focal
+        length of ``focal_px``."""
+        return cls(
+            # a measured angle carries two centroid errors: 3 sigma of their sum, at least 1 px
+            pair_tol_rad=max(3.0 * np.sqrt(2.0) * sigma_px, 1.0) / focal_px,
+            # radial distance of a 2-D Gaussian error: beyond 3.5 sigma in 0.2 % of cases; the
+            # agreement is also scored within 1 and 2 sigma (at least 0.5 px)
+            match_radii_rad=tuple(
+                r / focal_px
+                for r in sorted(
+                    {max(sigma_px, 0.5), max(2.0 * sigma_px, 0.5), max(3.5 * sigma_px, 1.0)}
+                )
+            ),
+            max_false_match_probability=max_false_match_probability,
+            parity=parity,
+            pixel_rad=1.0 / focal_px,
+        )
+
     @property
     def match_radius_rad(self) -> float:
         """The largest match radius (radians): stars within it are paired."""

@@ -301,16 +301,28 @@ def match_patterns(
     tol_rad: float,
     max_angle_rad: float,
     parity: int | None,
+    *,
+    scale_range: tuple[float, float] | None = None,
+    rel_tol: float = 0.0,
 ) -> PatternMatches:
     """Catalog patterns agreeing with the observed patterns ``obs`` (p, 4, 3), each edge
-    within ``tol_rad`` (radians) of the measured one; ``vectors``: catalog unit vectors."""
+    within ``tol_rad`` (radians) of the measured one; ``vectors``: catalog unit vectors.
+
+    With ``scale_range`` (lo, hi) the observed angles are known only up to a scale: a catalog
+    pattern agrees when its largest edge is lo..hi times the observed one and its edges agree
+    with the observed ones times that factor, within ``tol_rad`` plus ``rel_tol`` times the
+    edge (the field of view is unknown and the bearings were made with a guessed one)."""
     p = len(obs)
     edges = pattern_edges(obs)
     largest = edges.max(axis=1)
-    usable = (edges.min(axis=1) >= 2.0 * tol_rad) & (largest <= max_angle_rad + tol_rad)
+    lo_scale, hi_scale = scale_range if scale_range is not None else (1.0, 1.0)
+    usable = (edges.min(axis=1) >= 2.0 * tol_rad) & (
+        largest * lo_scale <= max_angle_rad + tol_rad
+    )
     # the ratio e / L of edges measured within tol: off by at most tol (1 + e/L) / (L - tol)
     ratios = np.sort(edges, axis=1)[:, :5] / largest[:, None]
     slack = tol_rad * (1.0 + ratios) / np.maximum(largest - tol_rad, tol_rad)[:, None]
+    slack = slack + 2.0 * rel_tol
     B = table.bins
     lo = np.clip(np.floor((ratios - slack) * B), 0, B - 1).astype(np.int64)
     hi = np.clip(np.floor((ratios + slack) * B), 0, B - 1).astype(np.int64)
@@ -319,9 +331,12 @@ def match_patterns(
     n_prefix = np.where(usable, np.prod(span[:, :4], axis=1), 0)
     if n_prefix.sum() > _MAX_PROBES and p > 1:
         half = p // 2
+        scaled = {"scale_range": scale_range, "rel_tol": rel_tol}
         parts = [
-            match_patterns(obs[:half], table, vectors, tol_rad, max_angle_rad, parity),
-            match_patterns(obs[half:], table, vectors, tol_rad, max_angle_rad, parity),
+            match_patterns(
+                obs[sub], table, vectors, tol_rad, max_angle_rad, parity, **scaled
+            )
+            for sub in (slice(None, half), slice(half, None))
         ]
         return _concat(parts, [0, half])
     total = int(n_prefix.sum())
@@ -348,10 +363,23 @@ def match_patterns(
         np.arange(n_cand) - np.repeat(np.cumsum(count) - count, count)
     )
     # the stored largest edge is a quick first test (float32: 1e-7 rad of rounding)
-    ok = np.abs(table.largest_edge_rad[cand_row] - largest[cand_pat]) <= tol_rad + 1e-7
+    cat_largest = table.largest_edge_rad[cand_row]
+    if scale_range is None:
+        ok = np.abs(cat_largest - largest[cand_pat]) <= tol_rad + 1e-7
+    else:
+        obs_largest = largest[cand_pat]
+        ok = (cat_largest >= lo_scale * (obs_largest - tol_rad) * (1.0 - rel_tol)) & (
+            cat_largest <= hi_scale * (obs_largest + tol_rad) * (1.0 + rel_tol)
+        )
     cand_pat, cand_row = cand_pat[ok], cand_row[ok]
     if len(cand_row) == 0:
         return _no_matches()
+    # observed edges are multiplied by this to compare with the catalog's
+    scale = (
+        np.ones(len(cand_row))
+        if scale_range is None
+        else table.largest_edge_rad[cand_row].astype(float) / largest[cand_pat]
+    )
     cat_stars = table.stars[cand_row].astype(np.intp)
     cat_vec = vectors[cat_stars]
     cat_edges = pattern_edges(cat_vec)
@@ -364,7 +392,7 @@ def match_patterns(
     canon_edges = pattern_edges(np.take_along_axis(obs, canon[:, :, None], axis=1))
     # a distance from the centroid is off by at most two star errors (the star's and the
     # centroid's), each below tol / sqrt(2): a difference of two by 2 sqrt(2) tol
-    tie_rad = 3.0 * tol_rad
+    tie_rad = 3.0 * tol_rad + 2.0 * rel_tol * largest[:, None]
     d_perm = dist_sorted[:, _PERMS]  # (p, 24, 4)
     consistent = np.ones((p, len(_PERMS)), dtype=bool)
     for i, j in _PAIRS:
@@ -372,7 +400,10 @@ def match_patterns(
     hyp_cand, hyp_perm, hyp_err = [], [], []
     for k in np.flatnonzero(consistent[cand_pat].any(axis=0)):
         c = np.flatnonzero(consistent[cand_pat, k])
-        err = np.abs(canon_edges[cand_pat[c]][:, _PERM_EDGES[k]] - cat_edges[c]).max(axis=1)
+        err = (
+            np.abs(canon_edges[cand_pat[c]][:, _PERM_EDGES[k]] * scale[c, None] - cat_edges[c])
+            - rel_tol * cat_edges[c]
+        ).max(axis=1) / scale[c]
         good = err <= tol_rad
         hyp_cand.append(c[good])
         hyp_perm.append(np.full(int(good.sum()), k))

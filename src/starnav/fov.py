@@ -1,0 +1,225 @@
+"""Solving a star list whose field of view is unknown (or known only roughly).
+
+The FOV range is searched with 4-star patterns matched up to a scale
+(``starnav.identify.fov_search``); the identification then goes through the same attitude
+fit and refusals as every solve, with the focal length (and, on request, the radial
+distortion) fitted. Bands sit on one fixed grid, 40° x sqrt(2)^k, so every range shares the
+same cached tables.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import replace
+from functools import cache
+from pathlib import Path
+
+import numpy as np
+
+from starnav.api import (
+    DEFAULT_MAX_FALSE_MATCH_PROBABILITY,
+    DEFAULT_MIN_MATCHED_FRACTION,
+    SolveResult,
+    conclude,
+    get_database,
+)
+from starnav.camera import Camera
+from starnav.catalog import Catalog, load_catalog
+from starnav.errors import StarnavError
+from starnav.identify.base import MatchSettings
+from starnav.identify.fov_search import BAND_FACTOR, Band, focal_px, search_fov
+from starnav.identify.pattern4 import build_pattern_table
+from starnav.starlist import check_star_list
+
+DEFAULT_FOV_RANGE_DEG = (5.0, 40.0)
+FOV_LIMITS_DEG = (1.0, 100.0)
+GIVEN_FOV_TOLERANCE = 0.05  # a given FOV is searched within +-5 %
+CAMERA_FOV_TOLERANCE = 0.01  # a calibrated camera's within +-1 %
+_STARS_PER_FIELD = 40.0  # catalog depth of a band: mean stars in one of its pattern fields
+_MAX_MAG = 8.0  # Hipparcos is complete to about here
+_MIN_MAG = 4.0
+_FIELD_RADIUS_FRACTION = 0.85  # pattern fields (as pattern4's default)
+
+
+def band_grid(fov_lo_deg: float, fov_hi_deg: float) -> list[tuple[float, float, float]]:
+    """The bands of the fixed grid 40° x sqrt(2)^k that overlap the range, widest first:
+    (lo, hi) clipped to the range, and the grid band's upper FOV (which its tables are
+    built for)."""
+    k_hi = math.ceil(math.log(fov_hi_deg / 40.0) / math.log(BAND_FACTOR) - 1e-9)
+    out = []
+    top = 40.0 * BAND_FACTOR**k_hi
+    while top > fov_lo_deg * (1.0 + 1e-9):
+        bottom = top / BAND_FACTOR
+        out.append((max(bottom, fov_lo_deg), min(top, fov_hi_deg), top))
+        top = bottom
+    return out
+
+
+@cache
+def _sky_counts(source: str) -> np.ndarray:
+    """Sorted magnitudes of the embedded catalog down to ``_MAX_MAG``."""
+    return np.sort(load_catalog(None, mag_limit=_MAX_MAG).mag)
+
+
+def band_mag_limit(table_fov_deg: float, width: int, height: int) -> float:
+    """Magnitude limit of a band's catalog: about ``_STARS_PER_FIELD`` stars on average in
+    a pattern field of the band's widest FOV (rounded up to 0.25 mag, 4 to 8)."""
+    f = focal_px(table_fov_deg, width)
+    half_diag = math.atan(math.hypot(width, height) / 2.0 / f)
+    radius = _FIELD_RADIUS_FRACTION * half_diag
+    needed = _STARS_PER_FIELD * 2.0 / (1.0 - math.cos(radius))  # 4 pi / field solid angle
+    mags = _sky_counts("hipparcos")
+    mag = mags[min(int(needed), len(mags) - 1)]
+    return float(min(max(math.ceil(mag * 4.0) / 4.0, _MIN_MAG), _MAX_MAG))
+
+
+def load_band(
+    table_fov_deg: float,
+    lo: float,
+    hi: float,
+    width: int,
+    height: int,
+    catalog: Catalog | str | Path | None,
+    epoch_year: float | None,
+) -> Band:
+    """One band's catalog, pair database and pattern table (cached in memory and on disk)."""
+    mag = band_mag_limit(table_fov_deg, width, height)
+    if isinstance(catalog, Catalog):
+        cat = catalog.brighter_than(mag)
+    else:
+        cat = load_catalog(catalog, mag_limit=mag, epoch_year=epoch_year)
+    camera = Camera.from_fov(table_fov_deg, width, height)
+    database = get_database(cat, camera)
+    table = build_pattern_table(database, field_radius_fraction=_FIELD_RADIUS_FRACTION)
+    return Band(lo, hi, cat, database, table)
+
+
+def check_fov_range(fov_range_deg: tuple[float, float]) -> tuple[float, float]:
+    """The range as two floats, or a one-line error."""
+    try:
+        lo, hi = (float(v) for v in fov_range_deg)
+    except (TypeError, ValueError):
+        raise StarnavError(
+            f"fov_range_deg must be two numbers (degrees), got {fov_range_deg!r}"
+        ) from None
+    a, b = FOV_LIMITS_DEG
+    if not (a <= lo < hi <= b):
+        raise StarnavError(
+            f"fov range must satisfy {a:g} <= low < high <= {b:g} degrees, got {lo:g} {hi:g}"
+        )
+    return lo, hi
+
+
+def solve_fov(
+    xy: np.ndarray,
+    *,
+    width: float,
+    height: float | None = None,
+    brightness: np.ndarray | None = None,
+    labels: list[str] | tuple[str, ...] | None = None,
+    fov_deg: float | None = None,
+    fov_range_deg: tuple[float, float] = DEFAULT_FOV_RANGE_DEG,
+    camera: Camera | None = None,
+    fit_distortion: bool = False,
+    catalog: Catalog | str | Path | None = None,
+    epoch_year: float | None = None,
+    parity: int | None = None,
+    sigma_px: float = 1.0,
+    max_false_match_probability: float = DEFAULT_MAX_FALSE_MATCH_PROBABILITY,
+    min_matched_fraction: float = DEFAULT_MIN_MATCHED_FRACTION,
+    pattern_stars: int = 15,
+) -> SolveResult:
+    """Identify stars at ``xy`` (n, 2, px) in an image ``width`` x ``height`` px whose field
+    of view is unknown: searched within ``fov_range_deg`` (horizontal, degrees), or within
+    5 % of ``fov_deg``, or within 1 % of a calibrated ``camera`` (whose principal point and
+    distortion are then used). The solution's ``fov_deg``/``focal_px`` are fitted;
+    ``fit_distortion`` fits k1, k2 as well (with at least 12 matched stars).
+    ``brightness``: larger is brighter (without it the rows are taken as brightest first).
+    Other options as ``starnav.solve_verbose``.
+    """
+    if camera is not None:
+        width, height = camera.width, camera.height
+        lo, hi = (
+            camera.fov_deg * (1 - CAMERA_FOV_TOLERANCE),
+            camera.fov_deg * (1 + CAMERA_FOV_TOLERANCE),
+        )
+    elif fov_deg is not None:
+        if not (np.isfinite(fov_deg) and FOV_LIMITS_DEG[0] <= fov_deg <= FOV_LIMITS_DEG[1]):
+            raise StarnavError(
+                f"fov_deg must be within {FOV_LIMITS_DEG[0]:g}..{FOV_LIMITS_DEG[1]:g} degrees, "
+                f"got {fov_deg!r}"
+            )
+        lo, hi = fov_deg * (1 - GIVEN_FOV_TOLERANCE), fov_deg * (1 + GIVEN_FOV_TOLERANCE)
+    else:
+        lo, hi = check_fov_range(fov_range_deg)
+    height = width if height is None else height
+    base = camera or Camera.from_fov(0.5 * (lo + hi), width, height)
+    stars = check_star_list(
+        xy, width=base.width, height=base.height, brightness=brightness, labels=labels
+    )
+    if not (np.isfinite(sigma_px) and sigma_px > 0):
+        raise StarnavError(f"sigma_px must be a positive number of pixels, got {sigma_px!r}")
+    if parity not in (None, 1, -1):
+        raise StarnavError(f"parity must be +1, -1 or None, got {parity!r}")
+    bands = [
+        load_band(top, a, b, base.width, base.height, catalog, epoch_year)
+        for a, b, top in band_grid(lo, hi)
+    ]
+
+    t0 = time.perf_counter()
+    order = (
+        np.argsort(-stars.brightness, kind="stable")
+        if stars.brightness is not None
+        else np.arange(len(stars.xy))
+    )
+    xy_sorted = stars.xy[order]
+    if base.k1 or base.k2:  # take the known distortion out: the search assumes a pinhole
+        b = base.pixels_to_bearings(xy_sorted)
+        xy_sorted = np.column_stack(
+            [
+                base.cx + base.focal_px * b[:, 0] / b[:, 2],
+                base.cy + base.focal_px * b[:, 1] / b[:, 2],
+            ]
+        )
+    found = search_fov(
+        xy_sorted[: MatchSettings.max_screen_stars],
+        bands,
+        width=base.width,
+        height=base.height,
+        cx=base.cx,
+        cy=base.cy,
+        sigma_px=sigma_px,
+        focal_range_px=(focal_px(hi, base.width), focal_px(lo, base.width)),
+        parity=parity,
+        max_false_match_probability=max_false_match_probability,
+        pattern_stars=pattern_stars,
+    )
+    if found.identification is None:
+        ms = (time.perf_counter() - t0) * 1e3
+        database = bands[0].database
+        return SolveResult(None, found.reason, ms, found.hypotheses, database)
+    ident = found.identification
+    ident = replace(ident, obs_index=order[ident.obs_index])  # back to the caller's rows
+    camera_fit = Camera(base.width, base.height, found.focal_px, base.cx, base.cy, base.k1, base.k2)
+    settings = MatchSettings.for_focal(
+        sigma_px,
+        found.focal_px,
+        max_false_match_probability=max_false_match_probability,
+        parity=parity,
+    )
+    return conclude(
+        ident,
+        found.hypotheses,
+        stars,
+        camera_fit,
+        found.band.catalog,
+        found.band.database,
+        settings,
+        t0=t0,
+        sigma_px=sigma_px,
+        fit_focal=True,
+        fit_distortion=fit_distortion,
+        algorithm="fov-search",
+        min_matched_fraction=min_matched_fraction,
+    )

@@ -1,0 +1,237 @@
+"""Identification when the field of view is unknown: 4-star patterns matched up to a scale.
+
+The edge ratios of a 4-star pattern (``pattern4``) hardly depend on the focal length, so
+they can be looked up before the scale is known. The FOV range is cut into bands a factor
+sqrt(2) wide; each band has its own catalog depth (about 40 stars per field), pair database
+and pattern table, built for the widest field of the band. Within a band the bearings are
+made with a few guessed focal lengths ("cells"): a wrong focal length distorts the gnomonic
+projection towards the corners of the image (an edge at angle phi from the boresight is
+stretched by about 2 delta tan^2 phi for a relative focal error delta), so a cell is narrow
+enough for that distortion to stay within a loose ratio tolerance (1 %). Every catalog
+pattern found that way gets its own focal length, fitted to its six edges; only patterns
+whose edges then agree within the measurement tolerance become hypotheses, verified on the
+whole field at that focal length by the shared ``HypothesisTester`` (one tester over every
+band and cell, so the false-match probability counts every hypothesis tried).
+
+Observed patterns are taken breadth-first over the brightest stars, and each batch of
+patterns is tried in every band and cell before the next: most fields are identified by the
+first few patterns, whatever their field of view.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from starnav.catalog import Catalog
+from starnav.identify.base import Identification, MatchSettings
+from starnav.identify.database import PairDatabase
+from starnav.identify.pattern4 import (
+    PatternTable,
+    breadth_first_combinations,
+    match_patterns,
+    pattern_edges,
+)
+from starnav.identify.verify import HypothesisTester
+
+BAND_FACTOR = math.sqrt(2.0)
+_LOOKUP_REL_TOL = 0.01  # ratio slack of the loose look-up (projection distortion of a cell)
+_MAX_CELL_HALF_WIDTH = 0.15  # relative focal-length half-width of a cell at most
+_FOCAL_STEPS = 4  # Gauss-Newton steps of a pattern's focal length
+
+
+def focal_px(fov_deg: float, width: int) -> float:
+    """Focal length (px) of a horizontal field of view (degrees) across ``width`` px."""
+    return 0.5 * width / math.tan(0.5 * math.radians(fov_deg))
+
+
+def fov_bands(fov_lo_deg: float, fov_hi_deg: float) -> list[tuple[float, float]]:
+    """The FOV range cut into bands (lo, hi) a factor ``BAND_FACTOR`` wide, widest first
+    (the last one may be narrower)."""
+    bands = []
+    hi = fov_hi_deg
+    while hi > fov_lo_deg * (1.0 + 1e-9):
+        lo = max(hi / BAND_FACTOR, fov_lo_deg)
+        bands.append((lo, hi))
+        hi = lo
+    return bands or [(fov_lo_deg, fov_hi_deg)]
+
+
+@dataclass(frozen=True, eq=False)
+class Band:
+    """One band of the FOV search: horizontal FOV ``fov_lo_deg``..``fov_hi_deg`` (degrees),
+    its ``catalog``, pair ``database`` (for verification) and pattern ``table``."""
+
+    fov_lo_deg: float
+    fov_hi_deg: float
+    catalog: Catalog
+    database: PairDatabase
+    table: PatternTable
+
+
+@dataclass(frozen=True, eq=False)
+class FovMatch:
+    """The outcome of a FOV search: the ``identification`` (rows of the stars given and of
+    ``band.catalog``) and the focal length it was verified with (px), or the ``reason``."""
+
+    identification: Identification | None
+    reason: str
+    hypotheses: int
+    focal_px: float
+    band: Band | None
+
+
+def pinhole_bearings(xy: np.ndarray, cx: float, cy: float, focal: np.ndarray) -> np.ndarray:
+    """Unit bearings of pixel positions ``xy`` (..., 2) through a distortion-free camera with
+    principal point (cx, cy) and focal length(s) ``focal`` (px, broadcast against ``xy``'s
+    leading dimensions)."""
+    b = np.stack([xy[..., 0] - cx, xy[..., 1] - cy, np.broadcast_to(focal, xy.shape[:-1])], axis=-1)
+    return b / np.linalg.norm(b, axis=-1, keepdims=True)
+
+
+def fit_pattern_focal(
+    xy: np.ndarray, cat_edges: np.ndarray, cx: float, cy: float, focal0: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """The focal length (px) at which the observed patterns ``xy`` (h, 4, 2) have the
+    catalog's edge angles ``cat_edges`` (h, 6) (least squares on log f from ``focal0``), and
+    the largest edge error left (radians)."""
+    log_f = np.log(focal0)
+    h = 1e-4
+    for _ in range(_FOCAL_STEPS):
+        f = np.exp(log_f)[:, None]
+        r = pattern_edges(pinhole_bearings(xy, cx, cy, f)) - cat_edges
+        up = pattern_edges(pinhole_bearings(xy, cx, cy, f * (1.0 + h)))
+        down = pattern_edges(pinhole_bearings(xy, cx, cy, f * (1.0 - h)))
+        d = (up - down) / (2.0 * h)
+        log_f = log_f - np.sum(r * d, axis=1) / np.maximum(np.sum(d * d, axis=1), 1e-300)
+    f = np.exp(log_f)
+    err = np.abs(pattern_edges(pinhole_bearings(xy, cx, cy, f[:, None])) - cat_edges).max(axis=1)
+    return f, err
+
+
+def _cells(
+    band: Band, width: int, half_diagonal_px: float, focal_range: tuple[float, float]
+) -> list[tuple[float, float, float]]:
+    """Guessed focal lengths of a band: (focal, half-width, look-up ratio slack) each."""
+    f_lo = max(focal_px(band.fov_hi_deg, width), focal_range[0])
+    f_hi = min(focal_px(band.fov_lo_deg, width), focal_range[1])
+    if f_hi < f_lo:
+        return []
+    # a relative focal error delta stretches the corners by 2 delta tan^2(phi)
+    tan2 = (half_diagonal_px / f_lo) ** 2
+    delta = min(_MAX_CELL_HALF_WIDTH, 0.5 * _LOOKUP_REL_TOL / tan2)
+    n = max(1, math.ceil(math.log(f_hi / f_lo) / (2.0 * delta)))
+    delta = 0.5 * math.log(f_hi / f_lo) / n if f_hi > f_lo else delta
+    return [
+        (f_lo * math.exp(delta * (2 * k + 1)), delta, max(2.0 * delta * tan2, 1e-3))
+        for k in range(n)
+    ]
+
+
+def search_fov(
+    xy: np.ndarray,
+    bands: list[Band],
+    *,
+    width: int,
+    height: int,
+    cx: float,
+    cy: float,
+    sigma_px: float,
+    focal_range_px: tuple[float, float],
+    parity: int | None = None,
+    max_false_match_probability: float = 1e-4,
+    pattern_stars: int = 15,
+    max_hypotheses: int = 20000,
+) -> FovMatch:
+    """Identify the stars at ``xy`` (n, 2, px, distortion removed, brightest first) with the
+    focal length unknown within ``focal_range_px`` (px), searching ``bands``."""
+    n = len(xy)
+    if n < 4:
+        return FovMatch(None, "fewer than 4 stars", 0, float("nan"), None)
+    half_diag = math.hypot(max(cx, width - cx), max(cy, height - cy))
+    plans = [
+        (band, cell) for band in bands for cell in _cells(band, width, half_diag, focal_range_px)
+    ]
+    if not plans:
+        return FovMatch(None, "the FOV range holds no field of view", 0, float("nan"), None)
+    stars = min(n, pattern_stars)
+    combos = breadth_first_combinations(stars)
+    ends = [math.comb(m, 4) for m in range(5, stars, 2)] + [len(combos)]
+    tester: HypothesisTester | None = None
+    start = 0
+    for end in ends:
+        if end <= start:
+            continue
+        rows = combos[start:end]
+        start = end
+        for band, (f_guess, delta, rel_tol) in plans:
+            settings = MatchSettings.for_focal(
+                sigma_px,
+                f_guess,
+                max_false_match_probability=max_false_match_probability,
+                parity=parity,
+            )
+            bearings = pinhole_bearings(xy, cx, cy, f_guess)
+            hyp = match_patterns(
+                bearings[rows],
+                band.table,
+                band.catalog.vectors,
+                settings.pair_tol_rad,
+                band.database.max_angle_rad,
+                parity,
+                scale_range=(1.0 / (1.0 + 1.2 * delta), 1.0 / (1.0 - 1.2 * delta)),
+                rel_tol=rel_tol,
+            )
+            if len(hyp.pattern) == 0:
+                continue
+            obs_rows = rows[hyp.pattern[:, None], hyp.obs_local]  # (h, 4) rows of xy
+            cat_vec = band.catalog.vectors[hyp.cat_rows]
+            cat_edges = pattern_edges(cat_vec)
+            obs_edges = pattern_edges(bearings[obs_rows])
+            f0 = f_guess * obs_edges.max(axis=1) / cat_edges.max(axis=1)
+            f_fit, err = fit_pattern_focal(xy[obs_rows], cat_edges, cx, cy, f0)
+            tol_px = settings.pair_tol_rad * f_guess
+            good = (
+                (err * f_fit <= tol_px)
+                & (f_fit >= focal_range_px[0] * 0.99)
+                & (f_fit <= focal_range_px[1] * 1.01)
+            )
+            good = np.flatnonzero(good)
+            if len(good) == 0:
+                continue
+            if tester is None:
+                tester = HypothesisTester(bearings, band.database, settings)
+            tester.count(len(good))  # every hypothesis of the batch, before testing
+            for h in good:
+                f = float(f_fit[h])
+                tester.bearings = pinhole_bearings(xy, cx, cy, f)
+                tester.database = band.database
+                tester.settings = replace(
+                    MatchSettings.for_focal(
+                        sigma_px,
+                        f,
+                        max_false_match_probability=max_false_match_probability,
+                        parity=parity,
+                    ),
+                    max_hypotheses=max_hypotheses,
+                )
+                outcome = tester.test(obs_rows[h], hyp.cat_rows[h], int(hyp.parity[h]))
+                if outcome is not None:
+                    return FovMatch(
+                        outcome.identification, outcome.reason, tester.hypotheses, f, band
+                    )
+                if tester.exhausted:
+                    return FovMatch(
+                        None, tester.outcome().reason, tester.hypotheses, float("nan"), None
+                    )
+    if tester is None:
+        return FovMatch(
+            None,
+            "no 4-star pattern matches the catalog at any field of view in the range",
+            0,
+            float("nan"),
+            None,
+        )
+    return FovMatch(None, tester.outcome().reason, tester.hypotheses, float("nan"), None)
