@@ -5,17 +5,22 @@ centre is (0.5, 0.5)). Camera frame: x right, y down, z along the boresight.
 
 Parity is not a camera property here: a mirrored image is described by an attitude matrix with
 determinant -1 (see ``starnav.geometry``), so the projection below is the same for both.
-Radial distortion (k1, k2 on the normalised radius) is part of the model; the identification
-pipeline fits none yet, so it defaults to zero.
+Radial distortion (k1, k2 on the normalised radius) is part of the model; solving images can
+fit it (``--fit-distortion``) and a camera file (JSON, ``save_camera`` / ``load_camera``,
+written by ``starnav calibrate``) keeps a calibrated camera.
 """
 
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
 from starnav.errors import CameraError
+
+CAMERA_FILE_KEYS = ("width", "height", "focal_px", "cx", "cy", "k1", "k2")
 
 
 def focal_px_from_fov(fov_deg: float, width: int) -> float:
@@ -115,3 +120,37 @@ class Camera:
             & (xy[:, 1] >= -margin_px)
             & (xy[:, 1] <= self.height + margin_px)
         )
+
+
+def save_camera(path: str | Path, camera: Camera, **extra: float | int | str) -> None:
+    """Write ``camera`` as a camera file (JSON; ``extra`` keys are kept as notes)."""
+    data = {key: getattr(camera, key) for key in CAMERA_FILE_KEYS}
+    data["fov_deg"] = camera.fov_deg
+    data.update(extra)
+    Path(path).write_text(json.dumps(data, indent=2) + "\n")
+
+
+def load_camera(path: str | Path) -> Camera:
+    """A camera from a camera file (JSON with width, height, focal_px, cx, cy, k1, k2)."""
+    path = Path(path)
+    try:
+        data = json.loads(path.read_text())
+    except FileNotFoundError:
+        raise CameraError(f"camera file {path} does not exist") from None
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise CameraError(f"camera file {path} is not readable JSON ({exc})") from None
+    if not isinstance(data, dict):
+        raise CameraError(f"camera file {path} must hold a JSON object")
+    missing = [k for k in CAMERA_FILE_KEYS if k not in data]
+    if missing:
+        raise CameraError(f"camera file {path} lacks {', '.join(missing)}")
+    values = {}
+    for key in CAMERA_FILE_KEYS:
+        value = data[key]
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise CameraError(f"camera file {path}: {key} must be a number, got {value!r}")
+        values[key] = value
+    if values["width"] != int(values["width"]) or values["height"] != int(values["height"]):
+        raise CameraError(f"camera file {path}: width and height must be whole pixels")
+    values["width"], values["height"] = int(values["width"]), int(values["height"])
+    return Camera(**values)

@@ -1,0 +1,124 @@
+"""From an image (file or array) to a verified attitude.
+
+``solve_image`` reads the file (``starnav.detect.read``), finds and centroids the stars
+(``starnav.detect.stars``) and solves them with the field of view unknown, roughly known or
+calibrated (``starnav.fov``). A camera file (JSON, written by ``starnav calibrate``) holds a
+calibrated camera: size, focal length, principal point and radial distortion.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from starnav.api import Solution
+from starnav.camera import Camera, load_camera
+from starnav.catalog import Catalog
+from starnav.detect.read import read_image
+from starnav.detect.stars import Detections, detect_stars
+from starnav.errors import CameraError, ImageError
+from starnav.fov import DEFAULT_FOV_RANGE_DEG, solve_fov
+
+DEFAULT_MAX_STARS = 50
+
+
+@dataclass(frozen=True, eq=False)
+class ImageSolveResult:
+    """One image solved: the ``solution`` (None with the ``reason`` when unsolved), the
+    ``detections``, the fitted ``camera`` (focal length, principal point, distortion; None
+    when unsolved), and the time (ms) spent decoding the file (``read_ms``, 0 for an array),
+    detecting stars (``detect_ms``) and identifying + fitting (``solve_ms``)."""
+
+    solution: Solution | None
+    reason: str
+    detections: Detections
+    camera: Camera | None
+    read_ms: float
+    detect_ms: float
+    solve_ms: float
+
+    @property
+    def total_ms(self) -> float:
+        """Detection and solve (ms): from the decoded image to the attitude."""
+        return self.detect_ms + self.solve_ms
+
+
+def solve_image(
+    image: str | Path | np.ndarray,
+    *,
+    fov_deg: float | None = None,
+    fov_range_deg: tuple[float, float] = DEFAULT_FOV_RANGE_DEG,
+    camera: Camera | str | Path | None = None,
+    fit_distortion: bool = False,
+    max_stars: int = DEFAULT_MAX_STARS,
+    threshold_sigma: float = 5.0,
+    sigma_px: float = 1.0,
+    catalog: Catalog | str | Path | None = None,
+    epoch_year: float | None = None,
+    parity: int | None = None,
+    **options,
+) -> ImageSolveResult:
+    """Solve an image file (FITS, PNG, JPEG, TIFF) or a 2-D array (row 0 at the top).
+
+    The field of view is searched within ``fov_range_deg`` (horizontal, degrees) unless
+    ``fov_deg`` (searched within 5 %) or a calibrated ``camera`` (a ``Camera`` or a camera
+    file; within 1 %) is given; the fitted one is reported either way. ``max_stars``: the
+    brightest this many detections are used; ``threshold_sigma``: detection threshold over
+    the background noise; ``sigma_px``: centroid 1-sigma assumed by the matching
+    tolerances. Other keywords: see ``starnav.fov.solve_fov``.
+    """
+    if isinstance(camera, str | Path):
+        camera = load_camera(camera)
+    if isinstance(max_stars, bool) or not (isinstance(max_stars, int) and max_stars >= 4):
+        raise ImageError(f"max_stars must be an integer >= 4, got {max_stars!r}")
+    t0 = time.perf_counter()
+    if isinstance(image, np.ndarray):
+        pixels, read_ms = image, 0.0
+        if pixels.ndim != 2 or pixels.size == 0:
+            raise ImageError(f"an image array must be 2-D and not empty, got shape {image.shape}")
+    else:
+        pixels = read_image(image)
+        read_ms = (time.perf_counter() - t0) * 1e3
+    height, width = pixels.shape
+    if camera is not None and (camera.width, camera.height) != (width, height):
+        raise CameraError(
+            f"the camera file is for {camera.width} x {camera.height} px images, this image is "
+            f"{width} x {height} px"
+        )
+    t1 = time.perf_counter()
+    found = detect_stars(pixels, threshold_sigma=threshold_sigma, max_stars=max_stars)
+    detect_ms = (time.perf_counter() - t1) * 1e3
+    if len(found.xy) < 4:
+        return ImageSolveResult(
+            None,
+            f"{len(found.xy)} stars detected, at least 4 are needed",
+            found,
+            None,
+            read_ms,
+            detect_ms,
+            0.0,
+        )
+    result = solve_fov(
+        found.xy,
+        width=width,
+        height=height,
+        fov_deg=fov_deg,
+        fov_range_deg=fov_range_deg,
+        camera=camera,
+        fit_distortion=fit_distortion,
+        sigma_px=sigma_px,
+        catalog=catalog,
+        epoch_year=epoch_year,
+        parity=parity,
+        **options,
+    )
+    sol = result.solution
+    fitted = None
+    if sol is not None:
+        cx = camera.cx if camera is not None else width / 2.0
+        cy = camera.cy if camera is not None else height / 2.0
+        fitted = Camera(width, height, sol.focal_px, cx, cy, sol.k1, sol.k2)
+    return ImageSolveResult(sol, result.reason, found, fitted, read_ms, detect_ms, result.time_ms)

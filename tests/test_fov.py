@@ -1,0 +1,130 @@
+"""Solving with the field of view unknown, roughly known or calibrated (centroid level)."""
+
+import itertools
+
+import numpy as np
+import pytest
+
+from starnav.camera import Camera, load_camera, save_camera
+from starnav.catalog import load_catalog
+from starnav.errors import CameraError, StarnavError
+from starnav.fov import band_grid, solve_fov
+from starnav.geometry import attitude_difference_deg
+from starnav.simulate import simulate_frame
+
+
+@pytest.fixture(scope="module")
+def sky():
+    return load_catalog(None, mag_limit=7.5)
+
+
+def test_band_grid_covers_the_range_on_the_fixed_grid():
+    bands = band_grid(5.0, 40.0)
+    assert bands[0][1] == pytest.approx(40.0) and bands[-1][0] == pytest.approx(5.0)
+    for (lo, hi, top), nxt in itertools.pairwise(bands):
+        assert nxt[1] == pytest.approx(lo)  # contiguous, widest first
+        assert lo < hi <= top
+    # any sub-range uses the same grid bands (so their tables are shared)
+    tops = {round(t, 6) for _, _, t in bands}
+    assert {round(t, 6) for _, _, t in band_grid(11.0, 13.0)} <= tops
+    assert len(band_grid(19.0, 21.0)) == 2  # 20° is a grid edge
+
+
+@pytest.mark.parametrize(
+    ("fov", "width", "seed"), [(8.0, 1024, 1), (20.0, 1024, 2), (33.0, 800, 3)]
+)
+def test_unknown_fov_is_found_and_fitted(sky, fov, width, seed):
+    camera = Camera.from_fov(fov, width, width * 3 // 4)
+    hits = 0
+    for k in range(3):
+        frame = simulate_frame(sky, camera, noise_px=0.2, false_stars=2, seed=seed * 10 + k)
+        res = solve_fov(
+            frame.xy, width=camera.width, height=camera.height, brightness=frame.brightness
+        )
+        if res.solution is None:
+            continue
+        s = res.solution
+        bore, roll = attitude_difference_deg(s.R_cam_from_icrs, frame.R_cam_from_icrs)
+        assert bore < 0.01 and roll < 0.1, (bore, roll)
+        assert s.fov_deg == pytest.approx(fov, rel=1e-3)
+        assert s.algorithm == "fov-search"
+        hits += 1
+    assert hits >= 2
+
+
+def test_given_fov_a_few_percent_off_is_refined(sky):
+    camera = Camera.from_fov(15.0, 1024)
+    frame = simulate_frame(sky, camera, noise_px=0.1, seed=7)
+    res = solve_fov(frame.xy, width=1024, brightness=frame.brightness, fov_deg=15.0 * 1.03)
+    assert res.solution is not None
+    assert res.solution.fov_deg == pytest.approx(15.0, rel=5e-4)
+
+
+def test_out_of_range_fov_is_not_found(sky):
+    camera = Camera.from_fov(20.0, 1024)
+    frame = simulate_frame(sky, camera, noise_px=0.1, seed=8)
+    res = solve_fov(frame.xy, width=1024, brightness=frame.brightness, fov_range_deg=(5, 10))
+    assert res.solution is None and res.reason
+
+
+def test_random_points_are_not_solved():
+    rng = np.random.default_rng(5)
+    for _ in range(3):
+        xy = rng.uniform(0, 1024, (30, 2))
+        assert solve_fov(xy, width=1024).solution is None
+
+
+def test_distortion_is_fitted_on_request(sky):
+    camera = Camera(1024, 1024, Camera.from_fov(30.0, 1024).focal_px, k1=-0.06)
+    frame = simulate_frame(sky, camera, noise_px=0.1, seed=11)
+    res = solve_fov(
+        frame.xy,
+        width=1024,
+        brightness=frame.brightness,
+        fov_range_deg=(25, 35),
+        fit_distortion=True,
+    )
+    s = res.solution
+    assert s is not None
+    assert s.k1 == pytest.approx(-0.06, abs=0.01)
+    assert s.rms_px < 0.3
+    bore, _ = attitude_difference_deg(s.R_cam_from_icrs, frame.R_cam_from_icrs)
+    assert bore < 0.005
+
+
+def test_calibrated_camera_takes_the_distortion_out(sky, tmp_path):
+    camera = Camera(1024, 768, 1800.0, 520.0, 380.0, k1=-0.05)
+    path = tmp_path / "cam.json"
+    save_camera(path, camera, rms_px=0.1)
+    loaded = load_camera(path)
+    assert loaded == camera
+    frame = simulate_frame(sky, camera, noise_px=0.1, seed=12)
+    s = solve_fov(frame.xy, width=1024, brightness=frame.brightness, camera=loaded).solution
+    assert s is not None and s.k1 == -0.05 and s.rms_px < 0.3
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ("{", "not readable JSON"),
+        ("[1]", "JSON object"),
+        ('{"width": 10}', "lacks"),
+        (
+            '{"width": 10, "height": 10, "focal_px": "x", "cx": 5, "cy": 5, "k1": 0, "k2": 0}',
+            "focal_px must be a number",
+        ),
+    ],
+)
+def test_bad_camera_files_are_one_line_errors(tmp_path, text, message):
+    path = tmp_path / "cam.json"
+    path.write_text(text)
+    with pytest.raises(CameraError, match=message):
+        load_camera(path)
+    with pytest.raises(CameraError, match="does not exist"):
+        load_camera(tmp_path / "missing.json")
+
+
+@pytest.mark.parametrize("bad", [(40, 5), (0.1, 10), ("a", 3), (5,)])
+def test_bad_fov_range(bad):
+    with pytest.raises(StarnavError, match="fov"):
+        solve_fov(np.zeros((5, 2)) + 10, width=100, fov_range_deg=bad)
