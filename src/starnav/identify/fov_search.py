@@ -7,7 +7,8 @@ and pattern table, built for the widest field of the band. Within a band the bea
 made with a few guessed focal lengths ("cells"): a wrong focal length distorts the gnomonic
 projection towards the corners of the image (an edge at angle phi from the boresight is
 stretched by about 2 delta tan^2 phi for a relative focal error delta), so a cell is narrow
-enough for that distortion to stay within a loose ratio tolerance (1 %). Every catalog
+enough for that distortion to stay within a loose ratio tolerance (2 %); the cells of a
+band are looked up together. Every catalog
 pattern found that way gets its own focal length, fitted to its six edges; only patterns
 whose edges then agree within the measurement tolerance become hypotheses, verified on the
 whole field at that focal length by the shared ``HypothesisTester`` (one tester over every
@@ -37,8 +38,8 @@ from starnav.identify.pattern4 import (
 from starnav.identify.verify import HypothesisTester
 
 BAND_FACTOR = math.sqrt(2.0)
-_LOOKUP_REL_TOL = 0.01  # ratio slack of the loose look-up (projection distortion of a cell)
-_MAX_CELL_HALF_WIDTH = 0.15  # relative focal-length half-width of a cell at most
+_LOOKUP_REL_TOL = 0.005  # ratio slack of the loose look-up (projection distortion of a cell)
+_MAX_CELL_HALF_WIDTH = 0.2  # relative focal-length half-width of a cell at most
 _FOCAL_STEPS = 4  # Gauss-Newton steps of a pattern's focal length
 
 
@@ -87,7 +88,15 @@ def pinhole_bearings(xy: np.ndarray, cx: float, cy: float, focal: np.ndarray) ->
     """Unit bearings of pixel positions ``xy`` (..., 2) through a distortion-free camera with
     principal point (cx, cy) and focal length(s) ``focal`` (px, broadcast against ``xy``'s
     leading dimensions)."""
-    b = np.stack([xy[..., 0] - cx, xy[..., 1] - cy, np.broadcast_to(focal, xy.shape[:-1])], axis=-1)
+    shape = np.broadcast_shapes(xy.shape[:-1], np.shape(focal))
+    b = np.stack(
+        [
+            np.broadcast_to(xy[..., 0] - cx, shape),
+            np.broadcast_to(xy[..., 1] - cy, shape),
+            np.broadcast_to(focal, shape),
+        ],
+        axis=-1,
+    )
     return b / np.linalg.norm(b, axis=-1, keepdims=True)
 
 
@@ -151,9 +160,8 @@ def search_fov(
     if n < 4:
         return FovMatch(None, "fewer than 4 stars", 0, float("nan"), None)
     half_diag = math.hypot(max(cx, width - cx), max(cy, height - cy))
-    plans = [
-        (band, cell) for band in bands for cell in _cells(band, width, half_diag, focal_range_px)
-    ]
+    plans = [(band, _cells(band, width, half_diag, focal_range_px)) for band in bands]
+    plans = [(band, cells) for band, cells in plans if cells]
     if not plans:
         return FovMatch(None, "the FOV range holds no field of view", 0, float("nan"), None)
     stars = min(n, pattern_stars)
@@ -166,16 +174,15 @@ def search_fov(
             continue
         rows = combos[start:end]
         start = end
-        for band, (f_guess, delta, rel_tol) in plans:
-            settings = MatchSettings.for_focal(
-                sigma_px,
-                f_guess,
-                max_false_match_probability=max_false_match_probability,
-                parity=parity,
-            )
-            bearings = pinhole_bearings(xy, cx, cy, f_guess)
+        for band, cells in plans:
+            # every cell of the band in one look-up: the observed patterns with the bearings
+            # of each guessed focal length, stacked
+            f_cells = np.array([f for f, _, _ in cells])
+            delta, rel_tol = cells[0][1], cells[0][2]
+            settings = MatchSettings.for_focal(sigma_px, float(f_cells.min()), parity=parity)
+            bearings = pinhole_bearings(xy[None], cx, cy, f_cells[:, None])  # (cells, n, 3)
             hyp = match_patterns(
-                bearings[rows],
+                bearings[:, rows].reshape(-1, 4, 3),
                 band.table,
                 band.catalog.vectors,
                 settings.pair_tol_rad,
@@ -186,13 +193,13 @@ def search_fov(
             )
             if len(hyp.pattern) == 0:
                 continue
-            obs_rows = rows[hyp.pattern[:, None], hyp.obs_local]  # (h, 4) rows of xy
-            cat_vec = band.catalog.vectors[hyp.cat_rows]
-            cat_edges = pattern_edges(cat_vec)
-            obs_edges = pattern_edges(bearings[obs_rows])
-            f0 = f_guess * obs_edges.max(axis=1) / cat_edges.max(axis=1)
+            cell, pattern = np.divmod(hyp.pattern, len(rows))
+            obs_rows = rows[pattern[:, None], hyp.obs_local]  # (h, 4) rows of xy
+            cat_edges = pattern_edges(band.catalog.vectors[hyp.cat_rows])
+            obs_edges = pattern_edges(bearings[cell[:, None], obs_rows])
+            f0 = f_cells[cell] * obs_edges.max(axis=1) / cat_edges.max(axis=1)
             f_fit, err = fit_pattern_focal(xy[obs_rows], cat_edges, cx, cy, f0)
-            tol_px = settings.pair_tol_rad * f_guess
+            tol_px = settings.pair_tol_rad * float(f_cells.min())
             good = (
                 (err * f_fit <= tol_px)
                 & (f_fit >= focal_range_px[0] * 0.99)
@@ -202,7 +209,7 @@ def search_fov(
             if len(good) == 0:
                 continue
             if tester is None:
-                tester = HypothesisTester(bearings, band.database, settings)
+                tester = HypothesisTester(bearings[0], band.database, settings)
             tester.count(len(good))  # every hypothesis of the batch, before testing
             for h in good:
                 f = float(f_fit[h])
