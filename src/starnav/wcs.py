@@ -1,0 +1,267 @@
+"""FITS World Coordinate System (WCS) of a solved image, for DS9, astropy, Aladin and friends.
+
+Pixel conventions: starnav's pixels have their origin at the top-left corner of the image (the
+first pixel's centre is (0.5, 0.5), y down); FITS numbers pixels from 1 at the first pixel's
+centre, so ``fits = ours + 0.5`` on both axes and astropy's 0-based pixel coordinates are
+``ours - 0.5``. Row 0 of the numpy array is FITS y = 1: nothing is flipped, the WCS describes the
+array as it is (a viewer that puts FITS y = 1 at the bottom shows it upside down compared with
+a PNG of the same array, and the sky on it correctly).
+
+The projection is gnomonic (TAN). The tangent point (CRVAL) is the camera's z axis, the
+principal point is CRPIX, and the CD matrix maps pixel offsets to the standard coordinates
+(xi toward East, eta toward North, degrees) of a pinhole camera at attitude ``R_cam_from_icrs``;
+a mirrored attitude (determinant -1) simply gives a CD matrix of the other sign of determinant.
+A camera with radial distortion (``k1``, ``k2``) gets TAN-SIP polynomials fitted by least squares
+to starnav's radial model on a grid over the image: A/B from measured (distorted) pixels to
+undistorted ones, AP/BP back (``fit_sip`` tells the fit error in pixels).
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from astropy.io import fits
+from astropy.time import Time
+from astropy.wcs import WCS
+
+from starnav.camera import Camera
+from starnav.errors import CameraError, ImageError, StarnavError
+from starnav.geometry import north_east, unit_to_radec
+
+DEFAULT_SIP_ORDER = 4
+MAX_SIP_ORDER = 9
+SIP_GRID_POINTS = 41  # per image axis: the grid the polynomials are fitted and checked on
+_ROUND_TRIP_TOLERANCE_PX = 1e-3
+
+
+@dataclass(frozen=True, eq=False)
+class SipFit:
+    """SIP polynomials for a camera's radial distortion (pixel offsets from the principal point).
+
+    ``a``, ``b``: (order + 1, order + 1) arrays, ``a[p, q]`` the coefficient of u^p v^q in the
+    correction from distorted to undistorted pixel offsets (terms of degree 2..order);
+    ``ap``, ``bp``: the inverse (undistorted to distorted, degrees 1..order).
+    ``max_error_px``: largest error of A/B over the image grid; ``max_inverse_error_px``: that
+    of AP/BP; ``max_distortion_px``: largest displacement the model itself makes in the image.
+    """
+
+    order: int
+    a: np.ndarray
+    b: np.ndarray
+    ap: np.ndarray
+    bp: np.ndarray
+    max_error_px: float
+    max_inverse_error_px: float
+    max_distortion_px: float
+
+
+def _check_attitude(R_cam_from_icrs: np.ndarray) -> np.ndarray:
+    R = np.asarray(R_cam_from_icrs, dtype=float)
+    if R.shape != (3, 3) or not np.isfinite(R).all():
+        raise StarnavError(f"R_cam_from_icrs must be a finite 3x3 matrix, got shape {R.shape}")
+    error = float(np.abs(R @ R.T - np.eye(3)).max())
+    if error > 1e-6:
+        raise StarnavError(
+            f"R_cam_from_icrs must have orthonormal rows (a rotation, or a reflection for a "
+            f"mirrored image); R R^T differs from the identity by {error:.2g}"
+        )
+    return R
+
+
+def _terms(order: int, lowest: int) -> list[tuple[int, int]]:
+    return [(p, n - p) for n in range(lowest, order + 1) for p in range(n, -1, -1)]
+
+
+def _design(uv: np.ndarray, terms: list[tuple[int, int]], scale: float) -> np.ndarray:
+    u, v = (uv / scale).T  # scaled so that the powers stay near 1 (conditioning)
+    return np.column_stack([u**p * v**q for p, q in terms])
+
+
+def _fit(
+    uv: np.ndarray, target: np.ndarray, order: int, lowest: int, scale: float
+) -> tuple[np.ndarray, np.ndarray, float]:
+    """Least-squares polynomials (degrees lowest..order) for the two columns of ``target``:
+    coefficient arrays in unscaled pixel units and the largest error (px) over the points."""
+    terms = _terms(order, lowest)
+    design = _design(uv, terms, scale)
+    coef, *_ = np.linalg.lstsq(design, target, rcond=None)
+    error = float(np.max(np.linalg.norm(design @ coef - target, axis=1)))
+    arrays = np.zeros((2, order + 1, order + 1))
+    # terms that move no point by 1e-9 px are rounding noise (e.g. even terms of a radial model)
+    coef[np.abs(coef) < 1e-9] = 0.0
+    for (p, q), c in zip(terms, coef, strict=True):
+        arrays[:, p, q] = c / scale ** (p + q)
+    return arrays[0], arrays[1], error
+
+
+def _check_order(order: int) -> int:
+    if isinstance(order, bool) or not isinstance(order, int | np.integer):
+        raise StarnavError(f"sip_order must be an integer, got {order!r}")
+    if not 2 <= order <= MAX_SIP_ORDER:
+        raise StarnavError(f"sip_order must be in 2..{MAX_SIP_ORDER}, got {order}")
+    return int(order)
+
+
+def fit_sip(camera: Camera, *, order: int = DEFAULT_SIP_ORDER) -> SipFit:
+    """SIP polynomials of degree ``order`` (2..9) for the camera's radial distortion.
+
+    Fitted on a grid of ``SIP_GRID_POINTS`` x ``SIP_GRID_POINTS`` pixels spanning the image
+    (corners included). A radial model has odd terms only, so an even order fits as well as the
+    odd order below it; the inverse AP/BP is exact once order >= 3 (k1 only) or 5 (with k2).
+    """
+    order = _check_order(order)
+    gx, gy = np.meshgrid(
+        np.linspace(0.0, camera.width, SIP_GRID_POINTS),
+        np.linspace(0.0, camera.height, SIP_GRID_POINTS),
+    )
+    grid = np.column_stack([gx.ravel(), gy.ravel()])
+    bearings = camera.pixels_to_bearings(grid)
+    distorted = camera.bearings_to_pixels(bearings)
+    gap = float(np.max(np.linalg.norm(distorted - grid, axis=1)))
+    if not gap <= _ROUND_TRIP_TOLERANCE_PX:
+        raise CameraError(
+            f"radial distortion k1={camera.k1!r}, k2={camera.k2!r} cannot be inverted over the "
+            f"image (pixels -> bearings -> pixels misses by {gap:.3g} px): no SIP fit"
+        )
+    centre = np.array([camera.cx, camera.cy])
+    # exact pairs: distorted offsets recomputed from the bearings by the forward model
+    d = distorted - centre
+    u = camera.focal_px * bearings[:, :2] / bearings[:, 2:]
+    scale = float(np.max(np.abs(d))) or 1.0
+    a, b, error = _fit(d, u - d, order, 2, scale)
+    ap, bp, inverse_error = _fit(u, d - u, order, 1, scale)
+    return SipFit(
+        order=order,
+        a=a,
+        b=b,
+        ap=ap,
+        bp=bp,
+        max_error_px=error,
+        max_inverse_error_px=inverse_error,
+        max_distortion_px=float(np.max(np.linalg.norm(u - d, axis=1))),
+    )
+
+
+def _date_obs(date_obs: str | _dt.datetime | Time) -> Time:
+    try:
+        return Time(date_obs, scale="utc")
+    except ValueError as exc:
+        raise StarnavError(f"date_obs {date_obs!r} is not a date and time: {exc}") from None
+
+
+def wcs_from_attitude(
+    R_cam_from_icrs: np.ndarray,
+    camera: Camera,
+    *,
+    sip_order: int = DEFAULT_SIP_ORDER,
+    date_obs: str | _dt.datetime | Time | None = None,
+) -> WCS:
+    """Celestial WCS (ICRS, degrees) of an image taken by ``camera`` at ``R_cam_from_icrs``.
+
+    TAN, or TAN-SIP of degree ``sip_order`` when the camera has radial distortion (see
+    ``fit_sip`` for the fit error). ``date_obs``: UTC time of the exposure (ISO string,
+    datetime or astropy Time), written as DATE-OBS and MJD-OBS. The WCS's ``pixel_shape`` is
+    (width, height). With astropy's 0-based pixel methods, pixel = starnav pixel - 0.5.
+    """
+    R = _check_attitude(R_cam_from_icrs)
+    _check_order(sip_order)
+    z = R[2]
+    ra_rad, dec_rad = unit_to_radec(z)
+    north, east = north_east(z)
+    # standard coordinates of a direction s: xi = (s.E)/(s.Z), eta = (s.N)/(s.Z); with
+    # c = R s and s = R^T c (R orthogonal, either parity) that is xi = (R E).(u, v, 1) with
+    # u = c_x / c_z, v = c_y / c_z the undistorted pixel offsets over the focal length.
+    cd = np.degrees(1.0 / camera.focal_px) * np.array(
+        [[R[0] @ east, R[1] @ east], [R[0] @ north, R[1] @ north]]
+    )
+    distorted = bool(camera.k1 or camera.k2)
+    suffix = "-SIP" if distorted else ""
+    header = fits.Header()
+    header["WCSAXES"] = 2
+    header["CTYPE1"] = "RA---TAN" + suffix
+    header["CTYPE2"] = "DEC--TAN" + suffix
+    header["CUNIT1"] = "deg"
+    header["CUNIT2"] = "deg"
+    header["CRPIX1"] = (float(camera.cx) + 0.5, "principal point x (FITS: first pixel centre 1)")
+    header["CRPIX2"] = (float(camera.cy) + 0.5, "principal point y")
+    header["CRVAL1"] = (float(np.degrees(ra_rad)), "RA of the camera z axis (deg)")
+    header["CRVAL2"] = (float(np.degrees(dec_rad)), "Dec of the camera z axis (deg)")
+    for i in range(2):
+        for j in range(2):
+            header[f"CD{i + 1}_{j + 1}"] = float(cd[i, j])
+    # 180 is the zenithal default except at Dec = +90 exactly, where the CD matrix above
+    # (East and North taken at RA = CRVAL1) still needs it
+    header["LONPOLE"] = 180.0
+    header["RADESYS"] = "ICRS"
+    if date_obs is not None:
+        when = _date_obs(date_obs)
+        header["DATE-OBS"] = (when.isot, "UTC")
+        header["MJD-OBS"] = float(when.mjd)
+    if distorted:
+        sip = fit_sip(camera, order=sip_order)
+        polynomials = (("A", sip.a), ("B", sip.b), ("AP", sip.ap), ("BP", sip.bp))
+        for name, coef in polynomials:
+            header[f"{name}_ORDER"] = sip.order
+            for p, q in zip(*np.nonzero(coef), strict=True):
+                header[f"{name}_{p}_{q}"] = float(coef[p, q])  # absent terms are 0
+    wcs = WCS(header)
+    wcs.pixel_shape = (camera.width, camera.height)
+    return wcs
+
+
+def _fits_image(image: np.ndarray, wcs: WCS) -> np.ndarray:
+    data = np.asarray(image)
+    if data.ndim != 2:
+        raise ImageError(f"image for the FITS file must be 2-D (height, width), got {data.shape}")
+    if wcs.pixel_shape is not None and data.shape[::-1] != tuple(wcs.pixel_shape):
+        width, height = wcs.pixel_shape
+        raise ImageError(
+            f"image shape {data.shape} does not match the WCS image size "
+            f"(height {height}, width {width})"
+        )
+    if data.dtype == bool:
+        return data.astype(np.uint8)
+    if data.dtype.kind not in "uif":
+        raise ImageError(f"image must hold numbers, got dtype {data.dtype}")
+    if data.dtype == np.float16:
+        return data.astype(np.float32)
+    return data
+
+
+def write_wcs(path: str | Path, wcs: WCS, *, image: np.ndarray | None = None) -> None:
+    """Write the WCS as a FITS file (overwriting ``path``).
+
+    Without ``image``: a header-only file like astrometry.net's ``wcs.fits`` (with IMAGEW and
+    IMAGEH, the image size in pixels). With ``image`` (2-D numpy array, row 0 = FITS y = 1):
+    the image as the primary data unit under the same header.
+    """
+    header = wcs.to_header(relax=True)
+    if wcs.wcs.has_cd() and "PC1_1" in header:
+        # astropy writes PCi_j with CDELT = 1; CDi_j is what astrometry.net and older readers use
+        cdelt = np.array([header.pop(f"CDELT{i}", 1.0) for i in (1, 2)])
+        for i in range(2):
+            for j in range(2):
+                header[f"CD{i + 1}_{j + 1}"] = cdelt[i] * header.pop(
+                    f"PC{i + 1}_{j + 1}", float(i == j)
+                )
+    if header.get("RADESYS") == "ICRS" and "EQUINOX" not in header:
+        # meaningless for ICRS (WCSLIB drops it) but read by tools that predate RADESYS
+        header.insert(
+            "RADESYS", ("EQUINOX", 2000.0, "ICRS axes, J2000 for old readers"), after=True
+        )
+    if wcs.pixel_shape is not None:
+        header["IMAGEW"] = (int(wcs.pixel_shape[0]), "image width (px)")
+        header["IMAGEH"] = (int(wcs.pixel_shape[1]), "image height (px)")
+    header["HISTORY"] = "WCS written by starnav"
+    data = None if image is None else _fits_image(image, wcs)
+    hdu = fits.PrimaryHDU(data=data, header=header)
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", fits.verify.VerifyWarning)  # long SIP comments
+            hdu.writeto(path, overwrite=True)
+    except OSError as exc:
+        raise StarnavError(f"cannot write WCS file {str(path)!r}: {exc}") from None

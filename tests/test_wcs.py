@@ -1,0 +1,200 @@
+"""FITS WCS from a starnav attitude: compared with starnav's own projection of catalog stars."""
+
+import astropy.units as u
+import numpy as np
+import pytest
+from astropy.coordinates import SkyCoord
+from astropy.io import fits
+from astropy.wcs import WCS
+
+from starnav.camera import Camera
+from starnav.catalog import load_catalog
+from starnav.errors import CameraError, ImageError, StarnavError
+from starnav.geometry import attitude_from_radec_roll, radec_to_unit, unit_to_radec
+from starnav.simulate import project_catalog
+from starnav.wcs import fit_sip, wcs_from_attitude, write_wcs
+
+
+@pytest.fixture(scope="module")
+def catalog():
+    return load_catalog(None, mag_limit=6.5)
+
+
+def _attitudes(n, seed):
+    """Random boresights over the sphere, rolls and both parities, plus the two poles."""
+    rng = np.random.default_rng(seed)
+    out = [(0.0, 90.0, 0.0, 1), (123.0, 90.0, 77.0, -1), (5.0, -90.0, 10.0, 1)]
+    for k in range(n):
+        ra, dec = rng.uniform(0, 360), np.degrees(np.arcsin(rng.uniform(-1, 1)))
+        out.append((ra, dec, rng.uniform(0, 360), 1 if k % 2 else -1))
+    return out
+
+
+def _distorted(fov_deg, width, height, k1, k2=0.0, cx=None, cy=None):
+    cam = Camera.from_fov(fov_deg, width, height)
+    return Camera(width, height, cam.focal_px, cx, cy, k1, k2)
+
+
+def _sky(catalog, rows):
+    return SkyCoord(catalog.ra_deg[rows] * u.deg, catalog.dec_deg[rows] * u.deg, frame="icrs")
+
+
+def _starnav_px(wcs, sky):
+    """starnav pixels of sky positions through the WCS (astropy's 0-based pixels + 0.5)."""
+    return np.column_stack(wcs.world_to_pixel(sky)) + 0.5
+
+
+@pytest.mark.parametrize(
+    "camera, tolerance_px",
+    [
+        (Camera.from_fov(20.0, 1024, 768), 1e-6),
+        (Camera(640, 480, 900.0, 300.25, 250.5), 1e-6),  # off-centre principal point
+        (_distorted(20.0, 1024, 1024, -0.05), 0.05),
+        (_distorted(20.0, 1280, 960, -0.05, 0.02, cx=650.0, cy=470.0), 0.05),
+    ],
+)
+def test_wcs_puts_catalog_stars_where_starnav_projects_them(catalog, camera, tolerance_px):
+    worst, stars = 0.0, 0
+    for ra, dec, roll, parity in _attitudes(12, seed=3):
+        R = attitude_from_radec_roll(ra, dec, roll, parity)
+        rows, xy = project_catalog(catalog, R, camera)
+        wcs = wcs_from_attitude(R, camera)
+        assert wcs.wcs.ctype[0] == ("RA---TAN-SIP" if camera.k1 else "RA---TAN")
+        worst = max(worst, float(np.abs(_starnav_px(wcs, _sky(catalog, rows)) - xy).max()))
+        stars += len(rows)
+    assert stars > 200
+    assert worst <= tolerance_px
+
+
+def test_inverse_sip_polynomials_match_the_camera(catalog):
+    """AP/BP (sky -> pixel without iterating, what many viewers use) within 0.05 px."""
+    camera = _distorted(20.0, 1024, 1024, -0.05)
+    for ra, dec, roll, parity in _attitudes(6, seed=4):
+        R = attitude_from_radec_roll(ra, dec, roll, parity)
+        rows, xy = project_catalog(catalog, R, camera)
+        wcs = wcs_from_attitude(R, camera)
+        sky = _sky(catalog, rows)
+        undistorted = wcs.wcs_world2pix(np.column_stack([sky.ra.deg, sky.dec.deg]), 1)
+        # astropy's sip_foc2pix takes focal-plane coordinates relative to CRPIX
+        fits_px = wcs.sip_foc2pix(undistorted - wcs.wcs.crpix, 1)
+        assert np.abs(fits_px - 0.5 - xy).max() <= 0.05
+
+
+def test_orientation_of_the_sky_on_the_image():
+    """Independent of starnav's projection code: parity +1, roll 0 is North up (-y), East left;
+    parity -1 puts East on the right; roll 90 turns East up."""
+    camera = Camera.from_fov(10.0, 800, 600)
+    centre = np.array([[camera.cx - 0.5, camera.cy - 0.5]])  # astropy 0-based pixels
+
+    def sky_at(wcs, dx, dy):
+        ra, dec = wcs.all_pix2world(centre + np.array([dx, dy]), 0)[0]
+        return ra, dec
+
+    wcs = wcs_from_attitude(attitude_from_radec_roll(150.0, 30.0, 0.0, 1), camera)
+    assert np.allclose(wcs.wcs.crval, [150.0, 30.0])
+    assert sky_at(wcs, 0, -100)[1] > 30.1  # up is North
+    assert sky_at(wcs, -100, 0)[0] > 150.1  # left is East
+    mirrored = wcs_from_attitude(attitude_from_radec_roll(150.0, 30.0, 0.0, -1), camera)
+    assert sky_at(mirrored, 0, -100)[1] > 30.1
+    assert sky_at(mirrored, 100, 0)[0] > 150.1  # right is East
+    assert np.linalg.det(wcs.wcs.cd) * np.linalg.det(mirrored.wcs.cd) < 0
+    rolled = wcs_from_attitude(attitude_from_radec_roll(150.0, 30.0, 90.0, 1), camera)
+    assert sky_at(rolled, 0, -100)[0] > 150.1  # up is East
+    scale_deg = np.degrees(1.0 / camera.focal_px)  # at the tangent point
+    assert np.isclose(np.sqrt(abs(np.linalg.det(wcs.wcs.cd))), scale_deg, rtol=1e-12)
+
+
+@pytest.mark.parametrize("k1", [0.0, -0.05])
+def test_pixel_to_world_round_trip_and_bearings(k1):
+    camera = _distorted(20.0, 1024, 768, k1)
+    R = attitude_from_radec_roll(287.3, -41.2, 133.0, -1)
+    wcs = wcs_from_attitude(R, camera)
+    xy = np.random.default_rng(5).uniform([0, 0], [1024, 768], (200, 2))
+    sky = wcs.pixel_to_world(xy[:, 0] - 0.5, xy[:, 1] - 0.5)
+    back = _starnav_px(wcs, sky)
+    assert np.abs(back - xy).max() < 1e-3
+    # the same directions as the camera model gives
+    truth = camera.pixels_to_bearings(xy) @ R  # rows: ICRS unit vectors (R orthogonal)
+    got = radec_to_unit(sky.ra.rad, sky.dec.rad)
+    error_px = np.degrees(np.linalg.norm(got - truth, axis=1)) / np.degrees(1 / camera.focal_px)
+    assert error_px.max() < (1e-6 if k1 == 0 else 0.05)
+
+
+def test_sip_fit_error_is_reported_and_falls_with_order():
+    camera = _distorted(20.0, 1024, 1024, -0.05)
+    fit4 = fit_sip(camera)
+    fit5 = fit_sip(camera, order=5)
+    assert fit4.order == 4 and fit4.a.shape == (5, 5)
+    assert 1.0 < fit4.max_distortion_px < 5.0  # the corners move by a couple of pixels
+    assert 1e-4 < fit4.max_error_px < 0.02
+    assert fit5.max_error_px < fit4.max_error_px / 10
+    assert fit4.max_inverse_error_px < 1e-6  # k1 only: the inverse is an exact cubic
+    assert fit4.a[0, 0] == fit4.a[1, 0] == fit4.a[0, 1] == 0.0
+    # a radial model about the image centre: no even terms survive
+    assert fit4.a[2, 0] == fit4.a[1, 1] == fit4.b[0, 2] == 0.0
+    with pytest.raises(StarnavError, match="sip_order"):
+        fit_sip(camera, order=1)
+    with pytest.raises(CameraError, match="cannot be inverted"):
+        fit_sip(_distorted(90.0, 1000, 1000, -2.0))
+
+
+@pytest.mark.filterwarnings("ignore:The WCS transformation has more axes")  # NAXIS = 0
+def test_header_written_and_read_back_gives_the_same_mapping(tmp_path, catalog):
+    camera = _distorted(15.0, 900, 700, -0.05, 0.01)
+    R = attitude_from_radec_roll(83.8, -5.4, 30.0, -1)
+    wcs = wcs_from_attitude(R, camera, date_obs="2024-03-01T22:15:00")
+    path = tmp_path / "wcs.fits"
+    write_wcs(path, wcs)
+    with fits.open(path) as hdul:
+        header = hdul[0].header
+        assert hdul[0].data is None and header["NAXIS"] == 0
+    assert header["CTYPE1"] == "RA---TAN-SIP" and header["CTYPE2"] == "DEC--TAN-SIP"
+    assert (header["IMAGEW"], header["IMAGEH"]) == (900, 700)
+    assert header["RADESYS"] == "ICRS" and header["EQUINOX"] == 2000.0
+    assert header["DATE-OBS"].startswith("2024-03-01T22:15:00")
+    assert "CD1_1" in header and "PC1_1" not in header
+    assert header["CRPIX1"] == camera.cx + 0.5 and header["CRPIX2"] == camera.cy + 0.5
+    again = WCS(header)
+    rows, xy = project_catalog(catalog, R, camera)
+    sky = _sky(catalog, rows)
+    assert np.abs(_starnav_px(again, sky) - _starnav_px(wcs, sky)).max() < 1e-9
+    assert np.abs(_starnav_px(again, sky) - xy).max() < 0.05
+    assert np.allclose(again.wcs.cd, wcs.wcs.cd, rtol=1e-12, atol=0)
+
+
+def test_image_written_under_the_header(tmp_path):
+    camera = Camera.from_fov(10.0, 64, 48)
+    wcs = wcs_from_attitude(attitude_from_radec_roll(10.0, 20.0, 0.0), camera)
+    image = np.arange(48 * 64, dtype=np.uint16).reshape(48, 64)
+    path = tmp_path / "image.fits"
+    write_wcs(path, wcs, image=image)
+    with fits.open(path) as hdul:
+        assert np.array_equal(hdul[0].data, image)  # row 0 stays row 0 (FITS y = 1)
+        again = WCS(hdul[0].header)
+    ra, dec = again.all_pix2world([[camera.cx + 0.5, camera.cy + 0.5]], 1)[0]
+    assert np.isclose(ra, 10.0) and np.isclose(dec, 20.0)
+    with pytest.raises(ImageError, match="does not match"):
+        write_wcs(path, wcs, image=image.T)
+    with pytest.raises(ImageError, match="2-D"):
+        write_wcs(path, wcs, image=np.zeros((48, 64, 3)))
+    with pytest.raises(StarnavError, match="cannot write"):
+        write_wcs(tmp_path / "no" / "such" / "dir.fits", wcs)
+
+
+def test_bad_attitude_and_date_are_refused():
+    camera = Camera.from_fov(10.0, 64)
+    with pytest.raises(StarnavError, match="orthonormal"):
+        wcs_from_attitude(2.0 * np.eye(3), camera)
+    with pytest.raises(StarnavError, match="3x3"):
+        wcs_from_attitude(np.eye(2), camera)
+    with pytest.raises(StarnavError, match="sip_order"):
+        wcs_from_attitude(np.eye(3), camera, sip_order=12)
+    with pytest.raises(StarnavError, match="date_obs"):
+        wcs_from_attitude(np.eye(3), camera, date_obs="yesterday")
+
+
+def test_crval_is_the_boresight():
+    R = attitude_from_radec_roll(359.9, -12.0, 200.0, -1)
+    wcs = wcs_from_attitude(R, Camera.from_fov(5.0, 100))
+    ra, dec = np.degrees(unit_to_radec(R[2]))
+    assert np.allclose(wcs.wcs.crval, [ra, dec])
