@@ -24,12 +24,27 @@ from starnav.api import (
 )
 from starnav.catalog import DEFAULT_MAG_LIMIT, load_catalog
 from starnav.errors import PointingError, StarnavError
-from starnav.geometry import attitude_difference_deg, attitude_from_radec_roll
+from starnav.fov import DEFAULT_FOV_RANGE_DEG
+from starnav.geometry import (
+    attitude_difference_deg,
+    attitude_from_radec_roll,
+    radec_roll_from_attitude,
+)
 from starnav.identify import ALGORITHMS, DEFAULT_ALGORITHM, cli_options
+from starnav.image import DEFAULT_MAX_STARS
+from starnav.render import PRESETS as RENDER_PRESETS
 from starnav.simulate import FALSE_STAR_ID, SimulatedFrame, simulate_frame
 from starnav.starlist import read_star_csv
 
 EXIT_OK, EXIT_NOT_SOLVED, EXIT_BAD_INPUT = 0, 1, 2
+_RENDER_NUMBERS = (
+    "psf_sigma_px",
+    "exposure_s",
+    "zero_point_e_per_s",
+    "background_e",
+    "read_noise_e",
+    "gain_e_per_adu",
+)
 _SOLUTION_KEYS = (
     "ra_deg",
     "dec_deg",
@@ -129,7 +144,7 @@ def _add_algorithm(p: argparse.ArgumentParser) -> None:
 def _build_parser() -> argparse.ArgumentParser:
     parser = _Parser(
         prog="starnav",
-        description="Star identification and attitude from star-camera centroids. "
+        description="Star identification and attitude from star-camera centroids and images. "
         "Exit status: 0 done/solved, 1 not solved, 2 bad input.",
     )
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
@@ -290,6 +305,94 @@ def _build_parser() -> argparse.ArgumentParser:
     _add_camera(p)
     _add_catalog(p)
     p.add_argument("--json", action="store_true")
+
+    p = sub.add_parser(
+        "solve", help="solve an image file (FITS, PNG, JPEG, TIFF): FOV may be unknown"
+    )
+    p.add_argument("image", help="image file")
+    fov = p.add_mutually_exclusive_group()
+    fov.add_argument("--fov-deg", type=_finite, help="horizontal FOV, roughly (searched ±5 %%)")
+    fov.add_argument(
+        "--fov-range",
+        nargs=2,
+        type=_finite,
+        metavar=("LO", "HI"),
+        default=DEFAULT_FOV_RANGE_DEG,
+        help="FOV search range in degrees when the FOV is unknown (default 5 40)",
+    )
+    fov.add_argument("--camera", help="camera file from 'starnav calibrate' (searched ±1 %%)")
+    p.add_argument(
+        "--fit-distortion", action="store_true", help="fit radial distortion k1, k2 as well"
+    )
+    p.add_argument(
+        "--max-stars",
+        type=_int_at_least(4),
+        default=DEFAULT_MAX_STARS,
+        help="use the brightest this many detections (default %(default)s)",
+    )
+    p.add_argument(
+        "--threshold-sigma",
+        type=_finite,
+        default=5.0,
+        help="detection threshold over the background noise (default %(default)g)",
+    )
+    p.add_argument(
+        "--sigma-px", type=_finite, default=1.0, help="centroid error assumed (default 1 px)"
+    )
+    p.add_argument("--parity", type=int, choices=(1, -1), help="force parity (default: find)")
+    p.add_argument(
+        "--catalog", help="CSV catalog id,ra_deg,dec_deg,mag (default: embedded Hipparcos)"
+    )
+    p.add_argument("--epoch", type=_finite, help="year for Hipparcos proper motion")
+    p.add_argument("--wcs", metavar="FITS", help="write a FITS WCS header (TAN or TAN-SIP) here")
+    p.add_argument(
+        "--annotate", metavar="PNG", type=_png_path, help="draw the solved image into this PNG"
+    )
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+
+    p = sub.add_parser("render", help="render a realistic star image (PSF, noise, hot pixels)")
+    p.add_argument("-o", "--output", required=True, help="image file: .png, .tif, .tiff, .fits")
+    p.add_argument(
+        "--preset",
+        choices=sorted(RENDER_PRESETS),
+        default="seed-1024",
+        help="camera and sensor (default %(default)s); the options below override it",
+    )
+    p.add_argument("--fov-deg", type=_finite, help="horizontal FOV")
+    p.add_argument("--width", type=_positive_int, help="image width (px)")
+    p.add_argument("--height", type=_positive_int, help="image height (px; default: width)")
+    p.add_argument("--k1", type=_finite, default=0.0, help="radial distortion k1")
+    p.add_argument("--k2", type=_finite, default=0.0, help="radial distortion k2")
+    p.add_argument("--ra-deg", type=_finite, help="boresight RA (default: random)")
+    p.add_argument("--dec-deg", type=_finite, help="boresight Dec (default: random)")
+    p.add_argument("--roll-deg", type=_finite, help="roll (default: random)")
+    p.add_argument("--parity", type=int, choices=(1, -1), default=1)
+    for name in _RENDER_NUMBERS:
+        p.add_argument(f"--{name.replace('_', '-')}", type=_finite, help=f"sensor: {name}")
+    p.add_argument("--bit-depth", type=int, choices=(8, 16), help="8 or 16 bit output")
+    p.add_argument("--hot-pixels", type=_count, help="hot pixels at random places")
+    p.add_argument("--mag-limit", type=_finite, help="faintest Hipparcos star drawn")
+    p.add_argument("--seed", type=_count, help="random seed")
+    p.add_argument("--truth", metavar="CSV", help="write the drawn stars (x, y, id, mag) here")
+    p.add_argument("--json", action="store_true", help="print the truth as one JSON object")
+
+    p = sub.add_parser(
+        "calibrate", help="fit focal length, principal point and distortion from star images"
+    )
+    p.add_argument("images", nargs="+", help="image files of one camera")
+    p.add_argument("-o", "--output", required=True, help="camera file (JSON) to write")
+    fov = p.add_mutually_exclusive_group()
+    fov.add_argument("--fov-deg", type=_finite, help="horizontal FOV, roughly")
+    fov.add_argument(
+        "--fov-range",
+        nargs=2,
+        type=_finite,
+        metavar=("LO", "HI"),
+        default=DEFAULT_FOV_RANGE_DEG,
+        help="FOV search range (default 5 40)",
+    )
+    p.add_argument("--max-stars", type=_int_at_least(4), default=100)
+    p.add_argument("--json", action="store_true", help="print one JSON object")
     return parser
 
 
@@ -848,6 +951,186 @@ def _cmd_locate_study(args) -> int:
     return EXIT_OK
 
 
+def _image_solution_dict(res, path: str) -> dict:
+    """The identify JSON of a solved or unsolved image, with the camera and timings."""
+    det = res.detections
+    labels = [str(k + 1) for k in range(len(det.xy))]
+    s = res.solution
+    out = _solution_dict(s) if s else _unsolved_dict(res.reason, res.solve_ms, labels, det.xy)
+    cam = res.camera
+    out.update(
+        file=path,
+        width=det.width,
+        height=det.height,
+        cx=cam.cx if cam else None,
+        cy=cam.cy if cam else None,
+        k1=cam.k1 if cam else None,
+        k2=cam.k2 if cam else None,
+        n_detected=len(det.xy),
+        read_ms=res.read_ms,
+        detect_ms=res.detect_ms,
+        solve_ms=res.solve_ms,
+    )
+    return out
+
+
+def _cmd_solve(args) -> int:
+    from starnav.detect.read import read_image
+    from starnav.image import solve_image
+
+    for out, suffixes in ((args.wcs, (".fits", ".fit", ".fts", ".wcs")),):
+        if out and not out.lower().endswith(suffixes):
+            raise StarnavError(
+                f"--wcs writes a FITS file: give a name ending in .fits, got {out!r}"
+            )
+    pixels = read_image(args.image)
+    res = solve_image(
+        pixels,
+        fov_deg=args.fov_deg,
+        fov_range_deg=tuple(args.fov_range),
+        camera=args.camera,
+        fit_distortion=args.fit_distortion,
+        max_stars=args.max_stars,
+        threshold_sigma=args.threshold_sigma,
+        sigma_px=args.sigma_px,
+        catalog=args.catalog,
+        epoch_year=args.epoch,
+        parity=args.parity,
+    )
+    s = res.solution
+    if s is not None and args.wcs:
+        from starnav.wcs import wcs_from_attitude, write_wcs
+
+        write_wcs(args.wcs, wcs_from_attitude(s.R_cam_from_icrs, res.camera))
+    if s is not None and args.annotate:
+        from starnav.image import annotate_result
+
+        annotate_result(args.annotate, pixels, res)
+    if s is None and (args.wcs or args.annotate):
+        print("starnav solve: not solved, no WCS or picture written", file=sys.stderr)
+    if args.json:
+        print(_json(_image_solution_dict(res, args.image)))
+    elif s:
+        _print_solution(s)
+        cam = res.camera
+        print(
+            f"  camera: FOV {cam.fov_deg:.4f}°, "
+            f"k1 {cam.k1:.5f} k2 {cam.k2:.5f}; {len(res.detections.xy)} stars detected; "
+            f"read {res.read_ms:.1f} ms, detect {res.detect_ms:.1f} ms, solve {res.solve_ms:.1f} ms"
+        )
+    else:
+        print(
+            f"not solved: {res.reason} ({len(res.detections.xy)} stars detected, "
+            f"{res.total_ms:.1f} ms)"
+        )
+    return EXIT_OK if s else EXIT_NOT_SOLVED
+
+
+def _cmd_render(args) -> int:
+    from dataclasses import replace
+
+    from starnav.camera import Camera
+    from starnav.render import preset, render_frame, write_image
+
+    camera, settings = preset(args.preset)
+    if args.fov_deg is not None or args.width is not None or args.height is not None:
+        width = args.width or camera.width
+        height = args.height or (width if args.width else camera.height)
+        camera = make_camera(width=width, height=height, fov_deg=args.fov_deg or camera.fov_deg)
+    camera = Camera(
+        camera.width, camera.height, camera.focal_px, camera.cx, camera.cy, args.k1, args.k2
+    )
+    changes = {
+        k: getattr(args, k)
+        for k in (*_RENDER_NUMBERS, "bit_depth", "hot_pixels", "mag_limit", "seed")
+        if getattr(args, k) is not None
+    }
+    settings = replace(settings, **changes)
+    rng = np.random.default_rng(args.seed)
+    R = attitude_from_radec_roll(
+        rng.uniform(0, 360) if args.ra_deg is None else args.ra_deg,
+        np.degrees(np.arcsin(rng.uniform(-1, 1))) if args.dec_deg is None else args.dec_deg,
+        rng.uniform(0, 360) if args.roll_deg is None else args.roll_deg,
+        args.parity,
+    )
+    frame = render_frame(
+        load_catalog(None, mag_limit=settings.mag_limit or 8.0), camera, R, settings
+    )
+    write_image(args.output, frame.image)
+    if args.truth:
+        with Path(args.truth).open("w", newline="") as fh:
+            w = csv.writer(fh)
+            w.writerow(["x", "y", "catalog_id", "mag"])
+            for (x, y), cid, mag in zip(frame.xy, frame.ids, frame.mag, strict=True):
+                w.writerow([f"{x:.4f}", f"{y:.4f}", int(cid), f"{mag:.3f}"])
+    ra, dec, roll, parity = radec_roll_from_attitude(R)
+    truth = {
+        "image": args.output,
+        "ra_deg": ra,
+        "dec_deg": dec,
+        "roll_deg": roll,
+        "parity": parity,
+        "fov_deg": camera.fov_deg,
+        "width": camera.width,
+        "height": camera.height,
+        "focal_px": camera.focal_px,
+        "k1": camera.k1,
+        "k2": camera.k2,
+        "n_stars": len(frame.xy),
+        "R_cam_from_icrs": R.tolist(),
+    }
+    if args.json:
+        print(_json(truth))
+    else:
+        print(
+            f"wrote {args.output}: {camera.width} x {camera.height} px, FOV {camera.fov_deg:.3f}°, "
+            f"{len(frame.xy)} stars; RA {ra:.5f}° Dec {dec:+.5f}° roll {roll:.4f}°"
+        )
+    return EXIT_OK
+
+
+def _cmd_calibrate(args) -> int:
+    from tqdm import tqdm
+
+    from starnav.calibrate import calibrate
+    from starnav.camera import save_camera
+
+    with tqdm(total=len(args.images), desc="calibrate", unit="image", file=sys.stderr) as bar:
+        cal = calibrate(
+            args.images,
+            fov_deg=args.fov_deg,
+            fov_range_deg=tuple(args.fov_range),
+            max_stars=args.max_stars,
+            progress=bar.update,
+        )
+    cam = cal.camera
+    save_camera(args.output, cam, rms_px=cal.rms_px, stars=cal.n_stars, frames=len(cal.frames))
+    out = {
+        **{k: getattr(cam, k) for k in ("width", "height", "focal_px", "cx", "cy", "k1", "k2")},
+        "fov_deg": cam.fov_deg,
+        "sigma": cal.sigma,
+        "rms_px": cal.rms_px,
+        "n_stars": cal.n_stars,
+        "frames": list(cal.frames),
+        "failed": [{"image": n, "reason": r} for n, r in cal.failed],
+        "camera_file": args.output,
+    }
+    if args.json:
+        print(_json(out))
+    else:
+        sg = cal.sigma
+        print(
+            f"wrote {args.output}: focal {cam.focal_px:.2f} ± {sg['focal_px']:.2f} px "
+            f"(FOV {cam.fov_deg:.4f}°), principal point ({cam.cx:.1f} ± {sg['cx']:.1f}, "
+            f"{cam.cy:.1f} ± {sg['cy']:.1f}) px, k1 {cam.k1:.5f} ± {sg['k1']:.5f}, "
+            f"k2 {cam.k2:.5f} ± {sg['k2']:.5f}; rms {cal.rms_px:.3f} px over {cal.n_stars} "
+            f"stars in {len(cal.frames)} images"
+        )
+        for name, reason in cal.failed:
+            print(f"  left out {name}: {reason}")
+    return EXIT_OK
+
+
 _COMMANDS = {
     "identify": _cmd_identify,
     "simulate": _cmd_simulate,
@@ -858,6 +1141,9 @@ _COMMANDS = {
     "locate-study": _cmd_locate_study,
     "pointing": _cmd_pointing,
     "pointing-study": _cmd_pointing_study,
+    "solve": _cmd_solve,
+    "render": _cmd_render,
+    "calibrate": _cmd_calibrate,
 }
 
 

@@ -111,6 +111,24 @@ def check_fov_range(fov_range_deg: tuple[float, float]) -> tuple[float, float]:
     return lo, hi
 
 
+def search_range(
+    fov_deg: float | None, fov_range_deg: tuple[float, float], camera: Camera | None
+) -> tuple[float, float]:
+    """The horizontal FOV range searched (degrees): within 1 % of a calibrated ``camera``,
+    5 % of ``fov_deg``, or ``fov_range_deg``; a one-line error for a bad one."""
+    if camera is not None:
+        f = camera.fov_deg
+        return f * (1 - CAMERA_FOV_TOLERANCE), f * (1 + CAMERA_FOV_TOLERANCE)
+    if fov_deg is not None:
+        if not (np.isfinite(fov_deg) and FOV_LIMITS_DEG[0] <= fov_deg <= FOV_LIMITS_DEG[1]):
+            raise StarnavError(
+                f"fov_deg must be within {FOV_LIMITS_DEG[0]:g}..{FOV_LIMITS_DEG[1]:g} degrees, "
+                f"got {fov_deg!r}"
+            )
+        return fov_deg * (1 - GIVEN_FOV_TOLERANCE), fov_deg * (1 + GIVEN_FOV_TOLERANCE)
+    return check_fov_range(fov_range_deg)
+
+
 def solve_fov(
     xy: np.ndarray,
     *,
@@ -138,21 +156,9 @@ def solve_fov(
     ``brightness``: larger is brighter (without it the rows are taken as brightest first).
     Other options as ``starnav.solve_verbose``.
     """
+    lo, hi = search_range(fov_deg, fov_range_deg, camera)
     if camera is not None:
         width, height = camera.width, camera.height
-        lo, hi = (
-            camera.fov_deg * (1 - CAMERA_FOV_TOLERANCE),
-            camera.fov_deg * (1 + CAMERA_FOV_TOLERANCE),
-        )
-    elif fov_deg is not None:
-        if not (np.isfinite(fov_deg) and FOV_LIMITS_DEG[0] <= fov_deg <= FOV_LIMITS_DEG[1]):
-            raise StarnavError(
-                f"fov_deg must be within {FOV_LIMITS_DEG[0]:g}..{FOV_LIMITS_DEG[1]:g} degrees, "
-                f"got {fov_deg!r}"
-            )
-        lo, hi = fov_deg * (1 - GIVEN_FOV_TOLERANCE), fov_deg * (1 + GIVEN_FOV_TOLERANCE)
-    else:
-        lo, hi = check_fov_range(fov_range_deg)
     height = width if height is None else height
     base = camera or Camera.from_fov(0.5 * (lo + hi), width, height)
     stars = check_star_list(

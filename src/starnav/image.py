@@ -20,7 +20,7 @@ from starnav.catalog import Catalog
 from starnav.detect.read import read_image
 from starnav.detect.stars import Detections, detect_stars
 from starnav.errors import CameraError, ImageError
-from starnav.fov import DEFAULT_FOV_RANGE_DEG, solve_fov
+from starnav.fov import DEFAULT_FOV_RANGE_DEG, search_range, solve_fov
 
 DEFAULT_MAX_STARS = 50
 
@@ -29,8 +29,9 @@ DEFAULT_MAX_STARS = 50
 class ImageSolveResult:
     """One image solved: the ``solution`` (None with the ``reason`` when unsolved), the
     ``detections``, the fitted ``camera`` (focal length, principal point, distortion; None
-    when unsolved), and the time (ms) spent decoding the file (``read_ms``, 0 for an array),
-    detecting stars (``detect_ms``) and identifying + fitting (``solve_ms``)."""
+    when unsolved), the ``catalog`` the stars were matched in, and the time (ms) spent
+    decoding the file (``read_ms``, 0 for an array), detecting stars (``detect_ms``) and
+    identifying + fitting (``solve_ms``)."""
 
     solution: Solution | None
     reason: str
@@ -39,6 +40,7 @@ class ImageSolveResult:
     read_ms: float
     detect_ms: float
     solve_ms: float
+    catalog: Catalog | None = None
 
     @property
     def total_ms(self) -> float:
@@ -72,6 +74,7 @@ def solve_image(
     """
     if isinstance(camera, str | Path):
         camera = load_camera(camera)
+    search_range(fov_deg, fov_range_deg, camera)  # a bad range is an error before any work
     if isinstance(max_stars, bool) or not (isinstance(max_stars, int) and max_stars >= 4):
         raise ImageError(f"max_stars must be an integer >= 4, got {max_stars!r}")
     t0 = time.perf_counter()
@@ -121,4 +124,40 @@ def solve_image(
         cx = camera.cx if camera is not None else width / 2.0
         cy = camera.cy if camera is not None else height / 2.0
         fitted = Camera(width, height, sol.focal_px, cx, cy, sol.k1, sol.k2)
-    return ImageSolveResult(sol, result.reason, found, fitted, read_ms, detect_ms, result.time_ms)
+    return ImageSolveResult(
+        sol,
+        result.reason,
+        found,
+        fitted,
+        read_ms,
+        detect_ms,
+        result.time_ms,
+        result.database.catalog,
+    )
+
+
+def annotate_result(path_out: str | Path, image: np.ndarray, result: ImageSolveResult) -> None:
+    """Draw a solved image into a PNG: detections, catalog stars, ids, names of bright stars
+    and the residuals (``starnav.annotate``)."""
+    from starnav.annotate import annotate_image
+
+    s, cam, cat = result.solution, result.camera, result.catalog
+    if s is None or cam is None or cat is None:
+        raise ImageError("only a solved image can be annotated")
+    row_of = {int(i): k for k, i in enumerate(cat.ids)}
+    rows = np.array([row_of[m.catalog_id] for m in s.stars if m.catalog_id is not None], int)
+    xy = np.array([(m.x, m.y) for m in s.stars if m.catalog_id is not None]).reshape(-1, 2)
+    projected = cam.bearings_to_pixels(cat.vectors[rows] @ s.R_cam_from_icrs.T)
+    annotate_image(
+        path_out,
+        image,
+        detected_xy=result.detections.xy,
+        R_cam_from_icrs=s.R_cam_from_icrs,
+        camera=cam,
+        catalog=cat,
+        matched=np.column_stack([xy, cat.ids[rows], projected - xy]),
+        title=(
+            f"RA {s.ra_deg:.4f}°  Dec {s.dec_deg:+.4f}°  roll {s.roll_deg:.3f}°  "
+            f"FOV {s.fov_deg:.3f}°  {s.n_matched} stars, rms {s.rms_px:.2f} px"
+        ),
+    )
