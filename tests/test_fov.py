@@ -1,12 +1,15 @@
 """Solving with the field of view unknown, roughly known or calibrated (centroid level)."""
 
 import itertools
+import json
 
 import numpy as np
 import pytest
 
+from conftest import CONTEST
 from starnav.camera import Camera, load_camera, save_camera
 from starnav.catalog import load_catalog
+from starnav.cli import main
 from starnav.errors import CameraError, StarnavError
 from starnav.fov import band_grid, solve_fov
 from starnav.geometry import attitude_difference_deg
@@ -128,3 +131,18 @@ def test_bad_camera_files_are_one_line_errors(tmp_path, text, message):
 def test_bad_fov_range(bad):
     with pytest.raises(StarnavError, match="fov"):
         solve_fov(np.zeros((5, 2)) + 10, width=100, fov_range_deg=bad)
+
+
+def test_identify_command_without_fov_matches_the_known_fov_answer(capsys):
+    base = [
+        str(CONTEST / "images" / "xingtu01.csv"),
+        *("--width", "512", "--catalog", str(CONTEST / "catalog.csv"), "--json"),
+    ]
+    assert main(base) == 0
+    unknown = json.loads(capsys.readouterr().out)
+    assert main([*base, "--fov-deg", "12"]) == 0
+    known = json.loads(capsys.readouterr().out)
+    assert unknown["fov_deg"] == pytest.approx(12.0, rel=1e-4)
+    assert unknown["algorithm"] == "fov-search"
+    ids = {s["label"]: s["catalog_id"] for s in unknown["stars"]}
+    assert ids == {s["label"]: s["catalog_id"] for s in known["stars"]}

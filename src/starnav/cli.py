@@ -154,7 +154,21 @@ def _build_parser() -> argparse.ArgumentParser:
         "stars",
         help="CSV with header: x,y and optionally label, flux or mag; or a directory of them",
     )
-    _add_camera(p)
+    p.add_argument(
+        "--fov-deg",
+        type=_finite,
+        help="horizontal field of view (without it the FOV is searched in --fov-range)",
+    )
+    p.add_argument("--width", type=_positive_int, required=True, help="image width (px)")
+    p.add_argument("--height", type=_positive_int, help="image height (px; default: width)")
+    p.add_argument(
+        "--fov-range",
+        nargs=2,
+        type=_finite,
+        metavar=("LO", "HI"),
+        default=DEFAULT_FOV_RANGE_DEG,
+        help="FOV search range in degrees when --fov-deg is not given (default 5 40)",
+    )
     _add_catalog(p)
     p.add_argument(
         "--sigma-px",
@@ -495,6 +509,8 @@ def _identify_many(args, paths: list[Path]) -> int:
 
     if args.plot or _prior(args) is not None:
         raise StarnavError("--plot and --prior-* take one star list, not a directory")
+    if args.fov_deg is None:
+        raise StarnavError("a directory of star lists needs --fov-deg")
     lists, problems = [], {}
     for path in paths:
         try:
@@ -551,14 +567,33 @@ def _cmd_identify(args) -> int:
         return _identify_many(args, paths)
     stars = read_star_csv(args.stars)
     prior = _prior(args)
-    result = solve_verbose(
-        stars.xy,
-        brightness=stars.brightness,
-        labels=stars.labels,
-        **_solve_options(args),
-        prior=prior,
-        prior_sigma_deg=args.prior_sigma_deg,
-    )
+    if args.fov_deg is None:  # FOV unknown: searched with scale-free patterns
+        from starnav.fov import solve_fov
+
+        if prior is not None or args.algorithm != DEFAULT_ALGORITHM:
+            raise StarnavError("--prior-* and --algorithm need --fov-deg")
+        result = solve_fov(
+            stars.xy,
+            width=args.width,
+            height=args.height,
+            brightness=stars.brightness,
+            labels=stars.labels,
+            fov_range_deg=tuple(args.fov_range),
+            catalog=args.catalog,
+            epoch_year=args.epoch,
+            parity=args.parity,
+            sigma_px=args.sigma_px,
+            max_false_match_probability=args.max_false_match_probability,
+        )
+    else:
+        result = solve_verbose(
+            stars.xy,
+            brightness=stars.brightness,
+            labels=stars.labels,
+            **_solve_options(args),
+            prior=prior,
+            prior_sigma_deg=args.prior_sigma_deg,
+        )
     s = result.solution
     if s is None and args.plot:
         print(f"starnav identify: not solved, no plot written to {args.plot}", file=sys.stderr)
@@ -567,7 +602,7 @@ def _cmd_identify(args) -> int:
 
         plot_solution(
             s,
-            make_camera(width=args.width, height=args.height, fov_deg=args.fov_deg),
+            make_camera(width=args.width, height=args.height, fov_deg=s.fov_deg),
             result.database.catalog,
             args.plot,
         )
