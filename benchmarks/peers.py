@@ -191,9 +191,12 @@ def write_catalog_csv(catalog, root: Path) -> Path:
     return path
 
 
-def peer_database(python: Path, peer: Peer, root: Path, which, catalog_csv: Path, fp: str):
+def peer_database(
+    python: Path, peer: Peer, root: Path, which, catalog_csv: Path, fp: str, tag: str = "hp6"
+):
     """(database argument for ``solve``, build report) of the stock database (``which`` None)
-    or of the one built from the catalog for a field of ``which`` degrees; cached."""
+    or of the one built from the catalog for a field of ``which`` degrees; cached (``tag``
+    names the catalog's magnitude cut in the file name)."""
     folder = root / "peers" / peer.name
     if which is None:
         if not peer.stock_built:
@@ -202,7 +205,7 @@ def peer_database(python: Path, peer: Peer, root: Path, which, catalog_csv: Path
         args = ["build-stock", "--out", str(path)]
     else:
         fov = f"{which:g}".replace(".", "p")
-        path = folder / f"hp6-{fp}-fov{fov}{peer.db_suffix}"
+        path = folder / f"{tag}-{fp}-fov{fov}{peer.db_suffix}"
         args = ["build", "--catalog", str(catalog_csv), "--fov-deg", f"{which:g}"]
         args += ["--out", str(path)]
     report_path = path.with_suffix(".json")

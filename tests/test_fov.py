@@ -135,6 +135,7 @@ def test_bad_fov_range(bad):
 
 def test_identify_command_without_fov_matches_the_known_fov_answer(capsys):
     base = [
+        "identify",
         str(CONTEST / "images" / "xingtu01.csv"),
         *("--width", "512", "--catalog", str(CONTEST / "catalog.csv"), "--json"),
     ]
