@@ -9,18 +9,24 @@ from starnav.api import (
     solve_batch,
     solve_verbose,
 )
-from starnav.camera import Camera
+from starnav.calibrate import Calibration, calibrate
+from starnav.camera import Camera, load_camera, save_camera
 from starnav.catalog import Catalog, load_catalog
-from starnav.errors import CameraError, CatalogError, StarListError, StarnavError
+from starnav.errors import CameraError, CatalogError, ImageError, StarListError, StarnavError
+from starnav.fov import solve_fov
+from starnav.image import ImageSolveResult, solve_image
 from starnav.simulate import SimulatedFrame, simulate_frame
 
 __version__ = "0.1.0"
 
 __all__ = [
+    "Calibration",
     "Camera",
     "CameraError",
     "Catalog",
     "CatalogError",
+    "ImageError",
+    "ImageSolveResult",
     "SimulatedFrame",
     "Solution",
     "SolveResult",
@@ -28,9 +34,14 @@ __all__ = [
     "StarMatch",
     "StarnavError",
     "best_three_star",
+    "calibrate",
+    "load_camera",
     "load_catalog",
+    "save_camera",
     "simulate_frame",
     "solve",
     "solve_batch",
+    "solve_fov",
+    "solve_image",
     "solve_verbose",
 ]

@@ -3,8 +3,8 @@
 The FOV range is searched with 4-star patterns matched up to a scale
 (``starnav.identify.fov_search``); the identification then goes through the same attitude
 fit and refusals as every solve, with the focal length (and, on request, the radial
-distortion) fitted. Bands sit on one fixed grid, 40° x sqrt(2)^k, so every range shares the
-same cached tables.
+distortion) fitted. Bands sit on one fixed grid of the diagonal field of view, 40° x
+sqrt(2)^k, so every range and image shape shares the same cached tables.
 """
 
 from __future__ import annotations
@@ -44,8 +44,8 @@ _FIELD_RADIUS_FRACTION = 0.85  # pattern fields (as pattern4's default)
 
 def band_grid(fov_lo_deg: float, fov_hi_deg: float) -> list[tuple[float, float, float]]:
     """The bands of the fixed grid 40° x sqrt(2)^k that overlap the range, widest first:
-    (lo, hi) clipped to the range, and the grid band's upper FOV (which its tables are
-    built for)."""
+    (lo, hi) clipped to the range, and the grid band's upper angle (which its tables are
+    built for). The grid is on the diagonal field of view (see ``diagonal_fov_deg``)."""
     k_hi = math.ceil(math.log(fov_hi_deg / 40.0) / math.log(BAND_FACTOR) - 1e-9)
     out = []
     top = 40.0 * BAND_FACTOR**k_hi
@@ -56,18 +56,32 @@ def band_grid(fov_lo_deg: float, fov_hi_deg: float) -> list[tuple[float, float, 
     return out
 
 
+def diagonal_fov_deg(fov_deg: float, width: int, height: int) -> float:
+    """The field of view across the image diagonal (degrees) of a horizontal ``fov_deg``:
+    the bands are cut on it, so images of every shape share the same tables."""
+    return math.degrees(
+        2.0 * math.atan(math.tan(math.radians(fov_deg) / 2.0) * math.hypot(width, height) / width)
+    )
+
+
+def horizontal_fov_deg(diagonal_deg: float, width: int, height: int) -> float:
+    """The horizontal field of view (degrees) of a diagonal one (``diagonal_fov_deg``)."""
+    return math.degrees(
+        2.0
+        * math.atan(math.tan(math.radians(diagonal_deg) / 2.0) * width / math.hypot(width, height))
+    )
+
+
 @cache
 def _sky_counts(source: str) -> np.ndarray:
     """Sorted magnitudes of the embedded catalog down to ``_MAX_MAG``."""
     return np.sort(load_catalog(None, mag_limit=_MAX_MAG).mag)
 
 
-def band_mag_limit(table_fov_deg: float, width: int, height: int) -> float:
+def band_mag_limit(diagonal_deg: float) -> float:
     """Magnitude limit of a band's catalog: about ``_STARS_PER_FIELD`` stars on average in
-    a pattern field of the band's widest FOV (rounded up to 0.25 mag, 4 to 8)."""
-    f = focal_px(table_fov_deg, width)
-    half_diag = math.atan(math.hypot(width, height) / 2.0 / f)
-    radius = _FIELD_RADIUS_FRACTION * half_diag
+    a pattern field of the band's widest diagonal FOV (rounded up to 0.25 mag, 4 to 8)."""
+    radius = _FIELD_RADIUS_FRACTION * math.radians(diagonal_deg) / 2.0
     needed = _STARS_PER_FIELD * 2.0 / (1.0 - math.cos(radius))  # 4 pi / field solid angle
     mags = _sky_counts("hipparcos")
     mag = mags[min(int(needed), len(mags) - 1)]
@@ -75,21 +89,22 @@ def band_mag_limit(table_fov_deg: float, width: int, height: int) -> float:
 
 
 def load_band(
-    table_fov_deg: float,
+    table_diagonal_deg: float,
     lo: float,
     hi: float,
-    width: int,
-    height: int,
     catalog: Catalog | str | Path | None,
     epoch_year: float | None,
 ) -> Band:
-    """One band's catalog, pair database and pattern table (cached in memory and on disk)."""
-    mag = band_mag_limit(table_fov_deg, width, height)
+    """One band (horizontal FOV ``lo``..``hi`` degrees of the image searched) with the
+    catalog, pair database and pattern table of its grid band, built for a square field
+    whose diagonal is ``table_diagonal_deg`` (cached in memory and on disk)."""
+    mag = band_mag_limit(table_diagonal_deg)
     if isinstance(catalog, Catalog):
         cat = catalog.brighter_than(mag)
     else:
         cat = load_catalog(catalog, mag_limit=mag, epoch_year=epoch_year)
-    camera = Camera.from_fov(table_fov_deg, width, height)
+    side = 1000
+    camera = Camera.from_fov(horizontal_fov_deg(table_diagonal_deg, side, side), side, side)
     database = get_database(cat, camera)
     table = build_pattern_table(database, field_radius_fraction=_FIELD_RADIUS_FRACTION)
     return Band(lo, hi, cat, database, table)
@@ -168,9 +183,12 @@ def solve_fov(
         raise StarnavError(f"sigma_px must be a positive number of pixels, got {sigma_px!r}")
     if parity not in (None, 1, -1):
         raise StarnavError(f"parity must be +1, -1 or None, got {parity!r}")
+    w, h = base.width, base.height
     bands = [
-        load_band(top, a, b, base.width, base.height, catalog, epoch_year)
-        for a, b, top in band_grid(lo, hi)
+        load_band(
+            top, horizontal_fov_deg(a, w, h), horizontal_fov_deg(b, w, h), catalog, epoch_year
+        )
+        for a, b, top in band_grid(diagonal_fov_deg(lo, w, h), diagonal_fov_deg(hi, w, h))
     ]
 
     t0 = time.perf_counter()

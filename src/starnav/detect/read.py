@@ -1,0 +1,230 @@
+"""Image files to one 2-D float32 luminance array, row 0 at the top of the picture.
+
+Formats: FITS (astropy: the first HDU holding a 2-D image, or a 3-plane colour cube), and
+through Pillow PNG, JPEG, TIFF and whatever else Pillow opens (8/16-bit grey, 32-bit integer
+and float grey, colour). Pillow 13 reduces 16-bit-per-channel colour to 8 bits, so such TIFFs
+are read with ``tifffile`` and such PNGs with ``pypng`` (pure Python: ~1.5 s per megapixel).
+Colour becomes luminance with the Rec. 709 weights (0.2126 R + 0.7152 G + 0.0722 B) on the
+stored values (no gamma decoding); an alpha channel is dropped. An EXIF orientation tag is
+applied, so row 0 is the top of the picture as viewers show it.
+
+FITS row order: astropy's ``data[0]`` is the first row stored (FITS y = 1), and we take it as
+row 0, the top of the picture. That is what a FITS written from a PNG holds (``starnav.render.
+write_image`` writes that way), while FITS viewers such as DS9 draw y = 1 at the bottom, i.e.
+show such an image upside down; a FITS file from an astronomical camera may be stored either
+way. Only the mirror parity of the solution depends on it, and the solver reports the parity.
+
+Values are stored values (BSCALE/BZERO applied for FITS); non-finite values come back as NaN
+(``starnav.detect.stars`` masks them).
+"""
+
+from __future__ import annotations
+
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from starnav.errors import ImageError
+
+REC709 = np.array([0.2126, 0.7152, 0.0722])
+_FITS_SUFFIXES = (".fits", ".fit", ".fts", ".fits.gz", ".fit.gz", ".fts.gz", ".fz")
+_FITS_MAGIC = b"SIMPLE  ="
+_GZIP_MAGIC = b"\x1f\x8b"
+_COLOUR_MODES = (
+    "RGB",
+    "RGBA",
+    "RGBX",
+    "RGBa",
+    "LA",
+    "La",
+    "PA",
+    "P",
+    "CMYK",
+    "YCbCr",
+    "LAB",
+    "HSV",
+)
+
+
+def read_image(path: str | Path) -> np.ndarray:
+    """The picture in ``path`` as a 2-D float32 array (luminance for colour), C order, native
+    byte order, row 0 = top of the picture. ``ImageError`` (one line, naming the file) for a
+    missing, unreadable or corrupt file, an empty or 1-D image, or one with no finite pixel."""
+    path = Path(path)
+    name = str(path)
+    if not path.exists():
+        raise ImageError(f"image file {name!r} does not exist")
+    if not path.is_file():
+        raise ImageError(f"image file {name!r} is not a file")
+    try:
+        with path.open("rb") as fh:
+            head = fh.read(80)
+    except OSError as exc:
+        raise ImageError(f"cannot read image file {name!r}: {exc.strerror or exc}") from None
+    if not head:
+        raise ImageError(f"image file {name!r} is empty (0 bytes)")
+    fits_name = path.name.lower().endswith(_FITS_SUFFIXES)
+    if head.startswith(_FITS_MAGIC) or (fits_name and head.startswith(_GZIP_MAGIC)):
+        data = _read_fits(path)
+    elif fits_name:
+        raise ImageError(f"cannot read image file {name!r}: not a FITS file (no SIMPLE card)")
+    else:
+        data = _read_pillow(path)
+    return _finish(data, name)
+
+
+def luminance(rgb: np.ndarray) -> np.ndarray:
+    """Rec. 709 luminance of colour pixels (..., 3) on the stored values, float32."""
+    rgb = np.asarray(rgb)
+    out = np.zeros(rgb.shape[:-1], dtype=np.float32)
+    for k in range(3):
+        out += np.float32(REC709[k]) * rgb[..., k].astype(np.float32)
+    return out
+
+
+def _read_fits(path: Path) -> np.ndarray:
+    from astropy.io import fits
+
+    name = str(path)
+    shapes = []
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # non-standard cards are common; the pixels matter
+            with fits.open(path, memmap=False) as hdul:
+                for hdu in hdul:
+                    if not hdu.is_image or hdu.data is None:  # tables, empty primaries
+                        continue
+                    data = np.asarray(hdu.data)
+                    squeezed = data.reshape([n for n in data.shape if n != 1] or [1])
+                    if squeezed.ndim == 2:
+                        return squeezed
+                    if squeezed.ndim == 3 and squeezed.shape[0] == 3:
+                        return luminance(np.moveaxis(squeezed, 0, -1))
+                    shapes.append(data.shape)
+    except (OSError, ValueError, TypeError, IndexError, KeyError) as exc:
+        raise ImageError(f"cannot read FITS file {name!r}: {_one_line(exc)}") from None
+    if shapes:
+        raise ImageError(
+            f"FITS file {name!r} holds no 2-D image or 3-plane colour image (data shapes: "
+            f"{', '.join(str(s) for s in shapes)})"
+        )
+    raise ImageError(f"FITS file {name!r} holds no image data")
+
+
+def _read_pillow(path: Path) -> np.ndarray:
+    from PIL import Image, ImageOps, UnidentifiedImageError
+
+    name = str(path)
+    try:
+        with Image.open(path) as img:
+            if _deeper_than_pillow(img):
+                return _read_deep_colour(path, img.format)
+            img.load()
+            return _pillow_to_array(ImageOps.exif_transpose(img))
+    except UnidentifiedImageError:
+        if _is_tiff(path):  # a TIFF that Pillow does not decode (e.g. float colour)
+            return _read_deep_colour(path, "TIFF")
+        raise ImageError(
+            f"cannot read image file {name!r}: not an image format we read "
+            "(FITS, PNG, JPEG, TIFF, ...)"
+        ) from None
+    except ImageError:
+        raise
+    except Image.DecompressionBombError:
+        raise ImageError(f"image file {name!r} is too large to decode safely") from None
+    except (OSError, ValueError, SyntaxError, EOFError, KeyError, IndexError) as exc:
+        raise ImageError(f"cannot read image file {name!r}: {_one_line(exc)}") from None
+
+
+def _pillow_to_array(img) -> np.ndarray:
+    mode = img.mode
+    if mode in ("P", "PA"):
+        img = img.convert("RGBA" if "transparency" in img.info or mode == "PA" else "RGB")
+    elif mode in ("CMYK", "YCbCr", "LAB", "HSV"):
+        img = img.convert("RGB")
+    elif mode == "1":
+        img = img.convert("L")
+    data = np.asarray(img)
+    if data.ndim == 3:
+        if data.shape[-1] in (3, 4):
+            return luminance(data[..., :3])
+        return data[..., 0]  # grey + alpha
+    return data
+
+
+def _deeper_than_pillow(img) -> bool:
+    """True for colour images with more than 8 bits per channel, which Pillow truncates."""
+    if img.mode not in _COLOUR_MODES:
+        return False
+    if img.format == "TIFF":
+        bits = img.tag_v2.get(258, (8,))
+        return max(bits if isinstance(bits, tuple) else (bits,)) > 8
+    if img.format == "PNG":
+        return any(";16" in str(tile.args) for tile in img.tile)
+    return False
+
+
+def _read_deep_colour(path: Path, fmt: str | None) -> np.ndarray:
+    name = str(path)
+    if fmt == "PNG":
+        try:
+            import png
+        except ImportError:
+            raise ImageError(
+                f"cannot read {name!r}: 16-bit colour PNG needs the 'pypng' package"
+            ) from None
+        try:
+            width, height, rows, info = png.Reader(filename=name).asDirect()
+            data = np.vstack([np.asarray(row, dtype=np.uint16) for row in rows])
+        except (png.Error, OSError, ValueError) as exc:
+            raise ImageError(f"cannot read PNG file {name!r}: {_one_line(exc)}") from None
+        data = data.reshape(height, width, info["planes"])
+    else:
+        try:
+            import tifffile
+        except ImportError:
+            raise ImageError(
+                f"cannot read {name!r}: colour TIFF with more than 8 bits per channel needs the "
+                "'tifffile' package"
+            ) from None
+        try:
+            data = np.asarray(tifffile.imread(path, key=0))
+        except Exception as exc:  # tifffile raises many types (incl. a missing codec)
+            raise ImageError(f"cannot read TIFF file {name!r}: {_one_line(exc)}") from None
+        if data.ndim == 3 and data.shape[0] in (3, 4) and data.shape[-1] not in (3, 4):
+            data = np.moveaxis(data, 0, -1)  # planar configuration
+    if data.ndim == 3 and data.shape[-1] >= 3:
+        return luminance(data[..., :3])
+    if data.ndim == 3:
+        return data[..., 0]  # grey + alpha
+    return data
+
+
+def _is_tiff(path: Path) -> bool:
+    with path.open("rb") as fh:
+        return fh.read(4) in (b"II*\x00", b"MM\x00*", b"II+\x00", b"MM\x00+")
+
+
+def _finish(data: np.ndarray, name: str) -> np.ndarray:
+    data = np.asarray(data)
+    if data.size == 0:
+        raise ImageError(f"image file {name!r} holds an empty image (shape {data.shape})")
+    if data.ndim != 2:
+        raise ImageError(f"image file {name!r} holds {data.ndim}-D data, not a 2-D image")
+    if data.dtype.kind not in "uifb":
+        raise ImageError(f"image file {name!r} holds {data.dtype} pixels, not numbers")
+    out = np.ascontiguousarray(data, dtype=np.float32)  # also native byte order
+    if not out.flags.writeable:
+        out = out.copy()
+    finite = np.isfinite(out)
+    if not finite.all():
+        if not finite.any():
+            raise ImageError(f"image file {name!r} has no finite pixel (all NaN or infinite)")
+        out[~finite] = np.nan
+    return out
+
+
+def _one_line(exc: BaseException) -> str:
+    text = str(exc).strip() or type(exc).__name__
+    return " ".join(text.split())

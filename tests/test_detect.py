@@ -1,0 +1,424 @@
+"""starnav.detect: reading image files, and detecting + centroiding stars on rendered images
+against their true positions."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+from PIL import Image
+from scipy.spatial import cKDTree
+from scipy.stats import spearmanr
+
+from starnav.catalog import load_catalog
+from starnav.detect.read import read_image
+from starnav.detect.stars import detect_stars
+from starnav.errors import ImageError
+from starnav.geometry import attitude_from_radec_roll
+from starnav.render import (
+    PRESETS,
+    RenderSettings,
+    flux_e_for_snr,
+    render_frame,
+    render_stars,
+    star_electrons,
+    star_snr,
+    write_image,
+)
+
+
+def _grid(n_side: int, size: int, rng: np.random.Generator) -> np.ndarray:
+    """n_side² star positions on a regular grid, each moved by a random sub-pixel offset."""
+    g = (np.arange(n_side) + 0.5) * size / n_side
+    xy = np.stack(np.meshgrid(g, g), -1).reshape(-1, 2)
+    return xy + rng.uniform(-0.5, 0.5, xy.shape)
+
+
+def _match(found: np.ndarray, truth: np.ndarray, radius: float = 1.5):
+    """(index into truth or -1 per detection, offsets of the matched ones)."""
+    dist, nearest = cKDTree(truth).query(found)
+    ok = dist < radius
+    return np.where(ok, nearest, -1), found[ok] - truth[nearest[ok]]
+
+
+# ----------------------------------------------------------------------------------------------
+# centroids
+
+
+@pytest.mark.parametrize(("sigma", "per_axis_max"), [(0.6, 0.03), (1.0, 0.04), (1.5, 0.05)])
+def test_centroid_accuracy_at_snr_50(sigma, per_axis_max):
+    """400 stars at SNR 50 (render.star_snr): rms error per axis <= 0.05 px (the Cramér-Rao
+    bound is sqrt(2) sigma / SNR: 0.028 px at sigma 1, 0.042 px at sigma 1.5)."""
+    rng = np.random.default_rng(11)
+    settings = RenderSettings(psf_sigma_px=sigma)
+    xy = _grid(20, 512, rng)
+    image = render_stars(
+        xy, np.full(len(xy), flux_e_for_snr(50.0, settings)), 512, 512, settings, rng
+    )
+    found = detect_stars(image)
+    which, err = _match(found.xy, xy)
+    assert len(found) == 400 and (which >= 0).all()
+    assert len(np.unique(which)) == 400
+    per_axis = np.sqrt(np.mean(err**2))
+    assert per_axis <= per_axis_max
+    assert np.abs(err.mean(axis=0)).max() < 0.01  # no offset: the +0.5 convention holds
+    if sigma <= 1.0:
+        assert np.sqrt(np.mean((err**2).sum(axis=1))) <= 0.05  # radial rms too
+    assert found.psf_sigma_px == pytest.approx(np.hypot(sigma, 0.3), abs=0.25)
+
+
+def test_single_star_lands_on_our_convention():
+    settings = RenderSettings(seed=2)
+    image = render_stars(np.array([[10.5, 20.5]]), np.array([2e5]), 40, 40, settings)
+    found = detect_stars(image)
+    assert len(found) == 1
+    assert found.xy[0] == pytest.approx([10.5, 20.5], abs=0.03)
+    assert (found.width, found.height) == (40, 40)
+    assert found.background == pytest.approx(50.0, abs=2.0)
+    assert found.background_rms == pytest.approx(np.sqrt(75.0), rel=0.15)
+
+
+def test_faint_stars_and_no_false_detections_in_noise():
+    settings = RenderSettings()
+    noise = render_stars(np.zeros((0, 2)), np.zeros(0), 512, 512, settings, rng=5)
+    assert len(detect_stars(noise)) == 0
+    rng = np.random.default_rng(6)
+    xy = _grid(15, 512, rng)
+    image = render_stars(
+        xy, np.full(len(xy), flux_e_for_snr(10.0, settings)), 512, 512, settings, rng
+    )
+    found = detect_stars(image)
+    which, err = _match(found.xy, xy)
+    assert (which >= 0).all() and len(found) >= 0.97 * len(xy)  # SNR 10: essentially all found
+    assert np.sqrt(np.mean(err**2)) < 0.2
+
+
+# ----------------------------------------------------------------------------------------------
+# whole frames
+
+
+def test_render_detect_round_trip_on_the_reference_camera():
+    catalog = load_catalog(None, mag_limit=7.0)
+    camera, settings = PRESETS["seed-1024"]
+    R = attitude_from_radec_roll(83.0, -5.0, 20.0)  # Orion: Hp -0.1 .. 7 in view
+    frame = render_frame(catalog, camera, R, dataclasses.replace(settings, seed=12, hot_pixels=20))
+    found = detect_stars(frame.image)
+    which, _ = _match(found.xy, frame.xy, radius=1.0)
+    # stars closer than ~4 px are one star to a star tracker (docs/domain.md): leave them out
+    separation = cKDTree(frame.xy).query(frame.xy, k=2)[0][:, 1]
+    bright = (frame.mag <= 6.5) & (separation > 5.0)
+    assert bright.sum() > 100
+    assert np.isin(np.flatnonzero(bright), which).all()
+    assert (which >= 0).mean() >= 0.97  # almost nothing that is not a catalog star
+    assert found.n_hot >= 18
+    # brightest first: detection order follows magnitude order
+    matched = which >= 0
+    rank = spearmanr(np.arange(matched.sum()), frame.mag[which[matched]]).statistic
+    assert rank > 0.9
+    top = which[:10]
+    assert (top >= 0).all() and np.median(top) < 12
+    assert np.all(np.diff(found.flux[~found.saturated]) <= 0)
+    # isolated stars at SNR >= 50: centroid rms per axis <= 0.05 px
+    # (stars cut by the image edge are pulled inwards: left out too)
+    away = (frame.xy > 3.0).all(axis=1) & (frame.xy < np.array([1021.0, 1021.0])).all(axis=1)
+    strong = bright & away & (star_snr(frame.flux_e, settings) >= 50.0)
+    assert strong.sum() >= 20
+    nearest = cKDTree(found.xy).query(frame.xy[strong])[1]
+    assert np.sqrt(np.mean((found.xy[nearest] - frame.xy[strong]) ** 2)) <= 0.05
+
+
+def test_max_stars_keeps_the_brightest():
+    rng = np.random.default_rng(13)
+    xy = _grid(10, 256, rng)
+    flux = rng.uniform(2e3, 5e4, len(xy))
+    image = render_stars(xy, flux, 256, 256, RenderSettings(), rng)
+    every = detect_stars(image)
+    some = detect_stars(image, max_stars=7)
+    assert len(every) == 100 and len(some) == 7
+    assert np.array_equal(some.xy, every.xy[:7])
+    which, _ = _match(some.xy, xy)
+    assert set(which) == set(np.argsort(-flux)[:7])
+
+
+def test_hot_pixels_rejected():
+    rng = np.random.default_rng(14)
+    xy = _grid(8, 256, rng)
+    settings = RenderSettings(hot_pixels=40, hot_pixel_adu=2000.0, seed=15)
+    frame_settings = dataclasses.replace(settings, psf_sigma_px=0.7)
+    image = render_stars(xy, np.full(len(xy), 2e4), 256, 256, frame_settings, rng=16)
+    found = detect_stars(image)
+    which, _ = _match(found.xy, xy)
+    assert (which >= 0).all() and len(found) == 64  # every star, no hot pixel
+    assert 35 <= found.n_hot <= 40  # a few may sit on a star
+    kept = detect_stars(image, reject_hot_pixels=False)
+    assert len(kept) >= 64 + 30 and kept.n_hot == 0
+
+
+def test_saturated_stars_kept_flagged_and_first():
+    settings = RenderSettings(seed=17)
+    xy = np.array([[40.3, 40.6], [120.7, 60.2], [80.5, 110.5], [30.2, 100.9]])
+    flux = np.array([3e6, 2e4, 1e7, 5e3])  # two of them saturate
+    image = render_stars(xy, flux, 160, 140, settings)
+    assert (image == 65535).sum() > 10
+    found = detect_stars(image)
+    assert len(found) == 4 and found.n_saturated == 2
+    assert found.saturated.tolist() == [True, True, False, False]
+    which, err = _match(found.xy, xy)
+    assert which.tolist() == [2, 0, 1, 3]
+    assert np.abs(err[:2]).max() < 0.15  # a symmetric saturated star still centroids well
+    # a float image (e.g. from read_image) infers saturation from the flat top
+    assert detect_stars(image.astype(np.float32)).saturated.tolist() == [True, True, False, False]
+    dropped = detect_stars(image, keep_saturated=False)
+    assert len(dropped) == 2 and dropped.n_saturated == 2 and not dropped.saturated.any()
+    # an explicit level: nothing reaches it
+    assert detect_stars(image, saturation=70000).n_saturated == 0
+
+
+@pytest.mark.parametrize(
+    "image",
+    [
+        np.zeros((64, 64)),
+        np.full((64, 64), 1000, dtype=np.uint16),
+        np.full((64, 64), np.nan),
+        np.zeros((64, 64), dtype=bool),
+    ],
+    ids=["zeros", "constant", "all-nan", "bool"],
+)
+def test_blank_images_give_no_stars(image):
+    found = detect_stars(image)
+    assert len(found) == 0 and found.xy.shape == (0, 2)
+
+
+def test_nan_pixels_masked_and_byte_order_and_dtypes():
+    rng = np.random.default_rng(18)
+    xy = _grid(5, 128, rng)
+    image = render_stars(xy, np.full(len(xy), 3e4), 128, 128, RenderSettings(), rng)
+    reference = detect_stars(image)
+    assert len(reference) == 25
+    for variant in (image.astype(">u2"), image.astype(np.int32), image.astype(">f8"), image.T.T):
+        found = detect_stars(variant)
+        assert np.allclose(found.xy, reference.xy, atol=1e-4)
+    holed = image.astype(np.float32)
+    holed[:20, :] = np.nan  # a dead band across the top
+    holed[60, 60] = np.inf
+    found = detect_stars(holed)
+    which, _ = _match(found.xy, xy)
+    assert (which >= 0).all() and np.isfinite(found.xy).all()
+    assert len(found) == (xy[:, 1] > 22).sum()
+
+
+def test_noise_free_image():
+    xy = np.array([[20.3, 30.8], [50.5, 10.2]])
+    image = star_electrons(xy, np.array([1000.0, 500.0]), 64, 48, 1.0)
+    found = detect_stars(image)
+    which, err = _match(found.xy, xy)
+    assert which.tolist() == [0, 1] and np.abs(err).max() < 0.01
+
+
+@pytest.mark.parametrize(
+    ("image", "kwargs", "match"),
+    [
+        (np.zeros(10), {}, "2-D"),
+        (np.zeros((0, 5)), {}, "2-D"),
+        (np.zeros((2, 50)), {}, "too small"),
+        (np.zeros((8, 8), dtype="U1"), {}, "numbers"),
+        (np.zeros((8, 8)), {"threshold_sigma": 0}, "threshold_sigma"),
+        (np.zeros((8, 8)), {"max_stars": 0}, "max_stars"),
+        (np.zeros((8, 8)), {"psf_sigma_px": 100.0}, "psf_sigma_px"),
+        (np.zeros((8, 8)), {"min_area_px": 1.5}, "min_area_px"),
+    ],
+)
+def test_bad_input(image, kwargs, match):
+    with pytest.raises(ImageError, match=match):
+        detect_stars(image, **kwargs)
+
+
+# ----------------------------------------------------------------------------------------------
+# reading files
+
+
+@pytest.fixture(scope="module")
+def picture():
+    """A 16-bit, asymmetric test picture: a gradient and a bright block near the top left."""
+    rows, cols = np.mgrid[0:30, 0:40]
+    image = (100 * rows + 7 * cols + 3).astype(np.uint16)
+    image[2:5, 3:7] = 60000
+    return image
+
+
+@pytest.mark.parametrize("suffix", [".png", ".tif", ".tiff", ".fits", ".fit"])
+def test_write_read_round_trip_16_bit(tmp_path, picture, suffix):
+    path = tmp_path / f"picture{suffix}"
+    write_image(path, picture)
+    back = read_image(path)
+    assert back.dtype == np.float32 and back.flags.c_contiguous and back.dtype.isnative
+    assert np.array_equal(back, picture.astype(np.float32))  # row 0 stays the top
+
+
+@pytest.mark.parametrize("suffix", [".png", ".tif", ".fits"])
+def test_write_read_round_trip_8_bit_and_float(tmp_path, picture, suffix):
+    small = (picture // 256).astype(np.uint8)
+    write_image(tmp_path / f"a{suffix}", small)
+    assert np.array_equal(read_image(tmp_path / f"a{suffix}"), small.astype(np.float32))
+    if suffix != ".png":
+        values = picture.astype(np.float32) / 7.0
+        write_image(tmp_path / f"b{suffix}", values)
+        assert np.array_equal(read_image(tmp_path / f"b{suffix}"), values)
+
+
+def test_rendered_frame_survives_a_file(tmp_path):
+    camera, settings = PRESETS["seed-512"]
+    catalog = load_catalog(None, mag_limit=6.0)
+    frame = render_frame(catalog, camera, attitude_from_radec_roll(83.0, -5.0, 0.0), settings)
+    write_image(tmp_path / "f.png", frame.image)
+    direct = detect_stars(frame.image)
+    from_file = detect_stars(read_image(tmp_path / "f.png"))
+    assert len(direct) > 10
+    assert np.allclose(from_file.xy, direct.xy) and np.allclose(from_file.flux, direct.flux)
+
+
+def test_fits_variants(tmp_path, picture):
+    from astropy.io import fits
+
+    # image in an extension after an empty primary, big-endian float, BSCALE/BZERO ints
+    path = tmp_path / "ext.fits"
+    hdus = [fits.PrimaryHDU(), fits.ImageHDU(picture.astype(">f4"))]
+    fits.HDUList(hdus).writeto(path)
+    assert np.array_equal(read_image(path), picture.astype(np.float32))
+    scaled = fits.PrimaryHDU((picture // 2).astype(np.int16))
+    scaled.header["BSCALE"] = 2.0
+    scaled.header["BZERO"] = 10.0
+    scaled.writeto(tmp_path / "scaled.fits")
+    assert np.allclose(read_image(tmp_path / "scaled.fits"), (picture // 2) * 2.0 + 10.0)
+    # a (1, H, W) cube is a 2-D image; a 3-plane cube is colour
+    fits.PrimaryHDU(picture[None]).writeto(tmp_path / "cube1.fits")
+    assert read_image(tmp_path / "cube1.fits").shape == (30, 40)
+    rgb = np.stack([picture, picture // 2, picture // 4]).astype(np.float32)
+    fits.PrimaryHDU(rgb).writeto(tmp_path / "rgb.fits")
+    expected = 0.2126 * rgb[0] + 0.7152 * rgb[1] + 0.0722 * rgb[2]
+    assert np.allclose(read_image(tmp_path / "rgb.fits"), expected, rtol=1e-6)
+    # gzip-compressed
+    write_image(tmp_path / "plain.fits", picture)
+    import gzip
+
+    (tmp_path / "z.fits.gz").write_bytes(gzip.compress((tmp_path / "plain.fits").read_bytes()))
+    assert np.array_equal(read_image(tmp_path / "z.fits.gz"), picture.astype(np.float32))
+
+
+def test_colour_pillow_formats(tmp_path):
+    rgb = np.zeros((6, 8, 3), np.uint8)
+    rgb[..., 0], rgb[..., 1], rgb[..., 2] = 200, 100, 50
+    rgb[1, 2] = (10, 20, 30)
+    expected = 0.2126 * 200 + 0.7152 * 100 + 0.0722 * 50
+    Image.fromarray(rgb).save(tmp_path / "c.png")
+    Image.fromarray(np.dstack([rgb, np.full((6, 8), 128, np.uint8)])).save(tmp_path / "a.png")
+    for name in ("c.png", "a.png"):
+        lum = read_image(tmp_path / name)
+        assert lum.shape == (6, 8)
+        assert lum[0, 0] == pytest.approx(expected, rel=1e-6)
+        assert lum[1, 2] == pytest.approx(0.2126 * 10 + 0.7152 * 20 + 0.0722 * 30, rel=1e-6)
+    Image.fromarray(rgb).convert("P").save(tmp_path / "p.png")
+    assert read_image(tmp_path / "p.png")[0, 0] == pytest.approx(expected, abs=3.0)
+    flat = np.zeros_like(rgb)
+    flat[...] = (200, 100, 50)
+    Image.fromarray(flat).save(tmp_path / "c.jpg", quality=95)
+    assert np.allclose(read_image(tmp_path / "c.jpg"), expected, atol=2.0)
+    grey = np.tile(np.arange(0, 240, 30, dtype=np.uint8), (6, 1))
+    Image.fromarray(grey).save(tmp_path / "g.jpg", quality=95)
+    assert np.allclose(read_image(tmp_path / "g.jpg"), grey, atol=4.0)
+
+
+def test_exif_orientation_applied(tmp_path, picture):
+    small = (picture // 256).astype(np.uint8)
+    exif = Image.Exif()
+    exif[0x0112] = 6  # "rotate 90° clockwise to display"
+    Image.fromarray(small).save(tmp_path / "o.png", exif=exif)
+    shown = read_image(tmp_path / "o.png")
+    assert shown.shape == (40, 30)
+    assert np.array_equal(shown, np.rot90(small, k=-1).astype(np.float32))
+
+
+@pytest.mark.filterwarnings("ignore:Truncated File Read")
+def test_16_bit_colour_tiff_keeps_16_bits(tmp_path):
+    tifffile = pytest.importorskip("tifffile")
+    rgb = np.zeros((5, 7, 3), np.uint16)
+    rgb[...] = (1000, 40000, 65535)
+    rgb[2, 3] = (3, 4, 5)  # Pillow alone would read this pixel as 0
+    tifffile.imwrite(tmp_path / "rgb16.tif", rgb, photometric="rgb", compression="zlib")
+    lum = read_image(tmp_path / "rgb16.tif")
+    assert lum[2, 3] == pytest.approx(0.2126 * 3 + 0.7152 * 4 + 0.0722 * 5, rel=1e-6)
+    assert lum[0, 0] == pytest.approx(0.2126 * 1000 + 0.7152 * 40000 + 0.0722 * 65535, rel=1e-6)
+    data = (tmp_path / "rgb16.tif").read_bytes()
+    (tmp_path / "cut.tif").write_bytes(data[: len(data) - 60])
+    with pytest.raises(ImageError, match=r"^cannot read TIFF file '.*cut\.tif': ") as info:
+        read_image(tmp_path / "cut.tif")
+    assert "\n" not in str(info.value) and str(info.value).count("cannot read") == 1
+
+
+def test_16_bit_colour_png_keeps_16_bits(tmp_path):
+    png = pytest.importorskip("png")
+    rgb = np.zeros((5, 7, 3), np.uint16)
+    rgb[...] = (1000, 40000, 65535)
+    rgb[2, 3] = (3, 4, 5)
+    with open(tmp_path / "rgb16.png", "wb") as fh:
+        png.Writer(7, 5, greyscale=False, bitdepth=16).write(fh, rgb.reshape(5, -1))
+    lum = read_image(tmp_path / "rgb16.png")
+    assert lum.shape == (5, 7)
+    assert lum[2, 3] == pytest.approx(0.2126 * 3 + 0.7152 * 4 + 0.0722 * 5, rel=1e-6)
+
+
+@pytest.mark.parametrize(
+    ("name", "content", "match"),
+    [
+        ("garbage.png", b"\x89PNG not really an image" * 10, "cannot read"),
+        ("random.jpg", bytes(range(256)) * 4, "cannot read"),
+        ("empty.png", b"", "empty"),
+        ("empty.fits", b"", "empty"),
+        ("text.fits", b"hello world\n" * 300, "not a FITS file"),
+        ("bad.fits", b"SIMPLE  =                    T" + b" " * 50 + b"garbage" * 100, "FITS"),
+    ],
+)
+def test_bad_files(tmp_path, name, content, match):
+    path = tmp_path / name
+    path.write_bytes(content)
+    with pytest.raises(ImageError, match=match) as info:
+        read_image(path)
+    message = str(info.value)
+    assert "\n" not in message and name in message
+
+
+def test_truncated_and_missing_files(tmp_path, picture):
+    write_image(tmp_path / "whole.png", picture)
+    data = (tmp_path / "whole.png").read_bytes()
+    (tmp_path / "cut.png").write_bytes(data[: len(data) // 2])
+    for path, match in [
+        (tmp_path / "cut.png", "cannot read"),
+        (tmp_path / "nope.png", "does not exist"),
+        (tmp_path, "not a file"),
+    ]:
+        with pytest.raises(ImageError, match=match) as info:
+            read_image(path)
+        assert "\n" not in str(info.value)
+
+
+def test_fits_without_a_usable_image(tmp_path):
+    from astropy.io import fits
+
+    fits.PrimaryHDU(np.arange(10.0)).writeto(tmp_path / "line.fits")
+    fits.PrimaryHDU(np.full((4, 4), np.nan, np.float32)).writeto(tmp_path / "nan.fits")
+    fits.PrimaryHDU().writeto(tmp_path / "header.fits")
+    table = fits.BinTableHDU.from_columns([fits.Column(name="a", format="E", array=np.ones(3))])
+    fits.HDUList([fits.PrimaryHDU(), table]).writeto(tmp_path / "table.fits")
+    fits.PrimaryHDU(np.zeros((2, 3, 4, 5))).writeto(tmp_path / "4d.fits")
+    fits.PrimaryHDU(np.zeros((0, 5), np.float32)).writeto(tmp_path / "zero.fits")
+    for name, match in [
+        ("line.fits", r"no 2-D image .*\(10,\)"),
+        ("nan.fits", "no finite pixel"),
+        ("header.fits", "no image data"),
+        ("table.fits", "no image data"),
+        ("4d.fits", r"no 2-D image .*\(2, 3, 4, 5\)"),
+        ("zero.fits", r"empty image \(shape \(0, 5\)\)"),
+    ]:
+        with pytest.raises(ImageError, match=match):
+            read_image(tmp_path / name)
