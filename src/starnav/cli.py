@@ -1034,9 +1034,14 @@ def _cmd_solve(args) -> int:
     )
     s = res.solution
     if s is not None and args.wcs:
-        from starnav.wcs import wcs_from_attitude, write_wcs
+        from starnav.wcs import fit_sip, wcs_from_attitude, write_wcs
 
-        write_wcs(args.wcs, wcs_from_attitude(s.R_cam_from_icrs, res.camera))
+        order = 4  # the lowest SIP order good to 0.01 px (wide fields need more)
+        while (res.camera.k1 or res.camera.k2) and order < 7:
+            if fit_sip(res.camera, order=order).max_error_px <= 0.01:
+                break
+            order += 1
+        write_wcs(args.wcs, wcs_from_attitude(s.R_cam_from_icrs, res.camera, sip_order=order))
     if s is not None and args.annotate:
         from starnav.image import annotate_result
 
