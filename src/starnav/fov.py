@@ -22,12 +22,12 @@ from starnav.api import (
     DEFAULT_MIN_MATCHED_FRACTION,
     SolveResult,
     conclude,
-    get_database,
 )
 from starnav.camera import Camera
 from starnav.catalog import Catalog, load_catalog
 from starnav.errors import StarnavError
 from starnav.identify.base import MatchSettings
+from starnav.identify.database import PairDatabase, catalog_only
 from starnav.identify.fov_search import BAND_FACTOR, Band, focal_px, search_fov
 from starnav.identify.pattern4 import build_pattern_table
 from starnav.starlist import check_star_list
@@ -40,6 +40,8 @@ _STARS_PER_FIELD = 40.0  # catalog depth of a band: mean stars in one of its pat
 _MAX_MAG = 8.0  # Hipparcos is complete to about here
 _MIN_MAG = 4.0
 _FIELD_RADIUS_FRACTION = 0.85  # pattern fields (as pattern4's default)
+_SLIVER = 0.05  # a band narrower than this (relative) is merged into the next wider one
+_DATABASES: dict[tuple, PairDatabase] = {}  # per process: catalog vectors and KD-tree
 
 
 def band_grid(fov_lo_deg: float, fov_hi_deg: float) -> list[tuple[float, float, float]]:
@@ -51,6 +53,8 @@ def band_grid(fov_lo_deg: float, fov_hi_deg: float) -> list[tuple[float, float, 
     top = 40.0 * BAND_FACTOR**k_hi
     while top > fov_lo_deg * (1.0 + 1e-9):
         bottom = top / BAND_FACTOR
+        if bottom < fov_lo_deg * (1.0 + _SLIVER):  # the rest is a sliver: this band takes it
+            bottom = fov_lo_deg
         out.append((max(bottom, fov_lo_deg), min(top, fov_hi_deg), top))
         top = bottom
     return out
@@ -103,9 +107,10 @@ def load_band(
         cat = catalog.brighter_than(mag)
     else:
         cat = load_catalog(catalog, mag_limit=mag, epoch_year=epoch_year)
-    side = 1000
-    camera = Camera.from_fov(horizontal_fov_deg(table_diagonal_deg, side, side), side, side)
-    database = get_database(cat, camera)
+    key = (cat.fingerprint, round(table_diagonal_deg, 6))
+    if key not in _DATABASES:  # the search verifies only: no pair table
+        _DATABASES[key] = catalog_only(cat, math.radians(table_diagonal_deg))
+    database = _DATABASES[key]
     table = build_pattern_table(database, field_radius_fraction=_FIELD_RADIUS_FRACTION)
     return Band(lo, hi, cat, database, table)
 

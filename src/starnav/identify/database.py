@@ -76,6 +76,17 @@ class PairDatabase:
         )
 
 
+def catalog_only(catalog: Catalog, max_angle_rad: float) -> PairDatabase:
+    """A database without pairs, for searches that only verify (catalog vectors and their
+    KD-tree; ``max_angle_rad`` still bounds the field)."""
+    t0 = time.perf_counter()
+    tree = cKDTree(catalog.vectors)
+    none = np.empty(0, dtype=np.int32)
+    return PairDatabase(
+        catalog, max_angle_rad, none, none, np.empty(0), tree, time.perf_counter() - t0, False, None
+    )
+
+
 def load_cached(path: Path) -> dict[str, np.ndarray] | None:
     """The arrays of a cached table, or None when it is missing or damaged (then rebuilt)."""
     if not path.exists():

@@ -1,0 +1,70 @@
+"""Build the FOV-search tables from scratch and report each band: catalog depth, stars,
+pair database and pattern table size, build time. Writes the ``fov-tables`` block of
+docs/images.md.
+
+    python benchmarks/fov_tables.py
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from docblock import replace_block  # noqa: E402
+from lost_in_space import machine  # noqa: E402
+
+DOC = Path(__file__).resolve().parents[1] / "docs" / "images.md"
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--fov-range", nargs=2, type=float, default=(5.0, 40.0))
+    parser.add_argument("--width", type=int, default=1024)
+    parser.add_argument("--height", type=int, default=1024)
+    args = parser.parse_args()
+    with tempfile.TemporaryDirectory() as cache:
+        os.environ["STARNAV_CACHE_DIR"] = cache  # a cold cache: every table is built
+        from starnav.fov import band_grid, diagonal_fov_deg, horizontal_fov_deg, load_band
+
+        w, h = args.width, args.height
+        lo, hi = (diagonal_fov_deg(v, w, h) for v in args.fov_range)
+        rows, total_s, total_mb = [], 0.0, 0.0
+        for a, b, top in band_grid(lo, hi):
+            t0 = time.perf_counter()
+            band = load_band(
+                top, horizontal_fov_deg(a, w, h), horizontal_fov_deg(b, w, h), None, None
+            )
+            seconds = time.perf_counter() - t0
+            mb = (band.database.nbytes + band.table.nbytes) / 1e6
+            total_s += seconds
+            total_mb += mb
+            rows.append(
+                f"| {a:.2f}-{b:.2f} | {top:.2f} | {band.catalog.mag.max():.2f} | "
+                f"{len(band.catalog)} | {band.database.nbytes / 1e6:.1f} | {len(band.table)} | "
+                f"{band.table.nbytes / 1e6:.1f} | {seconds:.1f} |"
+            )
+    text = "\n".join(
+        [
+            f"FOV range {args.fov_range[0]:g}-{args.fov_range[1]:g}° across {w} x {h} px "
+            f"(diagonal {lo:.2f}-{hi:.2f}°); {machine()}; "
+            f"`python benchmarks/fov_tables.py`.",
+            "",
+            "| diagonal FOV searched (°) | table built for (°) | faintest Hp | stars | catalog + KD-tree "
+            "MB | patterns | pattern table MB | build s |",
+            "|---|---|---|---|---|---|---|---|",
+            *rows,
+            f"| all | | | | | | {total_mb:.0f} MB in all | {total_s:.0f} |",
+        ]
+    )
+    print(text)
+    replace_block(DOC, "fov-tables", text)
+
+
+if __name__ == "__main__":
+    main()
