@@ -16,8 +16,8 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from docblock import replace_block  # noqa: E402
-from lost_in_space import machine  # noqa: E402
+from docblock import replace_block
+from lost_in_space import machine
 
 DOC = Path(__file__).resolve().parents[1] / "docs" / "images.md"
 
@@ -55,8 +55,8 @@ def main() -> None:
             f"(diagonal {lo:.2f}-{hi:.2f}°); {machine()}; "
             f"`python benchmarks/fov_tables.py`.",
             "",
-            "| diagonal FOV searched (°) | table built for (°) | faintest Hp | stars | catalog + KD-tree "
-            "MB | patterns | pattern table MB | build s |",
+            "| diagonal FOV searched (°) | table built for (°) | faintest Hp | stars | "
+            "catalog + KD-tree MB | patterns | pattern table MB | build s |",
             "|---|---|---|---|---|---|---|---|",
             *rows,
             f"| all | | | | | | {total_mb:.0f} MB in all | {total_s:.0f} |",
