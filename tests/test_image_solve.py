@@ -139,3 +139,24 @@ def test_blank_image_is_not_solved(tmp_path, capsys):
     write_image(path, np.full((128, 128), 100, dtype=np.uint16))
     assert main(["solve", str(path)]) == 1
     assert "stars detected" in capsys.readouterr().out
+
+
+def test_a_refused_identification_does_not_end_the_fov_search(sky):
+    # benchmarks/images.py frame 436 (seed 2026): a 7-star chance match at FOV 21.1° passed
+    # the verification, the fit refused it ("only 7 of 22 stars agree"), and the search
+    # stopped there; it must go on to the right answer
+    import dataclasses
+
+    from scipy.spatial.transform import Rotation
+
+    from starnav.render import PRESETS
+
+    camera, settings = PRESETS["seed-1024"]
+    seq = np.random.SeedSequence([2026, 436])
+    R = Rotation.random(random_state=np.random.default_rng(seq)).as_matrix()
+    seed = int(seq.generate_state(1)[0])
+    frame = render_frame(sky, camera, R, dataclasses.replace(settings, seed=seed))
+    s = solve_image(frame.image).solution
+    assert s is not None
+    bore, _ = attitude_difference_deg(s.R_cam_from_icrs, R)
+    assert bore * 3600 < 5 and s.fov_deg == pytest.approx(20.0, rel=1e-3)

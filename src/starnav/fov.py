@@ -28,7 +28,7 @@ from starnav.catalog import Catalog, load_catalog
 from starnav.errors import StarnavError
 from starnav.identify.base import MatchSettings
 from starnav.identify.database import PairDatabase, catalog_only
-from starnav.identify.fov_search import BAND_FACTOR, Band, focal_px, search_fov
+from starnav.identify.fov_search import BAND_FACTOR, Band, FovMatch, focal_px, search_fov
 from starnav.identify.pattern4 import build_pattern_table
 from starnav.starlist import check_star_list
 
@@ -211,6 +211,43 @@ def solve_fov(
                 base.cy + base.focal_px * b[:, 1] / b[:, 2],
             ]
         )
+
+    def finish(found: FovMatch) -> SolveResult:
+        """The attitude fit and refusals of a verified identification."""
+        ident = replace(found.identification, obs_index=order[found.identification.obs_index])
+        camera_fit = Camera(
+            base.width, base.height, found.focal_px, base.cx, base.cy, base.k1, base.k2
+        )
+        settings = MatchSettings.for_focal(
+            sigma_px,
+            found.focal_px,
+            max_false_match_probability=max_false_match_probability,
+            parity=parity,
+        )
+        return conclude(
+            ident,
+            found.hypotheses,
+            stars,
+            camera_fit,
+            found.band.catalog,
+            found.band.database,
+            settings,
+            t0=t0,
+            sigma_px=sigma_px,
+            fit_focal=True,
+            fit_distortion=fit_distortion,
+            algorithm="fov-search",
+            min_matched_fraction=min_matched_fraction,
+        )
+
+    # a verified identification that the fit then refuses (too few of the stars it predicts
+    # agree, ...) does not end the search: the next hypothesis may be the right one
+    results: list[SolveResult] = []
+
+    def accept(found: FovMatch) -> bool:
+        results.append(finish(found))
+        return results[-1].solution is not None
+
     found = search_fov(
         xy_sorted[: MatchSettings.max_screen_stars],
         bands,
@@ -223,32 +260,9 @@ def solve_fov(
         parity=parity,
         max_false_match_probability=max_false_match_probability,
         pattern_stars=pattern_stars,
+        accept=accept,
     )
-    if found.identification is None:
-        ms = (time.perf_counter() - t0) * 1e3
-        database = bands[0].database
-        return SolveResult(None, found.reason, ms, found.hypotheses, database)
-    ident = found.identification
-    ident = replace(ident, obs_index=order[ident.obs_index])  # back to the caller's rows
-    camera_fit = Camera(base.width, base.height, found.focal_px, base.cx, base.cy, base.k1, base.k2)
-    settings = MatchSettings.for_focal(
-        sigma_px,
-        found.focal_px,
-        max_false_match_probability=max_false_match_probability,
-        parity=parity,
-    )
-    return conclude(
-        ident,
-        found.hypotheses,
-        stars,
-        camera_fit,
-        found.band.catalog,
-        found.band.database,
-        settings,
-        t0=t0,
-        sigma_px=sigma_px,
-        fit_focal=True,
-        fit_distortion=fit_distortion,
-        algorithm="fov-search",
-        min_matched_fraction=min_matched_fraction,
-    )
+    if results and (results[-1].solution is not None or found.identification is not None):
+        return replace(results[-1], time_ms=(time.perf_counter() - t0) * 1e3)
+    ms = (time.perf_counter() - t0) * 1e3
+    return SolveResult(None, found.reason, ms, found.hypotheses, bands[0].database)

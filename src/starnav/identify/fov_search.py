@@ -22,6 +22,7 @@ first few patterns, whatever their field of view.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -153,9 +154,13 @@ def search_fov(
     max_false_match_probability: float = 1e-4,
     pattern_stars: int = 15,
     max_hypotheses: int = 20000,
+    accept: Callable[[FovMatch], bool] | None = None,
 ) -> FovMatch:
     """Identify the stars at ``xy`` (n, 2, px, distortion removed, brightest first) with the
-    focal length unknown within ``focal_range_px`` (px), searching ``bands``."""
+    focal length unknown within ``focal_range_px`` (px), searching ``bands``. ``accept``:
+    a last say on a verified identification (e.g. the attitude fit's refusals); when it
+    returns False the search goes on. Returns the accepted match, or the last refused one
+    when nothing else verifies."""
     n = len(xy)
     if n < 4:
         return FovMatch(None, "fewer than 4 stars", 0, float("nan"), None)
@@ -168,6 +173,7 @@ def search_fov(
     combos = breadth_first_combinations(stars)
     ends = [math.comb(m, 4) for m in range(5, stars, 2)] + [len(combos)]
     tester: HypothesisTester | None = None
+    refused: FovMatch | None = None
     start = 0
     for end in ends:
         if end <= start:
@@ -226,13 +232,18 @@ def search_fov(
                 )
                 outcome = tester.test(obs_rows[h], hyp.cat_rows[h], int(hyp.parity[h]))
                 if outcome is not None:
-                    return FovMatch(
+                    found = FovMatch(
                         outcome.identification, outcome.reason, tester.hypotheses, f, band
                     )
+                    if accept is None or outcome.identification is None or accept(found):
+                        return found
+                    refused = found
                 if tester.exhausted:
-                    return FovMatch(
+                    return refused or FovMatch(
                         None, tester.outcome().reason, tester.hypotheses, float("nan"), None
                     )
+    if refused is not None:
+        return refused
     if tester is None:
         return FovMatch(
             None,
