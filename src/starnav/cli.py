@@ -108,6 +108,21 @@ def _add_camera(p: argparse.ArgumentParser, *, required: bool = True) -> None:
     p.add_argument("--height", type=_positive_int, help="image height (px; default: width)")
 
 
+def _add_fov_search(p: argparse.ArgumentParser, fov_help: str):
+    """--fov-deg or --fov-range (the FOV search); returns the group for more choices."""
+    fov = p.add_mutually_exclusive_group()
+    fov.add_argument("--fov-deg", type=_finite, help=fov_help)
+    fov.add_argument(
+        "--fov-range",
+        nargs=2,
+        type=_finite,
+        metavar=("LO", "HI"),
+        default=DEFAULT_FOV_RANGE_DEG,
+        help="horizontal FOV range searched when the FOV is unknown (degrees; default 5 40)",
+    )
+    return fov
+
+
 def _add_catalog(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--catalog",
@@ -154,21 +169,9 @@ def _build_parser() -> argparse.ArgumentParser:
         "stars",
         help="CSV with header: x,y and optionally label, flux or mag; or a directory of them",
     )
-    p.add_argument(
-        "--fov-deg",
-        type=_finite,
-        help="horizontal field of view (without it the FOV is searched in --fov-range)",
-    )
+    _add_fov_search(p, "horizontal field of view (without it the FOV is searched)")
     p.add_argument("--width", type=_positive_int, required=True, help="image width (px)")
     p.add_argument("--height", type=_positive_int, help="image height (px; default: width)")
-    p.add_argument(
-        "--fov-range",
-        nargs=2,
-        type=_finite,
-        metavar=("LO", "HI"),
-        default=DEFAULT_FOV_RANGE_DEG,
-        help="FOV search range in degrees when --fov-deg is not given (default 5 40)",
-    )
     _add_catalog(p)
     p.add_argument(
         "--sigma-px",
@@ -324,16 +327,7 @@ def _build_parser() -> argparse.ArgumentParser:
         "solve", help="solve an image file (FITS, PNG, JPEG, TIFF): FOV may be unknown"
     )
     p.add_argument("image", help="image file")
-    fov = p.add_mutually_exclusive_group()
-    fov.add_argument("--fov-deg", type=_finite, help="horizontal FOV, roughly (searched ±5 %%)")
-    fov.add_argument(
-        "--fov-range",
-        nargs=2,
-        type=_finite,
-        metavar=("LO", "HI"),
-        default=DEFAULT_FOV_RANGE_DEG,
-        help="FOV search range in degrees when the FOV is unknown (default 5 40)",
-    )
+    fov = _add_fov_search(p, "horizontal FOV, roughly (searched ±5 %%)")
     fov.add_argument("--camera", help="camera file from 'starnav calibrate' (searched ±1 %%)")
     p.add_argument(
         "--fit-distortion", action="store_true", help="fit radial distortion k1, k2 as well"
@@ -395,16 +389,7 @@ def _build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("images", nargs="+", help="image files of one camera")
     p.add_argument("-o", "--output", required=True, help="camera file (JSON) to write")
-    fov = p.add_mutually_exclusive_group()
-    fov.add_argument("--fov-deg", type=_finite, help="horizontal FOV, roughly")
-    fov.add_argument(
-        "--fov-range",
-        nargs=2,
-        type=_finite,
-        metavar=("LO", "HI"),
-        default=DEFAULT_FOV_RANGE_DEG,
-        help="FOV search range (default 5 40)",
-    )
+    _add_fov_search(p, "horizontal FOV, roughly (searched ±5 %%)")
     p.add_argument("--max-stars", type=_int_at_least(4), default=100)
     p.add_argument("--json", action="store_true", help="print one JSON object")
     return parser
