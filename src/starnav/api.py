@@ -142,6 +142,25 @@ def make_camera(*, width: float, height: float | None, fov_deg: float) -> Camera
     return Camera.from_fov(fov_deg, width, height)
 
 
+def check_solve_options(
+    sigma_px: float,
+    parity: int | None,
+    max_false_match_probability: float,
+    min_matched_fraction: float,
+) -> None:
+    """One-line errors for the options every solve shares."""
+    if not (np.isfinite(sigma_px) and sigma_px > 0):
+        raise StarnavError(f"sigma_px must be a positive number of pixels, got {sigma_px!r}")
+    if parity not in (None, 1, -1):
+        raise StarnavError(f"parity must be +1, -1 or None, got {parity!r}")
+    if not 0.0 <= min_matched_fraction <= 1.0:
+        raise StarnavError(f"min_matched_fraction must be in [0, 1], got {min_matched_fraction!r}")
+    if not 0.0 < max_false_match_probability < 1.0:
+        raise StarnavError(
+            f"max_false_match_probability must be in (0, 1), got {max_false_match_probability!r}"
+        )
+
+
 def solve_verbose(
     xy: np.ndarray,
     *,
@@ -183,10 +202,7 @@ def solve_verbose(
     stars = check_star_list(
         xy, width=camera.width, height=camera.height, brightness=brightness, labels=labels
     )
-    if not (np.isfinite(sigma_px) and sigma_px > 0):
-        raise StarnavError(f"sigma_px must be a positive number of pixels, got {sigma_px!r}")
-    if parity not in (None, 1, -1):
-        raise StarnavError(f"parity must be +1, -1 or None, got {parity!r}")
+    check_solve_options(sigma_px, parity, max_false_match_probability, min_matched_fraction)
     try:
         identifier = make_identifier(algorithm, **dict(algorithm_options or {}))
     except TypeError as exc:  # an option the algorithm does not have
@@ -202,12 +218,6 @@ def solve_verbose(
             raise StarnavError(
                 f"prior_sigma_deg must be in (0, 30] degrees, got {prior_sigma_deg!r}"
             )
-    if not 0.0 <= min_matched_fraction <= 1.0:
-        raise StarnavError(f"min_matched_fraction must be in [0, 1], got {min_matched_fraction!r}")
-    if not 0.0 < max_false_match_probability < 1.0:
-        raise StarnavError(
-            f"max_false_match_probability must be in (0, 1), got {max_false_match_probability!r}"
-        )
     cat = load_catalog(catalog, mag_limit=mag_limit, epoch_year=epoch_year)
     database = get_database(cat, camera)
 
@@ -275,9 +285,7 @@ def conclude(
     the start of the solve (for ``time_ms``)."""
     max_false_match_probability = settings.max_false_match_probability
     # least squares on the image, taking in the stars the better attitude brings in range
-    fitter = _Fitter(
-        cat, stars.xy, camera, database, settings, sigma_px, fit_focal, fit_distortion
-    )
+    fitter = _Fitter(cat, stars.xy, camera, database, settings, sigma_px, fit_focal, fit_distortion)
     obs, cat_rows, fit, ver = fitter.converge(
         found.obs_index, found.cat_index, found.R_cam_from_icrs
     )

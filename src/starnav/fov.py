@@ -21,6 +21,7 @@ from starnav.api import (
     DEFAULT_MAX_FALSE_MATCH_PROBABILITY,
     DEFAULT_MIN_MATCHED_FRACTION,
     SolveResult,
+    check_solve_options,
     conclude,
 )
 from starnav.camera import Camera
@@ -184,10 +185,7 @@ def solve_fov(
     stars = check_star_list(
         xy, width=base.width, height=base.height, brightness=brightness, labels=labels
     )
-    if not (np.isfinite(sigma_px) and sigma_px > 0):
-        raise StarnavError(f"sigma_px must be a positive number of pixels, got {sigma_px!r}")
-    if parity not in (None, 1, -1):
-        raise StarnavError(f"parity must be +1, -1 or None, got {parity!r}")
+    check_solve_options(sigma_px, parity, max_false_match_probability, min_matched_fraction)
     w, h = base.width, base.height
     bands = [
         load_band(

@@ -316,9 +316,7 @@ def match_patterns(
     edges = pattern_edges(obs)
     largest = edges.max(axis=1)
     lo_scale, hi_scale = scale_range if scale_range is not None else (1.0, 1.0)
-    usable = (edges.min(axis=1) >= 2.0 * tol_rad) & (
-        largest * lo_scale <= max_angle_rad + tol_rad
-    )
+    usable = (edges.min(axis=1) >= 2.0 * tol_rad) & (largest * lo_scale <= max_angle_rad + tol_rad)
     # the ratio e / L of edges measured within tol: off by at most tol (1 + e/L) / (L - tol)
     ratios = np.sort(edges, axis=1)[:, :5] / largest[:, None]
     slack = tol_rad * (1.0 + ratios) / np.maximum(largest - tol_rad, tol_rad)[:, None]
@@ -333,9 +331,7 @@ def match_patterns(
         half = p // 2
         scaled = {"scale_range": scale_range, "rel_tol": rel_tol}
         parts = [
-            match_patterns(
-                obs[sub], table, vectors, tol_rad, max_angle_rad, parity, **scaled
-            )
+            match_patterns(obs[sub], table, vectors, tol_rad, max_angle_rad, parity, **scaled)
             for sub in (slice(None, half), slice(half, None))
         ]
         return _concat(parts, [0, half])
