@@ -131,19 +131,18 @@ def solve_frame(t3: tetra3.Tetra3, frame: dict) -> dict:
     )
     time_ms = (time.perf_counter() - t0) * 1e3
     out = {"time_ms": time_ms, "peer_ms": result.get("T_solve")}
+    return {**out, **answer(result, width, height)}
+
+
+def answer(result: dict, width: int, height: int) -> dict:
+    """A cedar-solve result in our conventions: RA, Dec, our roll and parity, FOV, matches
+    (all None with the error when unsolved)."""
     if result.get("RA") is None:
-        return {
-            **out,
-            "ra_deg": None,
-            "dec_deg": None,
-            "roll_deg": None,
-            "parity": None,
-            "error": str(result.get("status")),
-        }
+        none = dict.fromkeys(("ra_deg", "dec_deg", "roll_deg", "parity", "fov_deg"))
+        return {**none, "error": str(result.get("status"))}
     parity = parity_of_matches(result, width, height)
     roll = (-result["Roll"]) % 360.0 if parity > 0 else result["Roll"] % 360.0
     return {
-        **out,
         "ra_deg": float(result["RA"]),
         "dec_deg": float(result["Dec"]),
         "roll_deg": float(roll),

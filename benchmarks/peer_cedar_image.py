@@ -42,7 +42,7 @@ import tetra3
 from PIL import Image
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # run with -I: no script dir on path
-from peer_cedar import PEER, STOCK, database_info, load, parity_of_matches, peak_rss_mb
+from peer_cedar import PEER, STOCK, answer, database_info, load, peak_rss_mb
 
 
 def decode(path: str) -> tuple[Image.Image, float]:
@@ -67,21 +67,7 @@ def solve_file(t3: tetra3.Tetra3, item: dict) -> dict:
         "extract_ms": result.get("T_extract"),
         "peer_ms": result.get("T_solve"),
     }
-    if result.get("RA") is None:
-        none = dict.fromkeys(("ra_deg", "dec_deg", "roll_deg", "parity", "fov_deg"))
-        return {**out, **none, "error": str(result.get("status"))}
-    parity = parity_of_matches(result, width, height)
-    roll = (-result["Roll"]) % 360.0 if parity > 0 else result["Roll"] % 360.0
-    return {
-        **out,
-        "ra_deg": float(result["RA"]),
-        "dec_deg": float(result["Dec"]),
-        "roll_deg": float(roll),
-        "parity": parity,
-        "fov_deg": float(result["FOV"]),
-        "n_matched": int(result["Matches"]),
-        "error": None,
-    }
+    return {**out, **answer(result, width, height)}
 
 
 def centroid_file(item: dict) -> dict:
