@@ -51,3 +51,30 @@ def test_uncertainty_matches_monte_carlo(hip_1991):
     mc_roll = np.sqrt(np.mean(errs[:, 2] ** 2))
     assert np.median(sig_b) == pytest.approx(mc_boresight, rel=0.2)
     assert np.median(sig_r) == pytest.approx(mc_roll, rel=0.2)
+
+
+@pytest.mark.parametrize(
+    ("k1", "k2", "fit_focal", "fit_distortion"),
+    [(0.0, 0.0, False, False), (0.0, 0.0, True, False), (-0.1, 0.05, True, True)],
+)
+def test_analytic_jacobian_matches_finite_differences(k1, k2, fit_focal, fit_distortion):
+    from starnav.attitude.refine import _residuals_and_jacobian
+
+    rng = np.random.default_rng(0)
+    v = rng.normal(size=(6, 3))
+    v[:, 2] = 5.0
+    v /= np.linalg.norm(v, axis=1, keepdims=True)
+    xy = rng.uniform(0, 1000, (6, 2))
+    cam = Camera(1000, 1000, 1500.0, k1=k1, k2=k2)
+    p0 = np.zeros(3 + fit_focal + 2 * fit_distortion)
+    args = (np.eye(3), v, xy, cam, fit_focal, fit_distortion)
+    J = _residuals_and_jacobian(p0, *args)[1]
+    h = 1e-6
+    numeric = np.column_stack(
+        [
+            (_residuals_and_jacobian(p0 + e, *args)[0] - _residuals_and_jacobian(p0 - e, *args)[0])
+            / (2 * h)
+            for e in np.eye(len(p0)) * h
+        ]
+    )
+    assert np.abs(J - numeric).max() <= 1e-7 * np.abs(numeric).max()

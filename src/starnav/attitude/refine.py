@@ -84,41 +84,31 @@ def _residuals_and_jacobian(params, R0, icrs, xy, camera, fit_focal, fit_distort
     c = icrs @ _rotate(params[:3], R0).T
     inv_z = 1.0 / c[:, 2]
     u, v = c[:, 0] * inv_z, c[:, 1] * inv_z
-    r2 = u * u + v * v
-    d = 1.0 + cam.k1 * r2 + cam.k2 * r2 * r2  # radial factor
-    dd = cam.k1 + 2.0 * cam.k2 * r2  # its derivative in r^2
-    res = np.concatenate([cam.cx + focal * u * d - xy[:, 0], cam.cy + focal * v * d - xy[:, 1]])
-    # derivatives of the distorted (u d, v d) in the undistorted (u, v)
-    dud_du, dud_dv = d + 2.0 * u * u * dd, 2.0 * u * v * dd
-    dvd_du, dvd_dv = 2.0 * u * v * dd, d + 2.0 * v * v * dd
-    # projection derivatives of u = cx/cz, v = cy/cz
-    n = len(c)
-    zero = np.zeros(n)
-    du_dc = np.column_stack([inv_z, zero, -u * inv_z])
-    dv_dc = np.column_stack([zero, inv_z, -v * inv_z])
-    cx, cy, cz = c.T
-    # c' = c + omega x c, so d c / d omega_k = e_k x c
-    dc = np.stack(
-        [
-            np.column_stack([zero, -cz, cy]),
-            np.column_stack([cz, zero, -cx]),
-            np.column_stack([-cy, cx, zero]),
-        ],
-        axis=2,
-    )  # (n, 3 components, 3 params)
-    ju0 = np.einsum("nc,ncp->np", du_dc, dc)
-    jv0 = np.einsum("nc,ncp->np", dv_dc, dc)
-    ju = focal * (dud_du[:, None] * ju0 + dud_dv[:, None] * jv0)
-    jv = focal * (dvd_du[:, None] * ju0 + dvd_dv[:, None] * jv0)
-    jac = np.vstack([ju, jv])
+    # c' = c + omega x c moves u = cx/cz and v = cy/cz by these (per omega_x, _y, _z)
+    uv = u * v
+    ju = np.column_stack([-uv, 1.0 + u * u, -v])
+    jv = np.column_stack([-1.0 - v * v, uv, u])
+    distorted = fit_distortion or cam.k1 or cam.k2
+    if distorted:
+        r2 = u * u + v * v
+        d = 1.0 + cam.k1 * r2 + cam.k2 * r2 * r2  # radial factor
+        dd = cam.k1 + 2.0 * cam.k2 * r2  # its derivative in r^2
+        # the distorted (u d, v d) moved by the undistorted (u, v)
+        ju, jv = (
+            (d + 2.0 * u * u * dd)[:, None] * ju + (2.0 * uv * dd)[:, None] * jv,
+            (2.0 * uv * dd)[:, None] * ju + (d + 2.0 * v * v * dd)[:, None] * jv,
+        )
+        u, v = u * d, v * d
+    res = np.concatenate([cam.cx + focal * u - xy[:, 0], cam.cy + focal * v - xy[:, 1]])
+    jac = focal * np.vstack([ju, jv])
     if fit_focal:
-        jac = np.column_stack([jac, np.concatenate([focal * u * d, focal * v * d])])
+        jac = np.column_stack([jac, np.concatenate([focal * u, focal * v])])
     if fit_distortion:
         jac = np.column_stack(
             [
                 jac,
-                np.concatenate([focal * u * r2, focal * v * r2]),
-                np.concatenate([focal * u * r2 * r2, focal * v * r2 * r2]),
+                np.concatenate([focal * u * r2 / d, focal * v * r2 / d]),
+                np.concatenate([focal * u * r2 * r2 / d, focal * v * r2 * r2 / d]),
             ]
         )
     return res, jac, cam
