@@ -277,7 +277,9 @@ def write_image(path: str | Path, image: np.ndarray) -> None:
             raise ImageError(
                 f"cannot write {str(path)!r}: dtype {image.dtype} (this format takes {kinds})"
             )
-        Image.fromarray(np.ascontiguousarray(image)).save(path)
+        # PNG: zlib level 1 writes a 16-bit 1024 px frame in ~40 ms instead of ~400 ms
+        options = {"compress_level": 1} if suffix == ".png" else {}
+        Image.fromarray(np.ascontiguousarray(image)).save(path, **options)
     except OSError as exc:
         raise ImageError(f"cannot write {str(path)!r}: {exc.strerror or exc}") from None
 
