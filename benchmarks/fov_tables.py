@@ -62,8 +62,31 @@ def main() -> None:
             f"| all | | | | | | {total_mb:.0f} MB in all | {total_s:.0f} |",
         ]
     )
+    text += "\n\n" + nothing_to_find(args.width, args.height, tuple(args.fov_range))
     print(text)
     replace_block(DOC, "fov-tables", text)
+
+
+def nothing_to_find(width: int, height: int, fov_range: tuple[float, float]) -> str:
+    """What a field with no catalog pattern costs: random points, searched to the end."""
+    import numpy as np
+
+    from starnav.fov import solve_fov
+
+    rng = np.random.default_rng(0)
+    lines = []
+    for n in (10, 30, 50):
+        ms, wrong = [], 0
+        for _ in range(10):
+            xy = rng.uniform([0, 0], [width, height], (n, 2))
+            res = solve_fov(xy, width=width, height=height, fov_range_deg=fov_range)
+            ms.append(res.time_ms)
+            wrong += res.solution is not None
+        lines.append(
+            f"{n} random points: median {np.median(ms):.0f} ms, max {np.max(ms):.0f} ms, "
+            f"{wrong} of 10 answered"
+        )
+    return "A field with nothing to find (10 trials each): " + "; ".join(lines) + "."
 
 
 if __name__ == "__main__":
