@@ -9,7 +9,7 @@ import math
 import os
 import sys
 import time
-from dataclasses import asdict
+from dataclasses import asdict, replace
 from pathlib import Path
 
 import numpy as np
@@ -1003,7 +1003,9 @@ def _cmd_solve(args) -> int:
             raise StarnavError(
                 f"--wcs writes a FITS file: give a name ending in .fits, got {out!r}"
             )
+    t0 = time.perf_counter()
     pixels = read_image(args.image)
+    read_ms = (time.perf_counter() - t0) * 1e3
     res = solve_image(
         pixels,
         fov_deg=args.fov_deg,
@@ -1017,6 +1019,7 @@ def _cmd_solve(args) -> int:
         epoch_year=args.epoch,
         parity=args.parity,
     )
+    res = replace(res, read_ms=read_ms)  # read here, so the picture can be annotated
     s = res.solution
     if s is not None and args.wcs:
         from starnav.wcs import fit_sip, wcs_from_attitude, write_wcs
@@ -1052,8 +1055,6 @@ def _cmd_solve(args) -> int:
 
 
 def _cmd_render(args) -> int:
-    from dataclasses import replace
-
     from starnav.camera import Camera
     from starnav.render import preset, render_frame, write_image
 

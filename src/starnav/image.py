@@ -157,7 +157,7 @@ def annotate_result(path_out: str | Path, image: np.ndarray, result: ImageSolveR
         catalog=cat,
         matched=np.column_stack([xy, cat.ids[rows], projected - xy]),
         title=(
-            f"RA {s.ra_deg:.4f}°  Dec {s.dec_deg:+.4f}°  roll {s.roll_deg:.3f}°  "
-            f"FOV {s.fov_deg:.3f}°  {s.n_matched} stars, rms {s.rms_px:.2f} px"
+            f"rms {s.rms_px:.2f} px, false-match probability {s.false_match_probability:.1e}, "
+            f"k1 {s.k1:.4f} k2 {s.k2:.4f}"
         ),
     )
