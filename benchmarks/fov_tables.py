@@ -27,6 +27,7 @@ def main() -> None:
     parser.add_argument("--fov-range", nargs=2, type=float, default=(5.0, 40.0))
     parser.add_argument("--width", type=int, default=1024)
     parser.add_argument("--height", type=int, default=1024)
+    parser.add_argument("--out", default=str(DOC), help="markdown file ('-': print only)")
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as cache:
         os.environ["STARNAV_CACHE_DIR"] = cache  # a cold cache: every table is built
@@ -64,7 +65,8 @@ def main() -> None:
     )
     text += "\n\n" + nothing_to_find(args.width, args.height, tuple(args.fov_range))
     print(text)
-    replace_block(DOC, "fov-tables", text)
+    if args.out != "-":
+        replace_block(args.out, "fov-tables", text)
 
 
 def nothing_to_find(width: int, height: int, fov_range: tuple[float, float]) -> str:
