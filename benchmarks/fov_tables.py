@@ -31,7 +31,13 @@ def main() -> None:
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as cache:
         os.environ["STARNAV_CACHE_DIR"] = cache  # a cold cache: every table is built
-        from starnav.fov import band_grid, diagonal_fov_deg, horizontal_fov_deg, load_band
+        from starnav.fov import (
+            band_grid,
+            diagonal_fov_deg,
+            horizontal_fov_deg,
+            load_band,
+            search_catalog,
+        )
 
         w, h = args.width, args.height
         lo, hi = (diagonal_fov_deg(v, w, h) for v in args.fov_range)
@@ -39,7 +45,10 @@ def main() -> None:
         for a, b, top in band_grid(lo, hi):
             t0 = time.perf_counter()
             band = load_band(
-                top, horizontal_fov_deg(a, w, h), horizontal_fov_deg(b, w, h), None, None
+                top,
+                horizontal_fov_deg(a, w, h),
+                horizontal_fov_deg(b, w, h),
+                search_catalog(None, None),
             )
             seconds = time.perf_counter() - t0
             mb = (band.database.nbytes + band.table.nbytes) / 1e6

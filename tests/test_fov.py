@@ -147,3 +147,46 @@ def test_identify_command_without_fov_matches_the_known_fov_answer(capsys):
     assert unknown["algorithm"] == "fov-search"
     ids = {s["label"]: s["catalog_id"] for s in unknown["stars"]}
     assert ids == {s["label"]: s["catalog_id"] for s in known["stars"]}
+
+
+def test_a_catalog_too_sparse_for_any_pattern_is_a_one_line_error(tmp_path, capsys):
+    cat = tmp_path / "three.csv"
+    cat.write_text("id,ra_deg,dec_deg,mag\n" + "".join(f"{k},{10 * k},5,{k}\n" for k in range(3)))
+    stars = tmp_path / "stars.csv"
+    stars.write_text("x,y\n10,10\n100,50\n300,200\n400,400\n250,100\n")
+    code = main(["identify", str(stars), "--width", "512", "--catalog", str(cat)])
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1 and "no 4-star pattern" in err
+
+
+def test_csv_catalog_sets_its_own_band_depths(capsys):
+    # the contest catalog (to mag 6) for a 20° map searched over 15-40°: every band's depth
+    # comes from this catalog's own counts
+    args = ["identify", str(CONTEST / "images" / "xingtu07.csv"), "--width", "1024"]
+    args += ["--catalog", str(CONTEST / "catalog.csv"), "--fov-range", "15", "40", "--json"]
+    assert main(args) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["fov_deg"] == pytest.approx(20.0, rel=1e-4)
+
+
+def test_a_diagonal_beyond_the_search_limit_is_refused():
+    with pytest.raises(StarnavError, match="diagonal"):
+        xy = np.column_stack([np.full(5, 50.0), np.arange(5) * 300.0 + 10])
+        solve_fov(xy, width=100, height=2000, fov_range_deg=(50, 100))
+
+
+MAP1 = str(CONTEST / "images" / "xingtu01.csv")
+
+
+@pytest.mark.parametrize(
+    "args",
+    [
+        ["render", "-o", "{tmp}/a.png", "--truth", "{tmp}/missing/dir/t.csv", "--seed", "1"],
+        ["render", "-o", "{tmp}/a.png", "--fov-deg", "0"],
+        ["identify", MAP1, "--width", "512", "--mag-limit", "5"],
+    ],
+)
+def test_more_bad_input_is_one_line_exit_2(tmp_path, capsys, args):
+    code = main([a.format(tmp=tmp_path) for a in args])
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1 and "Traceback" not in err

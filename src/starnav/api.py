@@ -249,7 +249,6 @@ def solve_verbose(
 
     return conclude(
         found,
-        outcome.hypotheses,
         stars,
         camera,
         cat,
@@ -265,7 +264,6 @@ def solve_verbose(
 
 def conclude(
     found: Identification,
-    hypotheses: int,
     stars: StarList,
     camera: Camera,
     cat: Catalog,
@@ -328,7 +326,7 @@ def conclude(
     )
     if refusal:
         ms = (time.perf_counter() - t0) * 1e3
-        return SolveResult(None, refusal, ms, hypotheses, database)
+        return SolveResult(None, refusal, ms, found.hypotheses, database)
     residual = dict(
         zip(obs.tolist(), np.linalg.norm(fit.residuals_px, axis=1).tolist(), strict=True)
     )
@@ -366,7 +364,7 @@ def conclude(
         k1=fit.camera.k1,
         k2=fit.camera.k2,
     )
-    return SolveResult(solution, "", ms, hypotheses, database)
+    return SolveResult(solution, "", ms, found.hypotheses, database)
 
 
 def _shared_rms(a, b) -> tuple[float, float]:

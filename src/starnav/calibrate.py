@@ -60,10 +60,11 @@ def _match(detected_xy, R, camera, cat) -> tuple[np.ndarray, np.ndarray]:
     if len(rows) == 0:
         return np.empty(0, int), np.empty(0, int)
     dist, nearest = cKDTree(xy).query(detected_xy, distance_upper_bound=_MATCH_RADIUS_PX)
-    ok = np.isfinite(dist)
-    det, cat_rows = np.flatnonzero(ok), rows[nearest[ok]]
-    _, first = np.unique(cat_rows, return_index=True)  # a catalog star pairs once
-    return det[first], cat_rows[first]
+    ok = np.flatnonzero(np.isfinite(dist))
+    ok = ok[np.argsort(dist[ok], kind="stable")]  # nearest pairs first
+    _, first = np.unique(nearest[ok], return_index=True)  # a catalog star pairs once
+    det = np.sort(ok[first])
+    return det, rows[nearest[det]]
 
 
 def calibrate(
@@ -85,7 +86,7 @@ def calibrate(
     ]
     if not names:
         raise StarnavError("calibration needs at least one image")
-    cat = load_catalog(catalog, mag_limit=_CATALOG_MAG)
+    cat = load_catalog(catalog, mag_limit=_CATALOG_MAG, epoch_year=options.get("epoch_year"))
     solved: list[tuple[str, ImageSolveResult]] = []
     failed = []
     shape = None
@@ -101,13 +102,12 @@ def calibrate(
         if progress is not None:
             progress()
         size = (res.detections.width, res.detections.height)
-        if shape is None:
-            shape = size
-        if size != shape:
-            failed.append((name, f"{size[0]} x {size[1]} px, not {shape[0]} x {shape[1]} px"))
-        elif res.solution is None:
+        if res.solution is None:
             failed.append((name, res.reason))
+        elif shape is not None and size != shape:
+            failed.append((name, f"{size[0]} x {size[1]} px, not {shape[0]} x {shape[1]} px"))
         else:
+            shape = size  # the first image solved sets the size
             solved.append((name, res))
     if not solved:
         raise StarnavError("no image could be solved: " + "; ".join(f"{n}: {r}" for n, r in failed))

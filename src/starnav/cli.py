@@ -555,8 +555,11 @@ def _cmd_identify(args) -> int:
     if args.fov_deg is None:  # FOV unknown: searched with scale-free patterns
         from starnav.fov import solve_fov
 
-        if prior is not None or args.algorithm != DEFAULT_ALGORITHM:
-            raise StarnavError("--prior-* and --algorithm need --fov-deg")
+        if prior is not None or args.algorithm != DEFAULT_ALGORITHM or args.mag_limit is not None:
+            raise StarnavError(
+                "--prior-*, --algorithm and --mag-limit need --fov-deg (without it the FOV "
+                "search picks the catalog depth of each FOV band and fits the focal length)"
+            )
         result = solve_fov(
             stars.xy,
             width=args.width,
@@ -998,11 +1001,11 @@ def _cmd_solve(args) -> int:
     from starnav.detect.read import read_image
     from starnav.image import solve_image
 
-    for out, suffixes in ((args.wcs, (".fits", ".fit", ".fts", ".wcs")),):
-        if out and not out.lower().endswith(suffixes):
-            raise StarnavError(
-                f"--wcs writes a FITS file: give a name ending in .fits, got {out!r}"
-            )
+    if args.wcs and not args.wcs.lower().endswith((".fits", ".fit", ".fts", ".wcs")):
+        raise StarnavError(
+            f"--wcs writes a FITS file: give a name ending in .fits (or .fit, .fts, .wcs), "
+            f"got {args.wcs!r}"
+        )
     t0 = time.perf_counter()
     pixels = read_image(args.image)
     read_ms = (time.perf_counter() - t0) * 1e3
@@ -1062,7 +1065,8 @@ def _cmd_render(args) -> int:
     if args.fov_deg is not None or args.width is not None or args.height is not None:
         width = args.width or camera.width
         height = args.height or (width if args.width else camera.height)
-        camera = make_camera(width=width, height=height, fov_deg=args.fov_deg or camera.fov_deg)
+        fov = camera.fov_deg if args.fov_deg is None else args.fov_deg
+        camera = make_camera(width=width, height=height, fov_deg=fov)
     camera = Camera(
         camera.width, camera.height, camera.focal_px, camera.cx, camera.cy, args.k1, args.k2
     )
@@ -1079,16 +1083,18 @@ def _cmd_render(args) -> int:
         rng.uniform(0, 360) if args.roll_deg is None else args.roll_deg,
         args.parity,
     )
-    frame = render_frame(
-        load_catalog(None, mag_limit=settings.mag_limit or 8.0), camera, R, settings
-    )
+    faintest = 8.0 if settings.mag_limit is None else settings.mag_limit
+    frame = render_frame(load_catalog(None, mag_limit=faintest), camera, R, settings)
     write_image(args.output, frame.image)
     if args.truth:
-        with Path(args.truth).open("w", newline="") as fh:
-            w = csv.writer(fh)
-            w.writerow(["x", "y", "catalog_id", "mag"])
-            for (x, y), cid, mag in zip(frame.xy, frame.ids, frame.mag, strict=True):
-                w.writerow([f"{x:.4f}", f"{y:.4f}", int(cid), f"{mag:.3f}"])
+        try:
+            with Path(args.truth).open("w", newline="") as fh:
+                w = csv.writer(fh)
+                w.writerow(["x", "y", "catalog_id", "mag"])
+                for (x, y), cid, mag in zip(frame.xy, frame.ids, frame.mag, strict=True):
+                    w.writerow([f"{x:.4f}", f"{y:.4f}", int(cid), f"{mag:.3f}"])
+        except OSError as exc:
+            raise StarnavError(f"cannot write {args.truth!r}: {exc.strerror or exc}") from None
     ra, dec, roll, parity = radec_roll_from_attitude(R)
     truth = {
         "image": args.output,

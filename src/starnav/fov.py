@@ -12,7 +12,6 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import replace
-from functools import cache
 from pathlib import Path
 
 import numpy as np
@@ -24,13 +23,13 @@ from starnav.api import (
     check_solve_options,
     conclude,
 )
-from starnav.camera import Camera
+from starnav.camera import Camera, focal_px_from_fov
 from starnav.catalog import Catalog, load_catalog
-from starnav.errors import StarnavError
+from starnav.errors import CatalogError, StarnavError
 from starnav.identify.base import MatchSettings
 from starnav.identify.database import PairDatabase, catalog_only
-from starnav.identify.fov_search import BAND_FACTOR, Band, FovMatch, focal_px, search_fov
-from starnav.identify.pattern4 import build_pattern_table
+from starnav.identify.fov_search import BAND_FACTOR, Band, FovMatch, search_fov
+from starnav.identify.pattern4 import FIELD_RADIUS_FRACTION, build_pattern_table
 from starnav.starlist import check_star_list
 
 DEFAULT_FOV_RANGE_DEG = (5.0, 40.0)
@@ -39,8 +38,7 @@ GIVEN_FOV_TOLERANCE = 0.05  # a given FOV is searched within +-5 %
 CAMERA_FOV_TOLERANCE = 0.01  # a calibrated camera's within +-1 %
 _STARS_PER_FIELD = 40.0  # catalog depth of a band: mean stars in one of its pattern fields
 _MAX_MAG = 8.0  # Hipparcos is complete to about here
-_MIN_MAG = 4.0
-_FIELD_RADIUS_FRACTION = 0.85  # pattern fields (as pattern4's default)
+MAX_DIAGONAL_FOV_DEG = 150.0
 _SLIVER = 0.05  # a band narrower than this (relative) is merged into the next wider one
 _DATABASES: dict[tuple, PairDatabase] = {}  # per process: catalog vectors and KD-tree
 
@@ -77,43 +75,73 @@ def horizontal_fov_deg(diagonal_deg: float, width: int, height: int) -> float:
     )
 
 
-@cache
-def _sky_counts(source: str) -> np.ndarray:
-    """Sorted magnitudes of the embedded catalog down to ``_MAX_MAG``."""
-    return np.sort(load_catalog(None, mag_limit=_MAX_MAG).mag)
-
-
-def band_mag_limit(diagonal_deg: float) -> float:
+def band_mag_limit(diagonal_deg: float, sorted_mags: np.ndarray) -> float:
     """Magnitude limit of a band's catalog: about ``_STARS_PER_FIELD`` stars on average in
-    a pattern field of the band's widest diagonal FOV (rounded up to 0.25 mag, 4 to 8)."""
-    radius = _FIELD_RADIUS_FRACTION * math.radians(diagonal_deg) / 2.0
+    a pattern field of the band's widest diagonal FOV, counted in the catalog's own sorted
+    magnitudes (rounded up to 0.25 mag, at most 8; the whole catalog when it is sparser)."""
+    radius = FIELD_RADIUS_FRACTION * math.radians(diagonal_deg) / 2.0
     needed = _STARS_PER_FIELD * 2.0 / (1.0 - math.cos(radius))  # 4 pi / field solid angle
-    mags = _sky_counts("hipparcos")
-    mag = mags[min(int(needed), len(mags) - 1)]
-    return float(min(max(math.ceil(mag * 4.0) / 4.0, _MIN_MAG), _MAX_MAG))
+    mag = sorted_mags[min(int(needed), len(sorted_mags) - 1)]
+    return float(min(math.ceil(mag * 4.0) / 4.0, _MAX_MAG))
 
 
-def load_band(
-    table_diagonal_deg: float,
-    lo: float,
-    hi: float,
-    catalog: Catalog | str | Path | None,
-    epoch_year: float | None,
-) -> Band:
+def load_band(table_diagonal_deg: float, lo: float, hi: float, catalog: Catalog) -> Band | None:
     """One band (horizontal FOV ``lo``..``hi`` degrees of the image searched) with the
-    catalog, pair database and pattern table of its grid band, built for a square field
-    whose diagonal is ``table_diagonal_deg`` (cached in memory and on disk)."""
-    mag = band_mag_limit(table_diagonal_deg)
-    if isinstance(catalog, Catalog):
-        cat = catalog.brighter_than(mag)
-    else:
-        cat = load_catalog(catalog, mag_limit=mag, epoch_year=epoch_year)
+    catalog, KD-tree (in memory) and pattern table (in memory and on disk) of its grid band,
+    built for a square field whose diagonal is ``table_diagonal_deg``; None when the catalog
+    holds no 4-star pattern for it."""
+    cat = catalog.brighter_than(band_mag_limit(table_diagonal_deg, np.sort(catalog.mag)))
+    if len(cat) < 4:
+        return None
     key = (cat.fingerprint, round(table_diagonal_deg, 6))
     if key not in _DATABASES:  # the search verifies only: no pair table
         _DATABASES[key] = catalog_only(cat, math.radians(table_diagonal_deg))
     database = _DATABASES[key]
-    table = build_pattern_table(database, field_radius_fraction=_FIELD_RADIUS_FRACTION)
-    return Band(lo, hi, cat, database, table)
+    table = build_pattern_table(database, field_radius_fraction=FIELD_RADIUS_FRACTION)
+    return Band(lo, hi, cat, database, table) if len(table) else None
+
+
+def search_catalog(catalog: Catalog | str | Path | None, epoch_year: float | None) -> Catalog:
+    """The catalog the bands are cut from: Hipparcos to Hp 8 (Hipparcos is complete to about
+    there), or the whole CSV / ``Catalog`` given."""
+    if catalog is None or (isinstance(catalog, str | Path) and str(catalog).lower() == "hipparcos"):
+        return load_catalog(None, mag_limit=_MAX_MAG, epoch_year=epoch_year)
+    return load_catalog(catalog, epoch_year=epoch_year)
+
+
+def load_bands(
+    lo: float,
+    hi: float,
+    width: int,
+    height: int,
+    catalog: Catalog | str | Path | None,
+    epoch_year: float | None,
+) -> list[Band]:
+    """The bands searched for a horizontal FOV of ``lo``..``hi`` degrees across an image of
+    ``width`` x ``height`` px."""
+    diag_hi = diagonal_fov_deg(hi, width, height)
+    if diag_hi > MAX_DIAGONAL_FOV_DEG:
+        raise StarnavError(
+            f"a {hi:g}° horizontal FOV on {width} x {height} px is {diag_hi:.0f}° across the "
+            f"diagonal; the FOV search handles up to {MAX_DIAGONAL_FOV_DEG:g}°"
+        )
+    full = search_catalog(catalog, epoch_year)
+    bands = [
+        load_band(
+            top,
+            horizontal_fov_deg(a, width, height),
+            horizontal_fov_deg(b, width, height),
+            full,
+        )
+        for a, b, top in band_grid(diagonal_fov_deg(lo, width, height), diag_hi)
+    ]
+    bands = [band for band in bands if band is not None]
+    if not bands:
+        raise CatalogError(
+            f"catalog {full.name!r} ({len(full)} stars) holds no 4-star pattern for a "
+            f"{lo:g}-{hi:g}° field"
+        )
+    return bands
 
 
 def check_fov_range(fov_range_deg: tuple[float, float]) -> tuple[float, float]:
@@ -186,13 +214,7 @@ def solve_fov(
         xy, width=base.width, height=base.height, brightness=brightness, labels=labels
     )
     check_solve_options(sigma_px, parity, max_false_match_probability, min_matched_fraction)
-    w, h = base.width, base.height
-    bands = [
-        load_band(
-            top, horizontal_fov_deg(a, w, h), horizontal_fov_deg(b, w, h), catalog, epoch_year
-        )
-        for a, b, top in band_grid(diagonal_fov_deg(lo, w, h), diagonal_fov_deg(hi, w, h))
-    ]
+    bands = load_bands(lo, hi, base.width, base.height, catalog, epoch_year)
 
     t0 = time.perf_counter()
     order = (
@@ -224,7 +246,6 @@ def solve_fov(
         )
         return conclude(
             ident,
-            found.hypotheses,
             stars,
             camera_fit,
             found.band.catalog,
@@ -254,7 +275,7 @@ def solve_fov(
         cx=base.cx,
         cy=base.cy,
         sigma_px=sigma_px,
-        focal_range_px=(focal_px(hi, base.width), focal_px(lo, base.width)),
+        focal_range_px=(focal_px_from_fov(hi, base.width), focal_px_from_fov(lo, base.width)),
         parity=parity,
         max_false_match_probability=max_false_match_probability,
         pattern_stars=pattern_stars,

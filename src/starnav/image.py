@@ -144,9 +144,9 @@ def annotate_result(path_out: str | Path, image: np.ndarray, result: ImageSolveR
     s, cam, cat = result.solution, result.camera, result.catalog
     if s is None or cam is None or cat is None:
         raise ImageError("only a solved image can be annotated")
-    row_of = {int(i): k for k, i in enumerate(cat.ids)}
-    rows = np.array([row_of[m.catalog_id] for m in s.stars if m.catalog_id is not None], int)
-    xy = np.array([(m.x, m.y) for m in s.stars if m.catalog_id is not None]).reshape(-1, 2)
+    matched = [m for m in s.stars if m.catalog_id is not None]
+    rows = cat.rows([m.catalog_id for m in matched])
+    xy = np.array([(m.x, m.y) for m in matched]).reshape(-1, 2)
     projected = cam.bearings_to_pixels(cat.vectors[rows] @ s.R_cam_from_icrs.T)
     annotate_image(
         path_out,

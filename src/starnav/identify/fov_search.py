@@ -1,18 +1,18 @@
 """Identification when the field of view is unknown: 4-star patterns matched up to a scale.
 
 The edge ratios of a 4-star pattern (``pattern4``) hardly depend on the focal length, so
-they can be looked up before the scale is known. The FOV range is cut into bands a factor
-sqrt(2) wide; each band has its own catalog depth (about 40 stars per field), pair database
-and pattern table, built for the widest field of the band. Within a band the bearings are
-made with a few guessed focal lengths ("cells"): a wrong focal length distorts the gnomonic
-projection towards the corners of the image (an edge at angle phi from the boresight is
-stretched by about 2 delta tan^2 phi for a relative focal error delta), so a cell is narrow
-enough for that distortion to stay within a loose ratio tolerance (2 %); the cells of a
-band are looked up together. Every catalog
-pattern found that way gets its own focal length, fitted to its six edges; only patterns
-whose edges then agree within the measurement tolerance become hypotheses, verified on the
-whole field at that focal length by the shared ``HypothesisTester`` (one tester over every
-band and cell, so the false-match probability counts every hypothesis tried).
+they can be looked up before the scale is known. The caller (``starnav.fov``) cuts the FOV
+range into bands, each with its own catalog depth, KD-tree and pattern table. Within a band
+the bearings are made with a few guessed focal lengths ("cells"): a wrong focal length
+distorts the gnomonic projection towards the corners of the image (an edge at angle phi from
+the boresight is stretched by about 2 delta tan^2 phi for a relative focal error delta), so
+a cell is narrow enough for that distortion to stay within a loose ratio slack (0.5 %); the
+cells of a band are looked up together. Every catalog pattern found that way gets its own
+focal length, fitted to its six edges; only patterns whose edges then agree within the
+measurement tolerance become hypotheses, verified on the whole field at that focal length by
+the shared ``HypothesisTester`` (one tester over every band and cell, so the false-match
+probability counts every hypothesis tried; a pattern found by two neighbouring cells counts
+once).
 
 Observed patterns are taken breadth-first over the brightest stars, and each batch of
 patterns is tried in every band and cell before the next: most fields are identified by the
@@ -27,6 +27,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from starnav.camera import focal_px_from_fov
 from starnav.catalog import Catalog
 from starnav.identify.base import Identification, MatchSettings
 from starnav.identify.database import PairDatabase
@@ -44,27 +45,11 @@ _MAX_CELL_HALF_WIDTH = 0.2  # relative focal-length half-width of a cell at most
 _FOCAL_STEPS = 4  # Gauss-Newton steps of a pattern's focal length
 
 
-def focal_px(fov_deg: float, width: int) -> float:
-    """Focal length (px) of a horizontal field of view (degrees) across ``width`` px."""
-    return 0.5 * width / math.tan(0.5 * math.radians(fov_deg))
-
-
-def fov_bands(fov_lo_deg: float, fov_hi_deg: float) -> list[tuple[float, float]]:
-    """The FOV range cut into bands (lo, hi) a factor ``BAND_FACTOR`` wide, widest first
-    (the last one may be narrower)."""
-    bands = []
-    hi = fov_hi_deg
-    while hi > fov_lo_deg * (1.0 + 1e-9):
-        lo = max(hi / BAND_FACTOR, fov_lo_deg)
-        bands.append((lo, hi))
-        hi = lo
-    return bands or [(fov_lo_deg, fov_hi_deg)]
-
-
 @dataclass(frozen=True, eq=False)
 class Band:
     """One band of the FOV search: horizontal FOV ``fov_lo_deg``..``fov_hi_deg`` (degrees),
-    its ``catalog``, pair ``database`` (for verification) and pattern ``table``."""
+    its ``catalog``, ``database`` (catalog vectors and KD-tree, for the verification; no pair
+    table) and pattern ``table``."""
 
     fov_lo_deg: float
     fov_hi_deg: float
@@ -125,8 +110,8 @@ def _cells(
     band: Band, width: int, half_diagonal_px: float, focal_range: tuple[float, float]
 ) -> list[tuple[float, float, float]]:
     """Guessed focal lengths of a band: (focal, half-width, look-up ratio slack) each."""
-    f_lo = max(focal_px(band.fov_hi_deg, width), focal_range[0])
-    f_hi = min(focal_px(band.fov_lo_deg, width), focal_range[1])
+    f_lo = max(focal_px_from_fov(band.fov_hi_deg, width), focal_range[0])
+    f_hi = min(focal_px_from_fov(band.fov_lo_deg, width), focal_range[1])
     if f_hi < f_lo:
         return []
     # a relative focal error delta stretches the corners by 2 delta tan^2(phi)
@@ -200,6 +185,18 @@ def search_fov(
             if len(hyp.pattern) == 0:
                 continue
             cell, pattern = np.divmod(hyp.pattern, len(rows))
+            # neighbouring cells overlap: the same pairing found twice is one hypothesis
+            key = np.column_stack([pattern[:, None], hyp.obs_local, hyp.cat_rows, hyp.parity])
+            _, first = np.unique(key, axis=0, return_index=True)
+            first = np.sort(first)
+            cell, pattern = cell[first], pattern[first]
+            hyp = replace(
+                hyp,
+                pattern=hyp.pattern[first],
+                obs_local=hyp.obs_local[first],
+                cat_rows=hyp.cat_rows[first],
+                parity=hyp.parity[first],
+            )
             obs_rows = rows[pattern[:, None], hyp.obs_local]  # (h, 4) rows of xy
             cat_edges = pattern_edges(band.catalog.vectors[hyp.cat_rows])
             obs_edges = pattern_edges(bearings[cell[:, None], obs_rows])

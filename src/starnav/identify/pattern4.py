@@ -51,6 +51,7 @@ _PERM_EDGES = np.array([[_EDGE_INDEX[(int(p[i]), int(p[j]))] for i, j in _PAIRS]
 _MAX_PROBES = 200_000  # bin look-ups per batch of observed patterns (bounds memory)
 _BUILD_BLOCK = 4096  # lattice fields expanded at once while building
 _MAX_PATTERN_ROWS = 5e7  # patterns expanded before removing duplicates (about 0.4 GB)
+FIELD_RADIUS_FRACTION = 0.85  # lattice field radius / half the field diagonal
 
 
 @cache
@@ -187,6 +188,8 @@ def _pattern_keys(
     vectors: np.ndarray, patterns: np.ndarray, bins: int
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Keys, canonical star order and largest edge of catalog ``patterns`` (m, 4)."""
+    if len(patterns) == 0:  # a catalog too sparse for any pattern
+        return np.empty(0, np.int64), np.empty((0, 4), np.intp), np.empty(0)
     keys, stars, largest = [], [], []
     for k in range(0, len(patterns), 200_000):  # bounds the memory of the (m, 4, 3) vectors
         p = patterns[k : k + 200_000]
@@ -214,7 +217,7 @@ def build_pattern_table(
     database: PairDatabase,
     *,
     stars_per_field: int = 10,
-    field_radius_fraction: float = 0.85,
+    field_radius_fraction: float = FIELD_RADIUS_FRACTION,
     oversampling: float = 100.0,
     bins: int = 50,
     use_cache: bool = True,
@@ -459,7 +462,7 @@ class Pattern4:
         *,
         pattern_stars: int = 15,
         stars_per_field: int = 10,
-        field_radius_fraction: float = 0.85,
+        field_radius_fraction: float = FIELD_RADIUS_FRACTION,
         oversampling: float = 100.0,
         bins: int = 50,
     ) -> None:
