@@ -105,17 +105,16 @@ def solve_frame(db: tetra3rs.SolverDatabase, frame: dict, match_max_error=None) 
     )
     time_ms = (time.perf_counter() - t0) * 1e3
     out = {"time_ms": time_ms, "peer_ms": float(result.solve_time_ms)}
+    return {**out, **answer(result)}
+
+
+def answer(result) -> dict:
+    """A tetra3rs result in our conventions: RA, Dec, our roll and parity, FOV, matches (all
+    None with the status when unsolved)."""
     if not result:
-        return {
-            **out,
-            "ra_deg": None,
-            "dec_deg": None,
-            "roll_deg": None,
-            "parity": None,
-            "error": str(result.status),
-        }
+        none = dict.fromkeys(("ra_deg", "dec_deg", "roll_deg", "parity", "fov_deg"))
+        return {**none, "error": str(result.status)}
     return {
-        **out,
         "ra_deg": float(result.ra_deg),
         "dec_deg": float(result.dec_deg),
         "roll_deg": float((result.roll_deg + 180.0) % 360.0),

@@ -45,7 +45,7 @@ import tetra3rs
 from PIL import Image
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # run with -I: no script dir on path
-from peer_tetra3rs import PEER, database_info, peak_rss_mb
+from peer_tetra3rs import PEER, answer, database_info, peak_rss_mb
 
 
 def decode(path: str) -> tuple[np.ndarray, float]:
@@ -83,19 +83,7 @@ def solve_file(db: tetra3rs.SolverDatabase, extract, item: dict) -> dict:
         "peer_ms": float(result.solve_time_ms),
         "n_centroids": len(found.centroids),
     }
-    if not result:
-        none = dict.fromkeys(("ra_deg", "dec_deg", "roll_deg", "parity", "fov_deg"))
-        return {**out, **none, "error": str(result.status)}
-    return {
-        **out,
-        "ra_deg": float(result.ra_deg),
-        "dec_deg": float(result.dec_deg),
-        "roll_deg": float((result.roll_deg + 180.0) % 360.0),
-        "parity": -1 if result.parity_flip else 1,
-        "fov_deg": float(result.fov_deg),
-        "n_matched": int(result.num_matches),
-        "error": None,
-    }
+    return {**out, **answer(result)}
 
 
 def centroid_file(extract, item: dict) -> dict:

@@ -41,6 +41,7 @@ _MAX_MAG = 8.0  # Hipparcos is complete to about here
 MAX_DIAGONAL_FOV_DEG = 150.0
 _SLIVER = 0.05  # a band narrower than this (relative) is merged into the next wider one
 _DATABASES: dict[tuple, PairDatabase] = {}  # per process: catalog vectors and KD-tree
+_BANDS: dict[tuple, list[Band]] = {}  # per process: the bands of a catalog, range and shape
 
 
 def band_grid(fov_lo_deg: float, fov_hi_deg: float) -> list[tuple[float, float, float]]:
@@ -126,6 +127,9 @@ def load_bands(
             f"diagonal; the FOV search handles up to {MAX_DIAGONAL_FOV_DEG:g}°"
         )
     full = search_catalog(catalog, epoch_year)
+    key = (full.fingerprint, round(lo, 9), round(hi, 9), width, height)
+    if key in _BANDS:
+        return _BANDS[key]
     bands = [
         load_band(
             top,
@@ -141,6 +145,7 @@ def load_bands(
             f"catalog {full.name!r} ({len(full)} stars) holds no 4-star pattern for a "
             f"{lo:g}-{hi:g}° field"
         )
+    _BANDS[key] = bands
     return bands
 
 
