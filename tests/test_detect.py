@@ -422,3 +422,18 @@ def test_fits_without_a_usable_image(tmp_path):
     ]:
         with pytest.raises(ImageError, match=match):
             read_image(tmp_path / name)
+
+
+@pytest.mark.parametrize(
+    ("height", "width", "step"), [(1024, 1024, 4), (960, 1280, 4), (101, 77, 3)]
+)
+def test_background_map_subtraction_matches_the_full_size_map(height, width, step):
+    from starnav.detect.stars import _subtract
+
+    rng = np.random.default_rng(0)
+    data = rng.normal(size=(height, width)).astype(np.float32)
+    back = rng.normal(size=(-(-height // step), -(-width // step))).astype(np.float32)
+    full = np.repeat(np.repeat(back, step, axis=0), step, axis=1)[:height, :width]
+    expected = data - full
+    _subtract(data, back, step)
+    assert np.array_equal(data, expected)

@@ -289,8 +289,21 @@ def _background(data: np.ndarray, mask: np.ndarray | None) -> tuple[int, np.ndar
 
 def _subtract(data: np.ndarray, back: np.ndarray, step: int) -> None:
     """data -= background map, each sample of the map covering a step x step block."""
+    height, width = data.shape
+    if (
+        step > 1
+        and height % step == 0
+        and width % step == 0
+        and back.shape
+        == (
+            height // step,
+            width // step,
+        )
+    ):  # the map widened to full rows only, then one broadcast over each block of rows
+        wide = np.repeat(back, step, axis=1)
+        data.reshape(height // step, step, width)[...] -= wide[:, None, :]
+        return
     if step > 1:
-        height, width = data.shape
         back = np.repeat(np.repeat(back, step, axis=0), step, axis=1)[:height, :width]
     data -= back
 

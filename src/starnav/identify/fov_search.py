@@ -42,7 +42,7 @@ from starnav.identify.verify import HypothesisTester
 BAND_FACTOR = math.sqrt(2.0)
 _LOOKUP_REL_TOL = 0.005  # ratio slack of the loose look-up (projection distortion of a cell)
 _MAX_CELL_HALF_WIDTH = 0.2  # relative focal-length half-width of a cell at most
-_FOCAL_STEPS = 4  # Gauss-Newton steps of a pattern's focal length
+_FOCAL_STEPS = 3  # Gauss-Newton steps of a pattern's focal length
 
 
 @dataclass(frozen=True, eq=False)
