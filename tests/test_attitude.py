@@ -78,3 +78,21 @@ def test_analytic_jacobian_matches_finite_differences(k1, k2, fit_focal, fit_dis
         ]
     )
     assert np.abs(J - numeric).max() <= 1e-7 * np.abs(numeric).max()
+
+
+def test_one_free_focal_step_agrees_with_the_full_fit():
+    from starnav.attitude.refine import free_focal_step
+    from starnav.catalog import load_catalog
+
+    cat = load_catalog(None, mag_limit=6.0)
+    true = Camera.from_fov(12.0, 512)
+    R = attitude_from_radec_roll(83.0, -1.0, 20.0)
+    rows, xy = project_catalog(cat, R, true)
+    xy = xy + np.random.default_rng(3).normal(0.0, 0.1, xy.shape)
+    given = true.with_focal(true.focal_px * 1.01)
+    held = refine_attitude(R, cat.vectors[rows], xy, given)
+    full = refine_attitude(held.R_cam_from_icrs, cat.vectors[rows], xy, given, fit_focal=True)
+    focal, sigma = free_focal_step(held.R_cam_from_icrs, cat.vectors[rows], xy, given)
+    # the refusal compares with a 0.5 % tolerance: 1e-4 of the focal length is far inside
+    assert focal == pytest.approx(full.camera.focal_px, rel=1e-4)
+    assert sigma == pytest.approx(full.sigma_focal_px, rel=0.05)

@@ -171,3 +171,20 @@ def test_wrong_field_of_view_is_refused(hip_1991):
             continue
         assert attitude_difference_deg(result.solution.R_cam_from_icrs, f.R_cam_from_icrs)[0] < 0.05
     assert refused >= 10
+
+
+def test_a_field_of_view_one_percent_off_is_refused_not_answered(hip_1991):
+    cam = Camera.from_fov(12.0, 512)
+    refused = 0
+    for seed in range(5):
+        f = simulate_frame(hip_1991, cam, noise_px=0.1, seed=100 + seed)
+        res = starnav.solve_verbose(f.xy, width=512, fov_deg=12.12, catalog=hip_1991, sigma_px=0.3)
+        if res.solution is None and "focal length of" in res.reason:
+            refused += 1
+            # the focal length the stars fit is named, and it is nearer the truth
+            fitted = float(res.reason.split("focal length of ")[1].split(" px")[0])
+            given = Camera.from_fov(12.12, 512).focal_px
+            assert abs(fitted - cam.focal_px) < 0.5 * abs(given - cam.focal_px)
+        else:
+            assert res.solution is None or len(res.solution.stars) < 6
+    assert refused >= 3

@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from starnav.attitude import refine_attitude
+from starnav.attitude.refine import free_focal_step
 from starnav.camera import Camera
 from starnav.catalog import Catalog, load_catalog
 from starnav.errors import CatalogError, StarnavError
@@ -470,13 +471,13 @@ def _refusal(
     n_matched = len(xy_matched)
     if not fit_focal and n_matched >= _MIN_STARS_SCALE_CHECK:
         # a wrong focal length biases the attitude beyond its error bars: test the scale
-        free = refine_attitude(R, cat.vectors[cat_rows], xy_matched, camera, fit_focal=True)
-        df = free.camera.focal_px - camera.focal_px
-        if abs(df) > 5.0 * free.sigma_focal_px and abs(df) > _SCALE_TOLERANCE * camera.focal_px:
+        focal, sigma = free_focal_step(R, cat.vectors[cat_rows], xy_matched, camera)
+        df = focal - camera.focal_px
+        if abs(df) > 5.0 * sigma and abs(df) > _SCALE_TOLERANCE * camera.focal_px:
             return (
-                f"the stars fit a focal length of {free.camera.focal_px:.1f} px (FOV "
-                f"{free.camera.fov_deg:.3f}°), not the {camera.focal_px:.1f} px given: "
-                f"correct the field of view or fit the focal length"
+                f"the stars fit a focal length of {focal:.1f} px (FOV "
+                f"{camera.with_focal(focal).fov_deg:.3f}°), not the {camera.focal_px:.1f} px "
+                f"given: correct the field of view or fit the focal length"
             )
     if p_false > max_p:
         return f"false-match probability {p_false:.2g} after the fit"

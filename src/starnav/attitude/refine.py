@@ -198,3 +198,25 @@ def refine_attitude(
         variance_px2=s2,
         leverage=leverage,
     )
+
+
+def free_focal_step(
+    R: np.ndarray, icrs_vectors: np.ndarray, xy: np.ndarray, camera: Camera
+) -> tuple[float, float]:
+    """The focal length (px) the stars fit, and its 1-sigma, by one Gauss-Newton step with
+    the focal length freed from a fit that held it at ``camera.focal_px`` (``R`` that fit's
+    attitude): at that fit's optimum one step is the joint solution to first order, at a
+    fifth of the cost of ``refine_attitude(..., fit_focal=True)``."""
+    xy = np.asarray(xy, dtype=float)
+    res, J, _ = _residuals_and_jacobian(
+        np.zeros(4), R, np.asarray(icrs_vectors, dtype=float), xy, camera, True
+    )
+    step = np.linalg.lstsq(J, -res, rcond=None)[0]
+    left = res + J @ step
+    s2 = float(left @ left) / max(len(res) - 4, 1)
+    try:
+        var = s2 * np.linalg.inv(J.T @ J)[3, 3]
+    except np.linalg.LinAlgError:
+        var = np.inf
+    focal = camera.focal_px * float(np.exp(step[3]))
+    return focal, focal * float(np.sqrt(max(var, 0.0)))
