@@ -13,8 +13,9 @@ re-encoded losslessly (deflate TIFF or PNG); the decoded pixels are checked to b
 own star extraction, each inside its own virtual environment (``$STARNAV_CACHE_DIR/venvs/<peer>``,
 default ``~/.cache/starnav``: ``pip install cedar-solve==0.5.1`` and ``pip install
 tetra3rs==0.14.0``, as ``benchmarks/peers.py`` makes them). This file is also the worker that
-runs there (``worker cedar|tetra3rs``): it imports only numpy and the peer, and reads the images
-as ``.npy`` arrays decoded here with Pillow.
+runs there (``worker cedar|tetra3rs``): it imports numpy, the peer and, for cedar, the parity
+test of ``benchmarks/peer_cedar.py``, and reads the images as ``.npy`` arrays decoded here with
+Pillow.
 
 * cedar-solve: ``Tetra3.solve_from_image`` (its ``get_centroids_from_image`` with defaults),
   shipped database (Hipparcos to magnitude 8, 10-30°, proper motion to 2024.0), ``distortion``
@@ -112,15 +113,14 @@ def _unit(ra_deg, dec_deg) -> np.ndarray:
 
 
 def _worker_cedar(files: list[str], fov_deg: float | None) -> None:
-    import logging
-
     import tetra3
     from PIL import Image
 
+    sys.path.insert(0, str(ROOT / "benchmarks"))  # the cedar adapter's conventions, checked there
+    from peer_cedar import parity_of_matches, quiet
+
     t3 = tetra3.Tetra3(load_database=None)
-    t3._logger.setLevel(logging.WARNING)
-    for handler in t3._logger.handlers:
-        handler.setLevel(logging.WARNING)
+    quiet(t3)
     t3.load_database("default_database")
     for name in files:
         pixels = np.load(name)
@@ -132,15 +132,7 @@ def _worker_cedar(files: list[str], fov_deg: float | None) -> None:
         status = {getattr(tetra3.tetra3, c): c for c in codes}.get(result.get("status"))
         out = {"status": status or str(result.get("status"))}
         if result.get("RA") is not None:
-            # parity: handedness of the matched image directions against the catalog's
-            yx = np.asarray(result["matched_centroids"], dtype=float)
-            stars = np.asarray(result["matched_stars"], dtype=float)
-            focal = 0.5 * width / np.tan(0.5 * np.radians(result["FOV"]))
-            cam = np.column_stack(
-                [(yx[:, 1] - width / 2) / focal, (yx[:, 0] - height / 2) / focal, np.ones(len(yx))]
-            )
-            cam /= np.linalg.norm(cam, axis=1)[:, None]
-            parity = 1 if np.linalg.det(cam.T @ _unit(stars[:, 0], stars[:, 1])) > 0 else -1
+            parity = parity_of_matches(result, width, height)
             out.update(
                 RA=float(result["RA"]),
                 Dec=float(result["Dec"]),
