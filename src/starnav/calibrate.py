@@ -17,7 +17,7 @@ import numpy as np
 from scipy.optimize import least_squares
 from scipy.spatial import cKDTree
 
-from starnav.attitude.refine import _rotate
+from starnav.attitude.refine import rotate_by
 from starnav.camera import Camera
 from starnav.catalog import Catalog, load_catalog
 from starnav.errors import StarnavError
@@ -49,7 +49,7 @@ def _joint_residuals(params, frames, width, height, n_frames):
     cam = Camera(width, height, float(np.exp(log_f)), cx, cy, k1, k2)
     out = []
     for i, (R0, icrs, xy) in enumerate(frames):
-        R = _rotate(params[3 * i : 3 * i + 3], R0)
+        R = rotate_by(params[3 * i : 3 * i + 3], R0)
         out.append((cam.bearings_to_pixels(icrs @ R.T) - xy).ravel())
     return np.concatenate(out)
 
@@ -144,7 +144,7 @@ def calibrate(
         camera = Camera(
             width, height, float(np.exp(log_f)), float(cx), float(cy), float(k1), float(k2)
         )
-        attitudes = [_rotate(fit.x[3 * i : 3 * i + 3], R) for i, R in enumerate(attitudes)]
+        attitudes = [rotate_by(fit.x[3 * i : 3 * i + 3], R) for i, R in enumerate(attitudes)]
     res = fit.fun
     dof = max(len(res) - len(fit.x), 1)
     s2 = float(res @ res) / dof

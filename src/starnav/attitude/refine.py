@@ -57,7 +57,7 @@ class Refinement:
         return np.einsum("ni,nij,nj->n", r, np.linalg.inv(spread), r) / sigma_px**2
 
 
-def _rotate(omega: np.ndarray, R0: np.ndarray) -> np.ndarray:
+def rotate_by(omega: np.ndarray, R0: np.ndarray) -> np.ndarray:
     """exp([omega]x) @ R0 (Rodrigues' formula; scipy's Rotation costs 30 µs a call here)."""
     angle = float(np.sqrt(omega @ omega))
     if angle < 1e-300:
@@ -81,7 +81,7 @@ def _updated(camera: Camera, params: np.ndarray, fit_focal: bool, fit_distortion
 def _residuals_and_jacobian(params, R0, icrs, xy, camera, fit_focal, fit_distortion=False):
     cam = _updated(camera, params, fit_focal, fit_distortion)
     focal = cam.focal_px
-    c = icrs @ _rotate(params[:3], R0).T
+    c = icrs @ rotate_by(params[:3], R0).T
     inv_z = 1.0 / c[:, 2]
     u, v = c[:, 0] * inv_z, c[:, 1] * inv_z
     # c' = c + omega x c moves u = cx/cz and v = cy/cz by these (per omega_x, _y, _z)
@@ -148,7 +148,7 @@ def refine_attitude(
         if cost0 is None:
             cost0 = cost
         step = np.linalg.lstsq(J, -res, rcond=None)[0]
-        R = _rotate(step[:3], R)
+        R = rotate_by(step[:3], R)
         cam = _updated(cam, step, fit_focal, fit_distortion)
         if np.max(np.abs(step[:4])) < _STEP_TOL_RAD and (
             not fit_distortion or np.max(np.abs(step[4:])) < _STEP_TOL_RAD
@@ -164,7 +164,7 @@ def refine_attitude(
             return _residuals_and_jacobian(p, R0, icrs, xy, camera, fit_focal, fit_distortion)[1]
 
         fit = least_squares(fun, zero, jac=jac, method="lm", x_scale="jac")
-        R = _rotate(fit.x[:3], R0)
+        R = rotate_by(fit.x[:3], R0)
         cam = _updated(camera, fit.x, fit_focal, fit_distortion)
     # the Jacobian above is exact at omega = 0: linearise again about the solution for the
     # covariance
