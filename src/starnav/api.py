@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
+from starnav import compiled as fast
 from starnav.attitude import refine_attitude
 from starnav.attitude.refine import free_focal_step
 from starnav.camera import Camera
@@ -182,6 +183,7 @@ def solve_verbose(
     algorithm_options: Mapping[str, object] | None = None,
     prior: Solution | np.ndarray | None = None,
     prior_sigma_deg: float = 1.0,
+    compiled: bool = True,
 ) -> SolveResult:
     """Like ``solve`` but always returns a ``SolveResult`` with the reason when unsolved.
 
@@ -197,7 +199,9 @@ def solve_verbose(
     ``{"selection": "brightest"}`` for ``triangle``); ``prior``: the previous attitude (a
     ``Solution`` or ``R_cam_from_icrs``), good to ``prior_sigma_deg`` (1-sigma): tracking mode
     matches the catalog stars near it only, and falls back to ``algorithm`` when that fails
-    (``Solution.algorithm`` says which answered).
+    (``Solution.algorithm`` says which answered); ``compiled``: run the numba-compiled path
+    (``starnav.compiled``) where it applies - the ``pyramid`` algorithm and tracking, the focal
+    length held - False runs the numpy path, which gives the same answers several times slower.
     """
     camera = make_camera(width=width, height=height, fov_deg=fov_deg)
     stars = check_star_list(
@@ -237,17 +241,71 @@ def solve_verbose(
     )
     outcome = None
     if R_prior is not None:
-        tracker = Tracking(R_prior=R_prior, sigma_deg=prior_sigma_deg)
-        outcome = tracker.identify(bearings, order, database, settings)
+        outcome = (
+            fast.identify(
+                bearings,
+                order,
+                database,
+                settings,
+                R_prior=R_prior,
+                prior_sigma_deg=prior_sigma_deg,
+            )
+            if compiled
+            else None
+        )
+        if outcome is None:  # not compiled, or the compiled path deferred to the numpy one
+            tracker = Tracking(R_prior=R_prior, sigma_deg=prior_sigma_deg)
+            outcome = tracker.identify(bearings, order, database, settings)
         if outcome.identification is not None:
-            algorithm = tracker.name
+            algorithm = Tracking.name
+    use_fast = compiled and not fit_focal
     if outcome is None or outcome.identification is None:  # lost in space
-        outcome = identifier.identify(bearings, order, database, settings)
+        outcome = None
+        if use_fast and algorithm == "pyramid":
+            outcome = fast.identify(bearings, order, database, settings)
+        if outcome is None:
+            outcome = identifier.identify(bearings, order, database, settings)
     found = outcome.identification
     if found is None:
         ms = (time.perf_counter() - t0) * 1e3
         return SolveResult(None, outcome.reason, ms, outcome.hypotheses, database)
-
+    done = (
+        fast.conclude(
+            found,
+            stars.xy,
+            camera,
+            database,
+            settings,
+            sigma_px=sigma_px,
+            min_matched_fraction=min_matched_fraction,
+        )
+        if use_fast
+        else None
+    )
+    if done is not None:
+        if done.refusal != fast.ACCEPTED:
+            reason = {
+                fast.WRONG_SCALE: lambda: _wrong_scale(done.scale_focal_px, camera),
+                fast.UNCONVINCING: lambda: _unconvincing(done.false_match_probability),
+                fast.TOO_FEW: lambda: _too_few(len(done.obs), done.expected, min_matched_fraction),
+            }[done.refusal]()
+            ms = (time.perf_counter() - t0) * 1e3
+            return SolveResult(None, reason, ms, found.hypotheses, database)
+        return _report(
+            stars,
+            done.obs,
+            done.cat,
+            cat,
+            camera,
+            done.R_cam_from_icrs,
+            done.residuals_px,
+            (done.rms_px, done.sigma_boresight_arcsec, done.sigma_roll_arcsec, 0.0),
+            done.false_match_probability,
+            t0=t0,
+            algorithm=algorithm,
+            hypotheses=found.hypotheses,
+            database=database,
+        )
     return conclude(
         found,
         stars,
@@ -328,44 +386,78 @@ def conclude(
     if refusal:
         ms = (time.perf_counter() - t0) * 1e3
         return SolveResult(None, refusal, ms, found.hypotheses, database)
-    residual = dict(
-        zip(obs.tolist(), np.linalg.norm(fit.residuals_px, axis=1).tolist(), strict=True)
+    return _report(
+        stars,
+        obs,
+        cat_rows,
+        cat,
+        fit.camera,
+        R,
+        fit.residuals_px,
+        (fit.rms_px, fit.sigma_boresight_arcsec, fit.sigma_roll_arcsec, fit.sigma_focal_px),
+        p_false,
+        t0=t0,
+        algorithm=algorithm,
+        hypotheses=found.hypotheses,
+        database=database,
     )
-    catalog_id = dict(zip(obs.tolist(), cat.ids[cat_rows].tolist(), strict=True))
+
+
+def _report(
+    stars: StarList,
+    obs: np.ndarray,
+    cat_rows: np.ndarray,
+    cat: Catalog,
+    camera: Camera,
+    R: np.ndarray,
+    residuals_px: np.ndarray,
+    spread: tuple[float, float, float, float],
+    p_false: float,
+    *,
+    t0: float,
+    algorithm: str,
+    hypotheses: int,
+    database: PairDatabase,
+) -> SolveResult:
+    """The reported solution of a fitted identification: matched ``obs`` rows of ``stars``
+    and ``cat_rows`` of ``cat``, the fitted ``camera`` and attitude, the residuals (n, 2, px),
+    ``spread`` = (rms px, 1-sigma boresight and roll arcsec, focal px)."""
+    residual = np.sqrt(np.sum(residuals_px**2, axis=1)).tolist()
+    matched_id = cat.ids[cat_rows].tolist()
+    catalog_id: list[int | None] = [None] * len(stars.xy)
+    residual_px: list[float | None] = [None] * len(stars.xy)
+    for k, n in enumerate(obs.tolist()):
+        catalog_id[n], residual_px[n] = matched_id[k], residual[k]
+    xy = stars.xy.tolist()
     star_matches = tuple(
-        StarMatch(
-            label=stars.labels[n],
-            x=float(stars.xy[n, 0]),
-            y=float(stars.xy[n, 1]),
-            catalog_id=catalog_id.get(n),
-            residual_px=residual.get(n),
-        )
-        for n in range(len(stars.xy))
+        StarMatch(stars.labels[n], xy[n][0], xy[n][1], catalog_id[n], residual_px[n])
+        for n in range(len(xy))
     )
     ra, dec, roll, par = radec_roll_from_attitude(R)
+    rms, sigma_boresight, sigma_roll, sigma_focal = spread
     ms = (time.perf_counter() - t0) * 1e3
     solution = Solution(
         ra_deg=ra,
         dec_deg=dec,
         roll_deg=roll,
         parity=par,
-        focal_px=fit.camera.focal_px,
-        fov_deg=fit.camera.fov_deg,
-        rms_px=fit.rms_px,
-        sigma_boresight_arcsec=fit.sigma_boresight_arcsec,
-        sigma_roll_arcsec=fit.sigma_roll_arcsec,
-        sigma_focal_px=fit.sigma_focal_px,
-        false_match_probability=p_false,
+        focal_px=camera.focal_px,
+        fov_deg=camera.fov_deg,
+        rms_px=float(rms),
+        sigma_boresight_arcsec=float(sigma_boresight),
+        sigma_roll_arcsec=float(sigma_roll),
+        sigma_focal_px=float(sigma_focal),
+        false_match_probability=float(p_false),
         time_ms=ms,
         R_cam_from_icrs=R,
         stars=star_matches,
         n_matched=len(obs),
         algorithm=algorithm,
         catalog=cat.name,
-        k1=fit.camera.k1,
-        k2=fit.camera.k2,
+        k1=camera.k1,
+        k2=camera.k2,
     )
-    return SolveResult(solution, "", ms, found.hypotheses, database)
+    return SolveResult(solution, "", ms, hypotheses, database)
 
 
 def _shared_rms(a, b) -> tuple[float, float]:
@@ -474,21 +566,33 @@ def _refusal(
         focal, sigma = free_focal_step(R, cat.vectors[cat_rows], xy_matched, camera)
         df = focal - camera.focal_px
         if abs(df) > 5.0 * sigma and abs(df) > _SCALE_TOLERANCE * camera.focal_px:
-            return (
-                f"the stars fit a focal length of {focal:.1f} px (FOV "
-                f"{camera.with_focal(focal).fov_deg:.3f}°), not the {camera.focal_px:.1f} px "
-                f"given: correct the field of view or fit the focal length"
-            )
+            return _wrong_scale(focal, camera)
     if p_false > max_p:
-        return f"false-match probability {p_false:.2g} after the fit"
+        return _unconvincing(p_false)
     # stars the solution says should be measurable: catalog stars inside the image
     expected = min(n_points, len(project_catalog(cat, R, fit.camera)[0]))
     if n_matched < min_matched_fraction * expected:
-        return (
-            f"only {n_matched} of {expected} stars agree with the best attitude (need "
-            f"{min_matched_fraction:.0%}): is the field of view right?"
-        )
+        return _too_few(n_matched, expected, min_matched_fraction)
     return ""
+
+
+def _wrong_scale(focal: float, camera: Camera) -> str:
+    return (
+        f"the stars fit a focal length of {focal:.1f} px (FOV "
+        f"{camera.with_focal(focal).fov_deg:.3f}°), not the {camera.focal_px:.1f} px "
+        f"given: correct the field of view or fit the focal length"
+    )
+
+
+def _unconvincing(p_false: float) -> str:
+    return f"false-match probability {p_false:.2g} after the fit"
+
+
+def _too_few(n_matched: int, expected: int, min_matched_fraction: float) -> str:
+    return (
+        f"only {n_matched} of {expected} stars agree with the best attitude (need "
+        f"{min_matched_fraction:.0%}): is the field of view right?"
+    )
 
 
 def solve(

@@ -27,7 +27,7 @@ def local_database(
 ) -> tuple[PairDatabase, np.ndarray]:
     """The pair table of the catalog stars within ``radius_rad`` of ``axis``, and their rows in
     the full catalog (local row k is full row ``rows[k]``)."""
-    rows = database.cone(axis, radius_rad)
+    rows = np.sort(database.cone(axis, radius_rad))  # ascending: the order of the local table
     cat = database.catalog
     sub = Catalog(cat.ids[rows], cat.ra_deg[rows], cat.dec_deg[rows], cat.mag[rows], cat.name)
     vectors = cat.vectors[rows]

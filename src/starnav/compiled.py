@@ -1,0 +1,949 @@
+"""The compiled solve path (numba): the default ``solve()`` in two machine-code calls.
+
+Pyramid identification on the pair database (``identify.pyramid``), tracking near a prior
+(``identify.tracking``), the whole-field verification (``identify.verify``) and the attitude
+fit with its outlier, rematch and refusal steps (``api.conclude``), for a pinhole camera of
+known focal length, written as loops that numba compiles. The numpy path makes hundreds of
+small array calls per frame, each a few microseconds of interpreter and dispatch; here they
+are one call for the identification and one for the fit.
+
+It makes the same decisions as the numpy path: the same triangles in the same order, the same
+hypotheses, false-match probabilities, fit steps and refusals (``tests/test_compiled.py``
+solves frames both ways and compares). Where the numpy path would do something this does not
+- choose between two pairings in the one-to-one match (two catalog stars within the match
+radius of one point, or two points of one star), or fall back to Levenberg-Marquardt because
+Gauss-Newton did not converge - it returns None ("defer") and the caller hands the frame to
+the numpy path. Cone searches use a 1° RA / Dec grid of the catalog instead of the KD-tree.
+
+Numba caches the machine code beside this file (or in numba's user-wide cache directory when
+that is read-only): compiled once per installation, in ~10 s, loaded in ~0.1 s afterwards.
+"""
+
+from __future__ import annotations
+
+import math
+import weakref
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+from starnav.identify.base import Identification, IdentifyOutcome, MatchSettings
+from starnav.identify.database import PairDatabase
+
+GRID_STEP_DEG = 1.0
+ARCSEC_PER_RAD = 180.0 * 3600.0 / math.pi
+_OUTLIER_ALPHA = 1e-3  # as api._OUTLIER_ALPHA
+_MIN_FIT_STARS = 4
+_MAX_REMATCH = 5
+_MIN_STARS_SCALE_CHECK = 6
+_SCALE_TOLERANCE = 0.005
+_MAX_STEPS = 10
+_MAX_GROUP_EDGES = 12  # candidate pairs of one group resolved here (2^12 subsets)
+_STEP_TOL_RAD = 1e-9
+
+# status codes of the kernels
+NOT_FOUND, FOUND, AMBIGUOUS, DEFER = 0, 1, 2, 3
+# refusal codes of the fit
+ACCEPTED, WRONG_SCALE, UNCONVINCING, TOO_FEW = 0, 1, 2, 3
+
+
+@dataclass(frozen=True, eq=False)
+class Sky:
+    """A catalog's unit vectors and their RA / Dec grid: cell ``i * n_ra + j`` (Dec band i
+    from the south pole, RA column j) holds catalog rows ``rows[start[c]:start[c + 1]]``.
+    ``n_dec = 0``: no grid, cone searches test every vector (a few dozen local stars)."""
+
+    vectors: np.ndarray
+    start: np.ndarray
+    rows: np.ndarray
+    n_dec: int
+    n_ra: int
+    step_rad: float
+
+    def args(self) -> tuple:
+        return (self.vectors, self.start, self.rows, self.n_dec, self.n_ra, self.step_rad)
+
+
+def sky_grid(vectors: np.ndarray, step_deg: float = GRID_STEP_DEG) -> Sky:
+    """The RA / Dec grid of unit ``vectors`` (n, 3) with cells of ``step_deg``."""
+    vectors = np.ascontiguousarray(vectors, dtype=np.float64)
+    step = math.radians(step_deg)
+    n_dec, n_ra = round(180.0 / step_deg), round(360.0 / step_deg)
+    dec = np.arcsin(np.clip(vectors[:, 2], -1.0, 1.0))
+    ra = np.arctan2(vectors[:, 1], vectors[:, 0]) % (2.0 * np.pi)
+    i = np.clip(np.floor((dec + 0.5 * np.pi) / step).astype(np.int64), 0, n_dec - 1)
+    j = np.clip(np.floor(ra / step).astype(np.int64), 0, n_ra - 1)
+    cell = i * n_ra + j
+    rows = np.argsort(cell, kind="stable").astype(np.int64)
+    start = np.searchsorted(cell[rows], np.arange(n_dec * n_ra + 1)).astype(np.int64)
+    return Sky(vectors, start, rows, n_dec, n_ra, step)
+
+
+def local_sky(vectors: np.ndarray) -> Sky:
+    """A ``Sky`` without grid (cone searches test each of the few ``vectors``)."""
+    none = np.zeros(1, dtype=np.int64)
+    return Sky(np.ascontiguousarray(vectors, dtype=np.float64), none, none, 0, 0, 1.0)
+
+
+_SKIES: weakref.WeakKeyDictionary[PairDatabase, Sky] = weakref.WeakKeyDictionary()
+
+
+def database_sky(database: PairDatabase) -> Sky:
+    """The grid of a database's catalog (built once per database, ~2 ms for 5000 stars)."""
+    sky = _SKIES.get(database)
+    if sky is None:
+        sky = _SKIES[database] = sky_grid(database.catalog.vectors)
+    return sky
+
+
+# ---------------------------------------------------------------------------- small kernels
+
+
+@njit(cache=True)
+def _chord(angle):
+    return 2.0 * math.sin(0.5 * angle)
+
+
+@njit(cache=True)
+def _angle(a, b):
+    """Angle (rad) between unit vectors, as geometry.angle_between."""
+    d = 0.0
+    s = 0.0
+    for k in range(3):
+        d += (a[k] - b[k]) ** 2
+        s += (a[k] + b[k]) ** 2
+    return 2.0 * math.atan2(math.sqrt(d), math.sqrt(s))
+
+
+@njit(cache=True)
+def _cone(axis, chord2, sky, out):
+    """Rows of the sky's vectors within chord sqrt(chord2) of ``axis`` written to ``out``;
+    returns how many."""
+    vectors, start, rows, n_dec, n_ra, step = sky
+    n = 0
+    if n_dec == 0:
+        for r in range(len(vectors)):
+            d = 0.0
+            for k in range(3):
+                d += (vectors[r, k] - axis[k]) ** 2
+            if d <= chord2:
+                out[n] = r
+                n += 1
+        return n
+    radius = 2.0 * math.asin(min(1.0, 0.5 * math.sqrt(chord2))) + 1e-9
+    dec0 = math.asin(max(-1.0, min(1.0, axis[2])))
+    ra0 = math.atan2(axis[1], axis[0])
+    lo, hi = dec0 - radius, dec0 + radius
+    i_lo = max(0, math.floor((lo + 0.5 * math.pi) / step))
+    i_hi = min(n_dec - 1, math.floor((hi + 0.5 * math.pi) / step))
+    full = hi >= 0.5 * math.pi or lo <= -0.5 * math.pi or math.sin(radius) >= math.cos(dec0)
+    j_lo, j_hi = 0, n_ra - 1
+    if not full:
+        half = math.asin(math.sin(radius) / math.cos(dec0)) + 1e-9
+        j_lo = math.floor((ra0 - half) / step)
+        j_hi = math.floor((ra0 + half) / step)
+        if j_hi - j_lo + 1 >= n_ra:
+            j_lo, j_hi = 0, n_ra - 1
+    for i in range(i_lo, i_hi + 1):
+        for jj in range(j_lo, j_hi + 1):
+            cell = i * n_ra + jj % n_ra
+            for m in range(start[cell], start[cell + 1]):
+                r = rows[m]
+                d = 0.0
+                for k in range(3):
+                    d += (vectors[r, k] - axis[k]) ** 2
+                if d <= chord2:
+                    out[n] = r
+                    n += 1
+    return n
+
+
+@njit(cache=True)
+def _binomial_tail(trials, extra, p):
+    """P(X >= extra), X ~ Binomial(trials, p) (= scipy's betainc(extra, trials-extra+1, p))."""
+    if p >= 1.0:
+        return 1.0
+    if p <= 0.0:
+        return 0.0
+    lp, lq = math.log(p), math.log1p(-p)
+    top = math.lgamma(trials + 1.0)
+    s = 0.0
+    for j in range(extra, trials + 1):
+        s += math.exp(
+            top - math.lgamma(j + 1.0) - math.lgamma(trials - j + 1.0) + j * lp + (trials - j) * lq
+        )
+    return min(1.0, s)
+
+
+@njit(cache=True)
+def _false_match(n_stars, n_agree, n_used, p_chance, hypotheses):
+    """As verify.false_match_probability."""
+    trials = n_stars - n_used
+    extra = n_agree - n_used
+    if extra <= 0 or trials <= 0:
+        return 1.0
+    return min(1.0, _binomial_tail(trials, extra, p_chance) * max(hypotheses, 1))
+
+
+@njit(cache=True)
+def _false_match_radii(dist, n_cone, field_area, n_stars, n_used, hypotheses, radii):
+    """As Verification.false_match_probability: best over the radii, times their number."""
+    best = 1.0
+    for radius in radii:
+        limit = _chord(radius) * (1 + 1e-12)
+        n_agree = 0
+        for d in dist:
+            if d <= limit:
+                n_agree += 1
+        p_chance = 1.0
+        if field_area > 0:
+            p_chance = min(1.0, n_cone * (1.0 - math.cos(radius)) / field_area)
+        best = min(best, _false_match(n_stars, n_agree, n_used, p_chance, hypotheses))
+    return min(1.0, best * len(radii))
+
+
+@njit(cache=True)
+def _field_radius(bearings, radius):
+    zmin = 1.0
+    for n in range(len(bearings)):
+        zmin = min(zmin, bearings[n, 2])
+    return math.acos(max(-1.0, min(1.0, zmin))) + radius
+
+
+@njit(cache=True)
+def _wahba(b, r, parity):
+    """As attitude.wahba: R_cam_from_icrs of pairs (b camera, r ICRS), mirrored for parity -1."""
+    B = np.zeros((3, 3))
+    for k in range(len(b)):
+        for i in range(3):
+            bi = -b[k, i] if (parity < 0 and i == 1) else b[k, i]
+            for j in range(3):
+                B[i, j] += bi * r[k, j]
+    U, _, Vt = np.linalg.svd(B)
+    d = np.linalg.det(U) * np.linalg.det(Vt)
+    for i in range(3):
+        U[i, 2] *= d
+    R = U @ Vt
+    if parity < 0:
+        for j in range(3):
+            R[1, j] = -R[1, j]
+    return R
+
+
+@njit(cache=True)
+def _match(bearings, R, sky, radius, cov, gate, field_rad, work):
+    """As verify.match_catalog: (obs, cat rows, chord distances, n_cone, deferred). With
+    ``gate``, each star's radius grows by 3 sigma of its position under the rotation
+    covariance ``cov``. The one-to-one pairing is scipy's: most pairs in each group of points
+    and stars that share candidates, then the least total squared distance; a group of more
+    than ``_MAX_GROUP_EDGES`` candidate pairs is left to the numpy path (``deferred``)."""
+    vectors = sky[0]
+    n_cone = _cone(R[2], _chord(field_rad) ** 2, sky, work)
+    n_b = len(bearings)
+    base2 = _chord(radius) ** 2
+    trace = cov[0, 0] + cov[1, 1] + cov[2, 2]
+    use_gate = gate and np.all(np.isfinite(cov))
+    cam = np.empty((n_cone, 3))
+    radius2 = np.empty(n_cone)
+    for m in range(n_cone):
+        v = vectors[work[m]]
+        for i in range(3):
+            cam[m, i] = R[i, 0] * v[0] + R[i, 1] * v[1] + R[i, 2] * v[2]
+        radius2[m] = base2
+        if use_gate:
+            var = trace
+            for i in range(3):
+                for j in range(3):
+                    var -= cam[m, i] * cov[i, j] * cam[m, j]
+            radius2[m] += 9.0 * max(var, 0.0)
+    # candidate pairs, point by point
+    cap = 2 * n_b + 8
+    e_b = np.empty(cap, dtype=np.int64)
+    e_m = np.empty(cap, dtype=np.int64)
+    e_d2 = np.empty(cap)
+    n_e = 0
+    row_deg = np.zeros(n_b, dtype=np.int64)
+    col_deg = np.zeros(max(n_cone, 1), dtype=np.int64)
+    for b in range(n_b):
+        for m in range(n_cone):
+            d2 = 0.0
+            for i in range(3):
+                d2 += (bearings[b, i] - cam[m, i]) ** 2
+            if d2 <= radius2[m]:
+                if n_e == cap:
+                    cap *= 2
+                    e_b2, e_m2, e_d22 = (
+                        np.empty(cap, np.int64),
+                        np.empty(cap, np.int64),
+                        np.empty(cap),
+                    )
+                    e_b2[:n_e], e_m2[:n_e], e_d22[:n_e] = e_b[:n_e], e_m[:n_e], e_d2[:n_e]
+                    e_b, e_m, e_d2 = e_b2, e_m2, e_d22
+                e_b[n_e], e_m[n_e], e_d2[n_e] = b, m, d2
+                row_deg[b] += 1
+                col_deg[m] += 1
+                n_e += 1
+    chosen = np.zeros(n_e, dtype=np.bool_)
+    group = np.full(n_e, -1, dtype=np.int64)
+    deferred = False
+    for e in range(n_e):
+        if row_deg[e_b[e]] == 1 and col_deg[e_m[e]] == 1:
+            chosen[e] = True
+        elif group[e] < 0:
+            # the group of pairs linked to this one through shared points or stars
+            members = np.empty(n_e, dtype=np.int64)
+            members[0] = e
+            group[e] = e
+            size, head = 1, 0
+            while head < size:
+                f = members[head]
+                head += 1
+                for g in range(n_e):
+                    if group[g] < 0 and (e_b[g] == e_b[f] or e_m[g] == e_m[f]):
+                        group[g] = e
+                        members[size] = g
+                        size += 1
+            if size > _MAX_GROUP_EDGES:
+                deferred = True
+                continue
+            best_mask, best_n, best_cost = 0, -1, np.inf
+            for mask in range(1, 1 << size):
+                n_pairs, cost, ok = 0, 0.0, True
+                for x in range(size):
+                    if not (mask >> x) & 1:
+                        continue
+                    for y in range(x):
+                        if (mask >> y) & 1 and (
+                            e_b[members[x]] == e_b[members[y]] or e_m[members[x]] == e_m[members[y]]
+                        ):
+                            ok = False
+                    n_pairs += 1
+                    cost += e_d2[members[x]]
+                if ok and (n_pairs > best_n or (n_pairs == best_n and cost < best_cost)):
+                    best_mask, best_n, best_cost = mask, n_pairs, cost
+            for x in range(size):
+                if (best_mask >> x) & 1:
+                    chosen[members[x]] = True
+    n = 0
+    for e in range(n_e):
+        n += chosen[e]
+    obs = np.empty(n, dtype=np.int64)
+    cat = np.empty(n, dtype=np.int64)
+    dist = np.empty(n)
+    k = 0
+    for e in range(n_e):  # in order of the points, as scipy's assignment returns them
+        if chosen[e]:
+            obs[k], cat[k], dist[k] = e_b[e], work[e_m[e]], math.sqrt(e_d2[e])
+            k += 1
+    return obs, cat, dist, n_cone, deferred
+
+
+# ---------------------------------------------------------------------------- identification
+
+
+@njit(cache=True)
+def _catalog_triangles(pair_a, pair_b, pair_angle, vectors, s_ij, s_ik, s_jk, tol):
+    """As pyramid.catalog_triangles, in the same order: rows (a, b, c) with sides ab, ac, bc
+    within ``tol`` of the measured ij, ik, jk."""
+    n_cat = len(vectors)
+    lo1 = np.searchsorted(pair_angle, s_ij - tol)
+    hi1 = np.searchsorted(pair_angle, s_ij + tol)
+    lo2 = np.searchsorted(pair_angle, s_ik - tol)
+    hi2 = np.searchsorted(pair_angle, s_ik + tol)
+    n1, n2 = hi1 - lo1, hi2 - lo2
+    out = np.empty((0, 3), dtype=np.int64)
+    if n1 == 0 or n2 == 0:
+        return out
+    # side ik both ways, grouped by its first star (stable counting sort)
+    a2 = np.empty(2 * n2, dtype=np.int64)
+    c2 = np.empty(2 * n2, dtype=np.int64)
+    for k in range(n2):
+        a2[k], c2[k] = pair_a[lo2 + k], pair_b[lo2 + k]
+        a2[n2 + k], c2[n2 + k] = pair_b[lo2 + k], pair_a[lo2 + k]
+    count = np.zeros(n_cat + 1, dtype=np.int64)
+    for k in range(2 * n2):
+        count[a2[k] + 1] += 1
+    for k in range(n_cat):
+        count[k + 1] += count[k]
+    fill = count[:n_cat].copy()
+    grouped = np.empty(2 * n2, dtype=np.int64)
+    for k in range(2 * n2):
+        grouped[fill[a2[k]]] = c2[k]
+        fill[a2[k]] += 1
+    cos_hi = math.cos(s_jk + tol)
+    cos_lo = math.cos(max(s_jk - tol, 0.0))
+    cap = 64
+    out = np.empty((cap, 3), dtype=np.int64)
+    n = 0
+    for k in range(2 * n1):
+        if k < n1:
+            a, b = np.int64(pair_a[lo1 + k]), np.int64(pair_b[lo1 + k])
+        else:
+            a, b = np.int64(pair_b[lo1 + k - n1]), np.int64(pair_a[lo1 + k - n1])
+        for m in range(count[a], count[a + 1]):
+            c = grouped[m]
+            if b == c:
+                continue
+            cos_bc = vectors[b, 0] * vectors[c, 0] + vectors[b, 1] * vectors[c, 1]
+            cos_bc += vectors[b, 2] * vectors[c, 2]
+            if cos_bc >= cos_hi and cos_bc <= cos_lo:
+                if n == cap:
+                    cap *= 2
+                    bigger = np.empty((cap, 3), dtype=np.int64)
+                    bigger[:n] = out[:n]
+                    out = bigger
+                out[n, 0], out[n, 1], out[n, 2] = a, b, c
+                n += 1
+    return out[:n]
+
+
+@njit(cache=True)
+def _det3(a, b, c):
+    return (
+        a[0] * (b[1] * c[2] - b[2] * c[1])
+        - a[1] * (b[0] * c[2] - b[2] * c[0])
+        + a[2] * (b[0] * c[1] - b[1] * c[0])
+    )
+
+
+@njit(cache=True)
+def _identify(bearings, order, pair_a, pair_b, pair_angle, max_angle, sky, tol, radii, max_p,
+              parity_known, max_hypotheses):  # fmt: skip
+    """As pyramid.match_triangles over Mortari's triangle order of ``order``. Returns
+    (status, obs, cat, R, parity, p, hypotheses, proposed, best_p)."""
+    vectors = sky[0]
+    n_total = len(bearings)
+    radius = radii.max()
+    field_rad = _field_radius(bearings, radius)
+    p_floor = (1.0 - math.cos(radii.min())) / (1.0 - math.cos(field_rad))
+    n_radii = len(radii)
+    screen2 = _chord(radius) ** 2
+    work = np.empty(len(vectors), dtype=np.int64)
+    no_cov = np.zeros((3, 3))
+    hypotheses, proposed, best_p = 0, 0, 1.0
+    empty = np.empty(0, dtype=np.int64)
+    R_none = np.zeros((3, 3))
+    n = len(order)
+    tri = np.empty((3, 3))
+    idx = np.empty(3, dtype=np.int64)
+    for dj in range(1, n - 1):
+        for dk in range(1, n - dj):
+            for i in range(n - dj - dk):
+                idx[0], idx[1], idx[2] = order[i], order[i + dj], order[i + dj + dk]
+                for k in range(3):
+                    tri[k] = bearings[idx[k]]
+                s01 = _angle(tri[0], tri[1])
+                s02 = _angle(tri[0], tri[2])
+                s12 = _angle(tri[1], tri[2])
+                if min(s01, s02, s12) < 2.0 * tol or max(s01, s02, s12) > max_angle + tol:
+                    continue
+                triples = _catalog_triangles(
+                    pair_a, pair_b, pair_angle, vectors, s01, s02, s12, tol
+                )
+                m = len(triples)
+                if m == 0:
+                    continue
+                det_obs = _det3(tri[0], tri[1], tri[2])
+                parities = np.empty(m, dtype=np.int64)
+                for h in range(m):
+                    det_cat = _det3(
+                        vectors[triples[h, 0]], vectors[triples[h, 1]], vectors[triples[h, 2]]
+                    )
+                    parities[h] = 1 if np.sign(det_obs) == np.sign(det_cat) else -1
+                if abs(det_obs) < 3.0 * tol * max(s01, s02, s12):  # too flat to tell
+                    both = np.empty((2 * m, 3), dtype=np.int64)
+                    both[:m] = triples
+                    both[m:] = triples
+                    par2 = np.empty(2 * m, dtype=np.int64)
+                    par2[:m] = parities
+                    par2[m:] = -parities
+                    triples, parities = both, par2
+                if parity_known != 0:
+                    keep = parities == parity_known
+                    triples, parities = triples[keep], parities[keep]
+                m = len(triples)
+                if m == 0:
+                    continue
+                hypotheses += m
+                # screen: points near some catalog star under each hypothesis's attitude
+                agree = np.zeros(m, dtype=np.int64)
+                Rs = np.empty((m, 3, 3))
+                for h in range(m):
+                    R = _wahba(tri, vectors[triples[h]], parities[h])
+                    Rs[h] = R
+                    n_cone = _cone(R[2], _chord(field_rad) ** 2, sky, work)
+                    for b in range(n_total):
+                        for c in range(n_cone):
+                            v = vectors[work[c]]
+                            d2 = 0.0
+                            for k in range(3):
+                                ck = R[k, 0] * v[0] + R[k, 1] * v[1] + R[k, 2] * v[2]
+                                d2 += (bearings[b, k] - ck) ** 2
+                            if d2 < screen2:
+                                agree[h] += 1
+                                break
+                for h in np.argsort(-agree, kind="mergesort"):
+                    p_best = n_radii * _false_match(n_total, agree[h], 3, p_floor, hypotheses)
+                    if p_best > max_p:
+                        break
+                    proposed += 1
+                    R = Rs[h]
+                    obs, cat, dist, n_cone, deferred = _match(
+                        bearings, R, sky, radius, no_cov, False, field_rad, work
+                    )
+                    if deferred:
+                        return DEFER, empty, empty, R_none, 0, 1.0, hypotheses, proposed, best_p
+                    area = 1.0 - math.cos(field_rad)
+                    p = _false_match_radii(dist, n_cone, area, n_total, 3, hypotheses, radii)
+                    best_p = min(best_p, p)
+                    if p > max_p:
+                        continue
+                    parity = parities[h]
+                    if parity_known == 0:
+                        # collinear stars verify in the mirror image as well
+                        R_m = _wahba(bearings[obs], vectors[cat], -parity)
+                        _, _, dist_m, n_cone_m, deferred = _match(
+                            bearings, R_m, sky, radius, no_cov, False, field_rad, work
+                        )
+                        if deferred:
+                            return (DEFER, empty, empty, R_none, 0, 1.0, hypotheses, proposed,
+                                    best_p)  # fmt: skip
+                        p_m = _false_match_radii(
+                            dist_m, n_cone_m, area, n_total, 3, hypotheses, radii
+                        )
+                        if p_m <= max_p:
+                            return (AMBIGUOUS, empty, empty, R_none, 0, 1.0, hypotheses,
+                                    proposed, best_p)  # fmt: skip
+                    return FOUND, obs, cat, R, parity, p, hypotheses, proposed, best_p
+                if hypotheses >= max_hypotheses:
+                    return NOT_FOUND, empty, empty, R_none, 0, 1.0, hypotheses, proposed, best_p
+    return NOT_FOUND, empty, empty, R_none, 0, 1.0, hypotheses, proposed, best_p
+
+
+@njit(cache=True)
+def _local_pairs(vectors, max_angle):
+    """As database.build_pairs: pairs (a < b) closer than ``max_angle``, sorted by angle."""
+    n = len(vectors)
+    limit2 = _chord(max_angle) ** 2
+    a = np.empty(n * (n - 1) // 2, dtype=np.int64)
+    b = np.empty(n * (n - 1) // 2, dtype=np.int64)
+    angle = np.empty(n * (n - 1) // 2)
+    m = 0
+    for i in range(n):
+        for j in range(i + 1, n):
+            d2 = 0.0
+            for k in range(3):
+                d2 += (vectors[i, k] - vectors[j, k]) ** 2
+            if d2 <= limit2:
+                a[m], b[m], angle[m] = i, j, _angle(vectors[i], vectors[j])
+                m += 1
+    order = np.argsort(angle[:m], kind="mergesort")
+    return a[:m][order], b[:m][order], angle[:m][order]
+
+
+@njit(cache=True)
+def _cone_rows(axis, radius, sky):
+    work = np.empty(len(sky[0]), dtype=np.int64)
+    n = _cone(axis, _chord(radius) ** 2, sky, work)
+    return np.sort(work[:n])
+
+
+# ---------------------------------------------------------------------------- attitude fit
+
+
+@njit(cache=True)
+def _rotate_by(omega, R0):
+    """As attitude.refine.rotate_by: exp([omega]x) @ R0."""
+    angle = math.sqrt(omega[0] ** 2 + omega[1] ** 2 + omega[2] ** 2)
+    if angle < 1e-300:
+        return R0.copy()
+    k0, k1, k2 = omega[0] / angle, omega[1] / angle, omega[2] / angle
+    K = np.array([[0.0, -k2, k1], [k2, 0.0, -k0], [-k1, k0, 0.0]])
+    return (np.eye(3) + math.sin(angle) * K + (1.0 - math.cos(angle)) * (K @ K)) @ R0
+
+
+@njit(cache=True)
+def _residuals_jacobian(R, icrs, xy, focal, cx, cy, with_focal):
+    """As refine._residuals_and_jacobian at omega = 0 (no distortion): residuals (2n,) u then
+    v, Jacobian (2n, 3 or 4)."""
+    n = len(xy)
+    n_par = 4 if with_focal else 3
+    res = np.empty(2 * n)
+    J = np.empty((2 * n, n_par))
+    for s in range(n):
+        c0 = R[0, 0] * icrs[s, 0] + R[0, 1] * icrs[s, 1] + R[0, 2] * icrs[s, 2]
+        c1 = R[1, 0] * icrs[s, 0] + R[1, 1] * icrs[s, 1] + R[1, 2] * icrs[s, 2]
+        c2 = R[2, 0] * icrs[s, 0] + R[2, 1] * icrs[s, 1] + R[2, 2] * icrs[s, 2]
+        u, v = c0 / c2, c1 / c2
+        res[s] = cx + focal * u - xy[s, 0]
+        res[n + s] = cy + focal * v - xy[s, 1]
+        uv = u * v
+        J[s, 0], J[s, 1], J[s, 2] = -focal * uv, focal * (1.0 + u * u), -focal * v
+        J[n + s, 0], J[n + s, 1], J[n + s, 2] = -focal * (1.0 + v * v), focal * uv, focal * u
+        if with_focal:
+            J[s, 3], J[n + s, 3] = focal * u, focal * v
+    return res, J
+
+
+@njit(cache=True)
+def _fit(R0, icrs, xy, focal, cx, cy):
+    """As refine.refine_attitude with the focal length held. Returns (ok, R, residuals (n, 2),
+    rotation covariance, variance_px2, leverage (n, 2, 2), rms, sigma boresight / roll
+    arcsec); ok False where the numpy path would turn to Levenberg-Marquardt."""
+    n = len(xy)
+    R = R0.copy()
+    cost0 = -1.0
+    for _ in range(_MAX_STEPS):
+        res, J = _residuals_jacobian(R, icrs, xy, focal, cx, cy, False)
+        if cost0 < 0:
+            cost0 = res @ res
+        step = np.linalg.lstsq(J, -res)[0]
+        R = _rotate_by(step, R)
+        if np.max(np.abs(step)) < _STEP_TOL_RAD:
+            break
+    res, J = _residuals_jacobian(R, icrs, xy, focal, cx, cy, False)
+    cost = res @ res
+    ok = np.all(np.isfinite(res)) and cost <= cost0
+    N = J.T @ J
+    ok = ok and abs(np.linalg.det(N)) > 0.0
+    residuals = np.empty((n, 2))
+    residuals[:, 0] = res[:n]
+    residuals[:, 1] = res[n:]
+    leverage = np.zeros((n, 2, 2))
+    if not ok:
+        return False, R, residuals, np.zeros((3, 3)), 0.0, leverage, 0.0, 0.0, 0.0
+    s2 = cost / max(2 * n - 3, 1)
+    N_inv = np.linalg.inv(N)
+    cov = s2 * N_inv
+    for s in range(n):
+        for i in range(2):
+            row_i = J[s + i * n]
+            for j in range(2):
+                row_j = J[s + j * n]
+                leverage[s, i, j] = row_i @ N_inv @ row_j
+    rms = math.sqrt(cost / n)
+    sigma_b = math.sqrt(max(cov[0, 0] + cov[1, 1], 0.0)) * ARCSEC_PER_RAD
+    sigma_r = math.sqrt(max(cov[2, 2], 0.0)) * ARCSEC_PER_RAD
+    return True, R, residuals, cov, s2, leverage, rms, sigma_b, sigma_r
+
+
+@njit(cache=True)
+def _studentized(residuals, leverage, sigma_px):
+    """As Refinement.studentized."""
+    n = len(residuals)
+    t = np.zeros(n)
+    for s in range(n):
+        a = 1.0 + 1e-9 - leverage[s, 0, 0]
+        b = -leverage[s, 0, 1]
+        c = -leverage[s, 1, 0]
+        d = 1.0 + 1e-9 - leverage[s, 1, 1]
+        if not (np.isfinite(a) and np.isfinite(b) and np.isfinite(c) and np.isfinite(d)):
+            return np.zeros(n)
+        det = a * d - b * c
+        x, y = residuals[s, 0], residuals[s, 1]
+        # r^T inv(spread) r with inv = [[d, -b], [-c, a]] / det
+        t[s] = (x * (d * x - b * y) + y * (-c * x + a * y)) / det / sigma_px**2
+    return t
+
+
+@njit(cache=True)
+def _bearings(xy, focal, cx, cy):
+    """As Camera.pixels_to_bearings (no distortion)."""
+    out = np.empty((len(xy), 3))
+    for s in range(len(xy)):
+        u, v = (xy[s, 0] - cx) / focal, (xy[s, 1] - cy) / focal
+        norm = math.sqrt(u * u + v * v + 1.0)
+        out[s, 0], out[s, 1], out[s, 2] = u / norm, v / norm, 1.0 / norm
+    return out
+
+
+@njit(cache=True)
+def _converge(obs, cat, R, bearings, xy, sky, focal, cx, cy, radius, sigma_px, field_rad, work):
+    """As api._Fitter.converge: fit, drop outliers, rematch until the pairs stop changing.
+    Returns (ok, obs, cat, fit tuple, n_cone of the last match)."""
+    vectors = sky[0]
+    fit = _fit(R, vectors[cat], xy[obs], focal, cx, cy)
+    n_cone_last = 0
+    if not fit[0]:
+        return False, obs, cat, fit, n_cone_last
+    ok, obs, cat, fit = _drop_outliers(obs, cat, fit, xy, vectors, focal, cx, cy, sigma_px)
+    if not ok:
+        return False, obs, cat, fit, n_cone_last
+    for _ in range(_MAX_REMATCH):
+        s2 = fit[4]
+        scale = max(1.0, sigma_px**2 / s2) if s2 > 0 else 1.0
+        cov = fit[3] * scale
+        v_obs, v_cat, _, n_cone_last, deferred = _match(
+            bearings, fit[1], sky, radius, cov, True, field_rad, work
+        )
+        if deferred:
+            return False, obs, cat, fit, n_cone_last
+        same = len(v_obs) == len(obs) and np.all(v_obs == obs) and np.all(v_cat == cat)
+        if same or len(v_obs) < len(obs):
+            break
+        fit = _fit(fit[1], vectors[v_cat], xy[v_obs], focal, cx, cy)
+        if not fit[0]:
+            return False, obs, cat, fit, n_cone_last
+        ok, obs, cat, fit = _drop_outliers(v_obs, v_cat, fit, xy, vectors, focal, cx, cy, sigma_px)
+        if not ok:
+            return False, obs, cat, fit, n_cone_last
+    return True, obs, cat, fit, n_cone_last
+
+
+@njit(cache=True)
+def _drop_outliers(obs, cat, fit, xy, vectors, focal, cx, cy, sigma_px):
+    """As api._Fitter.drop_outliers."""
+    while len(obs) > _MIN_FIT_STARS:
+        t = _studentized(fit[2], fit[5], sigma_px)
+        worst = np.argmax(t)
+        if t[worst] <= 2.0 * math.log(len(obs) / _OUTLIER_ALPHA):
+            break
+        keep = np.arange(len(obs)) != worst
+        obs, cat = obs[keep], cat[keep]
+        fit = _fit(fit[1], vectors[cat], xy[obs], focal, cx, cy)
+        if not fit[0]:
+            return False, obs, cat, fit
+    return True, obs, cat, fit
+
+
+@njit(cache=True)
+def _shared_rms(obs_a, cat_a, res_a, obs_b, cat_b, res_b):
+    """As api._shared_rms."""
+    sa, sb, n = 0.0, 0.0, 0
+    for i in range(len(obs_a)):
+        for j in range(len(obs_b)):
+            if obs_a[i] == obs_b[j] and cat_a[i] == cat_b[j]:
+                sa += res_a[i, 0] ** 2 + res_a[i, 1] ** 2
+                sb += res_b[j, 0] ** 2 + res_b[j, 1] ** 2
+                n += 1
+    if n == 0:
+        return np.inf, np.inf
+    return math.sqrt(sa / n), math.sqrt(sb / n)
+
+
+@njit(cache=True)
+def _free_focal_step(R, icrs, xy, focal, cx, cy):
+    """As refine.free_focal_step: (focal length, its 1-sigma) from one Gauss-Newton step."""
+    res, J = _residuals_jacobian(R, icrs, xy, focal, cx, cy, True)
+    step = np.linalg.lstsq(J, -res)[0]
+    left = res + J @ step
+    s2 = (left @ left) / max(len(res) - 4, 1)
+    N = J.T @ J
+    var = np.inf
+    if abs(np.linalg.det(N)) > 0.0:
+        var = s2 * np.linalg.inv(N)[3, 3]
+    f = focal * math.exp(step[3])
+    return f, f * math.sqrt(max(var, 0.0))
+
+
+@njit(cache=True)
+def _conclude(obs, cat, R, xy, sky, focal, cx, cy, width, height, half_diagonal, radii,
+              sigma_px, hypotheses, max_p, min_matched_fraction):  # fmt: skip
+    """As api.conclude without fit_focal or distortion. Returns (status, refusal, obs, cat, R,
+    residuals, rms, sigma boresight / roll arcsec, p_false, focal fitted by the scale check,
+    expected)."""
+    vectors = sky[0]
+    radius = radii.max()
+    bearings = _bearings(xy, focal, cx, cy)
+    field_rad = _field_radius(bearings, radius)
+    work = np.empty(len(vectors), dtype=np.int64)
+    ok, obs, cat, fit, n_cone = _converge(
+        obs, cat, R, bearings, xy, sky, focal, cx, cy, radius, sigma_px, field_rad, work
+    )
+    if not ok:
+        return DEFER, 0, obs, cat, R, fit[2], 0.0, 0.0, 0.0, 1.0, 0.0, 0
+    wide_obs, wide_cat, _, _, deferred = _match(
+        bearings, fit[1], sky, 3.0 * radius, fit[3], False, _field_radius(bearings, 3.0 * radius),
+        work,
+    )  # fmt: skip
+    if deferred:
+        return DEFER, 0, obs, cat, R, fit[2], 0.0, 0.0, 0.0, 1.0, 0.0, 0
+    if len(wide_obs) > len(obs):
+        ok2, obs2, cat2, fit2, n_cone2 = _converge(
+            wide_obs, wide_cat, fit[1], bearings, xy, sky, focal, cx, cy, radius, sigma_px,
+            field_rad, work,
+        )  # fmt: skip
+        if not ok2:
+            return DEFER, 0, obs, cat, R, fit[2], 0.0, 0.0, 0.0, 1.0, 0.0, 0
+        rms_a, rms_b = _shared_rms(obs, cat, fit[2], obs2, cat2, fit2[2])
+        if len(obs2) > len(obs) and rms_b <= 1.5 * rms_a + 0.1 * sigma_px:
+            obs, cat, fit, n_cone = obs2, cat2, fit2, n_cone2
+    R = fit[1]
+    dist = np.empty(len(obs))
+    for s in range(len(obs)):
+        v = vectors[cat[s]]
+        d2 = 0.0
+        for k in range(3):
+            ck = R[k, 0] * v[0] + R[k, 1] * v[1] + R[k, 2] * v[2]
+            d2 += (bearings[obs[s], k] - ck) ** 2
+        dist[s] = math.sqrt(d2)
+    area = 1.0 - math.cos(field_rad)
+    p_false = _false_match_radii(dist, n_cone, area, len(xy), 3, hypotheses, radii)
+    refusal = ACCEPTED
+    f_scale = 0.0
+    if len(obs) >= _MIN_STARS_SCALE_CHECK:
+        f_scale, sigma = _free_focal_step(R, vectors[cat], xy[obs], focal, cx, cy)
+        df = f_scale - focal
+        if abs(df) > 5.0 * sigma and abs(df) > _SCALE_TOLERANCE * focal:
+            refusal = WRONG_SCALE
+    if refusal == ACCEPTED and p_false > max_p:
+        refusal = UNCONVINCING
+    # catalog stars inside the image (as simulate.project_catalog)
+    n_front = _cone(R[2], _chord(half_diagonal + 0.01) ** 2, sky, work)
+    inside = 0
+    limit = math.cos(half_diagonal + 0.01)
+    for m in range(n_front):
+        v = vectors[work[m]]
+        c0 = R[0, 0] * v[0] + R[0, 1] * v[1] + R[0, 2] * v[2]
+        c1 = R[1, 0] * v[0] + R[1, 1] * v[1] + R[1, 2] * v[2]
+        c2 = R[2, 0] * v[0] + R[2, 1] * v[1] + R[2, 2] * v[2]
+        if c2 > 0.0 and c2 > limit:
+            x, y = cx + focal * c0 / c2, cy + focal * c1 / c2
+            if 0.0 <= x <= width and 0.0 <= y <= height:
+                inside += 1
+    expected = min(len(xy), inside)
+    if refusal == ACCEPTED and len(obs) < min_matched_fraction * expected:
+        refusal = TOO_FEW
+    return (FOUND, refusal, obs, cat, R, fit[2], fit[6], fit[7], fit[8], p_false, f_scale,
+            expected)  # fmt: skip
+
+
+# ---------------------------------------------------------------------------- Python side
+
+
+def identify(
+    bearings: np.ndarray,
+    order: np.ndarray,
+    database: PairDatabase,
+    settings: MatchSettings,
+    *,
+    R_prior: np.ndarray | None = None,
+    prior_sigma_deg: float = 1.0,
+) -> IdentifyOutcome | None:
+    """Pyramid identification (or tracking near ``R_prior``), as ``Pyramid().identify`` (or
+    ``Tracking(...).identify``) would do it; None when the numpy path must decide."""
+    order = np.asarray(order)
+    used = order[: settings.max_screen_stars]
+    screened = np.ascontiguousarray(bearings[used] if len(used) < len(bearings) else bearings)
+    local_order = np.arange(len(used)) if len(used) < len(bearings) else order
+    local_order = np.ascontiguousarray(local_order[: settings.max_stars], dtype=np.int64)
+    if len(local_order) < 3:
+        return IdentifyOutcome(None, "fewer than 3 stars", 0)
+    radii = np.asarray(settings.match_radii_rad, dtype=np.float64)
+    sky = database_sky(database)
+    if R_prior is None:
+        parity = settings.parity or 0
+        pairs = (database.pair_a, database.pair_b, database.pair_angle_rad)
+        rows = None
+    else:
+        radius = _field_radius(screened, settings.match_radius_rad) + 3.0 * math.radians(
+            prior_sigma_deg
+        )
+        rows = _cone_rows(np.ascontiguousarray(R_prior[2]), radius, sky.args())
+        sky = local_sky(sky.vectors[rows])
+        pairs = _local_pairs(sky.vectors, database.max_angle_rad)
+        parity = 1 if np.linalg.det(R_prior) > 0 else -1
+    status, obs, cat, R, par, p, hypotheses, proposed, best_p = _identify(
+        screened,
+        local_order,
+        *pairs,
+        database.max_angle_rad,
+        sky.args(),
+        settings.pair_tol_rad,
+        radii,
+        settings.max_false_match_probability,
+        parity,
+        settings.max_hypotheses,
+    )
+    if status == DEFER:
+        return None
+    if status == AMBIGUOUS:
+        return IdentifyOutcome(
+            None,
+            "parity ambiguous: the identified stars are nearly collinear (give the parity to "
+            "solve)",
+            hypotheses,
+        )
+    if status == NOT_FOUND:
+        reason = _not_found_reason(hypotheses, proposed, best_p, settings, R_prior is not None)
+        return IdentifyOutcome(None, reason, hypotheses)
+    if len(used) < len(bearings):
+        obs = used[obs]
+    if rows is not None:
+        cat = rows[cat]
+    found = Identification(obs.astype(np.intp), cat.astype(np.intp), R, int(par), p, hypotheses)
+    return IdentifyOutcome(found, "", hypotheses)
+
+
+def _not_found_reason(
+    hypotheses: int, proposed: int, best_p: float, settings: MatchSettings, tracking: bool
+) -> str:
+    """As HypothesisTester.outcome."""
+    if hypotheses >= settings.max_hypotheses:
+        return f"gave up after {hypotheses} hypotheses"
+    if hypotheses == 0:
+        return "no star triangle matches the catalog"
+    if proposed == 0:
+        return "no hypothesis had enough agreeing stars to be worth verifying"
+    if best_p < 1.0:
+        return (
+            f"best hypothesis not convincing (false-match probability {best_p:.2g} > "
+            f"{settings.max_false_match_probability:g})"
+        )
+    return "no hypothesis agreed with enough stars to be convincing"
+
+
+@dataclass(frozen=True, eq=False)
+class Concluded:
+    """The fit of an identification (see api.conclude): matched ``obs`` / ``cat`` rows, the
+    attitude, residuals (n, 2, px), rms (px), 1-sigma boresight / roll (arcsec), the final
+    false-match probability, and the refusal (``ACCEPTED`` or a code) with the focal length
+    the scale check found and the number of stars expected."""
+
+    obs: np.ndarray
+    cat: np.ndarray
+    R_cam_from_icrs: np.ndarray
+    residuals_px: np.ndarray
+    rms_px: float
+    sigma_boresight_arcsec: float
+    sigma_roll_arcsec: float
+    false_match_probability: float
+    refusal: int
+    scale_focal_px: float
+    expected: int
+
+
+def conclude(
+    found: Identification,
+    xy: np.ndarray,
+    camera,
+    database: PairDatabase,
+    settings: MatchSettings,
+    *,
+    sigma_px: float,
+    min_matched_fraction: float,
+) -> Concluded | None:
+    """The attitude fit and refusals of ``api.conclude`` for a pinhole camera with the focal
+    length held; None when the numpy path must decide."""
+    out = _conclude(
+        np.ascontiguousarray(found.obs_index, dtype=np.int64),
+        np.ascontiguousarray(found.cat_index, dtype=np.int64),
+        np.ascontiguousarray(found.R_cam_from_icrs, dtype=np.float64),
+        np.ascontiguousarray(xy, dtype=np.float64),
+        database_sky(database).args(),
+        float(camera.focal_px),
+        float(camera.cx),
+        float(camera.cy),
+        float(camera.width),
+        float(camera.height),
+        camera.half_diagonal_rad,
+        np.asarray(settings.match_radii_rad, dtype=np.float64),
+        float(sigma_px),
+        int(found.hypotheses),
+        settings.max_false_match_probability,
+        float(min_matched_fraction),
+    )
+    if out[0] == DEFER:
+        return None
+    return Concluded(*out[2:10], out[1], *out[10:])
