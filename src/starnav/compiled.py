@@ -22,8 +22,12 @@ that is read-only): compiled once per installation, in ~10 s, loaded in ~0.1 s a
 from __future__ import annotations
 
 import math
+import sys
+import threading
 import weakref
-from dataclasses import dataclass
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numba import njit
@@ -52,7 +56,8 @@ ACCEPTED, WRONG_SCALE, UNCONVINCING, TOO_FEW = 0, 1, 2, 3
 class Sky:
     """A catalog's unit vectors and their RA / Dec grid: cell ``i * n_ra + j`` (Dec band i
     from the south pole, RA column j) holds catalog rows ``rows[start[c]:start[c + 1]]``.
-    ``n_dec = 0``: no grid, cone searches test every vector (a few dozen local stars)."""
+    Searches see only the rows where ``allowed`` is True (tracking: the stars near the
+    prior)."""
 
     vectors: np.ndarray
     start: np.ndarray
@@ -60,9 +65,19 @@ class Sky:
     n_dec: int
     n_ra: int
     step_rad: float
+    allowed: np.ndarray
 
     def args(self) -> tuple:
-        return (self.vectors, self.start, self.rows, self.n_dec, self.n_ra, self.step_rad)
+        """The tuple the kernels take."""
+        return (
+            self.vectors,
+            self.start,
+            self.rows,
+            self.n_dec,
+            self.n_ra,
+            self.step_rad,
+            self.allowed,
+        )
 
 
 def sky_grid(vectors: np.ndarray, step_deg: float = GRID_STEP_DEG) -> Sky:
@@ -77,13 +92,7 @@ def sky_grid(vectors: np.ndarray, step_deg: float = GRID_STEP_DEG) -> Sky:
     cell = i * n_ra + j
     rows = np.argsort(cell, kind="stable").astype(np.int64)
     start = np.searchsorted(cell[rows], np.arange(n_dec * n_ra + 1)).astype(np.int64)
-    return Sky(vectors, start, rows, n_dec, n_ra, step)
-
-
-def local_sky(vectors: np.ndarray) -> Sky:
-    """A ``Sky`` without grid (cone searches test each of the few ``vectors``)."""
-    none = np.zeros(1, dtype=np.int64)
-    return Sky(np.ascontiguousarray(vectors, dtype=np.float64), none, none, 0, 0, 1.0)
+    return Sky(vectors, start, rows, n_dec, n_ra, step, np.ones(len(vectors), dtype=np.bool_))
 
 
 _SKIES: weakref.WeakKeyDictionary[PairDatabase, Sky] = weakref.WeakKeyDictionary()
@@ -118,19 +127,10 @@ def _angle(a, b):
 
 @njit(cache=True)
 def _cone(axis, chord2, sky, out):
-    """Rows of the sky's vectors within chord sqrt(chord2) of ``axis`` written to ``out``;
-    returns how many."""
-    vectors, start, rows, n_dec, n_ra, step = sky
+    """Allowed rows of the sky's vectors within chord sqrt(chord2) of ``axis``, written to
+    ``out``; returns how many."""
+    vectors, start, rows, n_dec, n_ra, step, allowed = sky
     n = 0
-    if n_dec == 0:
-        for r in range(len(vectors)):
-            d = 0.0
-            for k in range(3):
-                d += (vectors[r, k] - axis[k]) ** 2
-            if d <= chord2:
-                out[n] = r
-                n += 1
-        return n
     radius = 2.0 * math.asin(min(1.0, 0.5 * math.sqrt(chord2))) + 1e-9
     dec0 = math.asin(max(-1.0, min(1.0, axis[2])))
     ra0 = math.atan2(axis[1], axis[0])
@@ -150,6 +150,8 @@ def _cone(axis, chord2, sky, out):
             cell = i * n_ra + jj % n_ra
             for m in range(start[cell], start[cell + 1]):
                 r = rows[m]
+                if not allowed[r]:
+                    continue
                 d = 0.0
                 for k in range(3):
                     d += (vectors[r, k] - axis[k]) ** 2
@@ -212,6 +214,15 @@ def _field_radius(bearings, radius):
 
 
 @njit(cache=True)
+def _det3(a, b, c):
+    return (
+        a[0] * (b[1] * c[2] - b[2] * c[1])
+        - a[1] * (b[0] * c[2] - b[2] * c[0])
+        + a[2] * (b[0] * c[1] - b[1] * c[0])
+    )
+
+
+@njit(cache=True)
 def _wahba(b, r, parity):
     """As attitude.wahba: R_cam_from_icrs of pairs (b camera, r ICRS), mirrored for parity -1."""
     B = np.zeros((3, 3))
@@ -221,7 +232,7 @@ def _wahba(b, r, parity):
             for j in range(3):
                 B[i, j] += bi * r[k, j]
     U, _, Vt = np.linalg.svd(B)
-    d = np.linalg.det(U) * np.linalg.det(Vt)
+    d = _det3(U[:, 0], U[:, 1], U[:, 2]) * _det3(Vt[0], Vt[1], Vt[2])
     for i in range(3):
         U[i, 2] *= d
     R = U @ Vt
@@ -343,10 +354,10 @@ def _match(bearings, R, sky, radius, cov, gate, field_rad, work):
 
 
 @njit(cache=True)
-def _catalog_triangles(pair_a, pair_b, pair_angle, vectors, s_ij, s_ik, s_jk, tol):
+def _catalog_triangles(pair_a, pair_b, pair_angle, vectors, allowed, s_ij, s_ik, s_jk, tol, head):
     """As pyramid.catalog_triangles, in the same order: rows (a, b, c) with sides ab, ac, bc
-    within ``tol`` of the measured ij, ik, jk."""
-    n_cat = len(vectors)
+    within ``tol`` of the measured ij, ik, jk, of allowed stars only. ``head``: -1 per catalog
+    row (work space, left as found)."""
     lo1 = np.searchsorted(pair_angle, s_ij - tol)
     hi1 = np.searchsorted(pair_angle, s_ij + tol)
     lo2 = np.searchsorted(pair_angle, s_ik - tol)
@@ -355,34 +366,29 @@ def _catalog_triangles(pair_a, pair_b, pair_angle, vectors, s_ij, s_ik, s_jk, to
     out = np.empty((0, 3), dtype=np.int64)
     if n1 == 0 or n2 == 0:
         return out
-    # side ik both ways, grouped by its first star (stable counting sort)
-    a2 = np.empty(2 * n2, dtype=np.int64)
-    c2 = np.empty(2 * n2, dtype=np.int64)
-    for k in range(n2):
-        a2[k], c2[k] = pair_a[lo2 + k], pair_b[lo2 + k]
-        a2[n2 + k], c2[n2 + k] = pair_b[lo2 + k], pair_a[lo2 + k]
-    count = np.zeros(n_cat + 1, dtype=np.int64)
-    for k in range(2 * n2):
-        count[a2[k] + 1] += 1
-    for k in range(n_cat):
-        count[k + 1] += count[k]
-    fill = count[:n_cat].copy()
-    grouped = np.empty(2 * n2, dtype=np.int64)
-    for k in range(2 * n2):
-        grouped[fill[a2[k]]] = c2[k]
-        fill[a2[k]] += 1
+    # side ik both ways, as a list per first star in the order of the pairs (entry k of the
+    # doubled list: pair lo2 + k, then reversed for k >= n2)
+    after = np.empty(2 * n2, dtype=np.int64)
+    for k in range(2 * n2 - 1, -1, -1):
+        x, y = pair_a[lo2 + k % n2], pair_b[lo2 + k % n2]
+        first, other = (x, y) if k < n2 else (y, x)
+        if allowed[first] and allowed[other]:
+            after[k] = head[first]
+            head[first] = k
     cos_hi = math.cos(s_jk + tol)
     cos_lo = math.cos(max(s_jk - tol, 0.0))
     cap = 64
     out = np.empty((cap, 3), dtype=np.int64)
     n = 0
     for k in range(2 * n1):
-        if k < n1:
-            a, b = np.int64(pair_a[lo1 + k]), np.int64(pair_b[lo1 + k])
-        else:
-            a, b = np.int64(pair_b[lo1 + k - n1]), np.int64(pair_a[lo1 + k - n1])
-        for m in range(count[a], count[a + 1]):
-            c = grouped[m]
+        x, y = np.int64(pair_a[lo1 + k % n1]), np.int64(pair_b[lo1 + k % n1])
+        a, b = (x, y) if k < n1 else (y, x)
+        if not (allowed[a] and allowed[b]):
+            continue
+        m = head[a]
+        while m >= 0:
+            c = np.int64(pair_b[lo2 + m]) if m < n2 else np.int64(pair_a[lo2 + m - n2])
+            m = after[m]
             if b == c:
                 continue
             cos_bc = vectors[b, 0] * vectors[c, 0] + vectors[b, 1] * vectors[c, 1]
@@ -395,16 +401,10 @@ def _catalog_triangles(pair_a, pair_b, pair_angle, vectors, s_ij, s_ik, s_jk, to
                     out = bigger
                 out[n, 0], out[n, 1], out[n, 2] = a, b, c
                 n += 1
+    for k in range(n2):  # leave the work space as found
+        head[pair_a[lo2 + k]] = -1
+        head[pair_b[lo2 + k]] = -1
     return out[:n]
-
-
-@njit(cache=True)
-def _det3(a, b, c):
-    return (
-        a[0] * (b[1] * c[2] - b[2] * c[1])
-        - a[1] * (b[0] * c[2] - b[2] * c[0])
-        + a[2] * (b[0] * c[1] - b[1] * c[0])
-    )
 
 
 @njit(cache=True)
@@ -420,6 +420,7 @@ def _identify(bearings, order, pair_a, pair_b, pair_angle, max_angle, sky, tol, 
     n_radii = len(radii)
     screen2 = _chord(radius) ** 2
     work = np.empty(len(vectors), dtype=np.int64)
+    head = np.full(len(vectors), -1, dtype=np.int64)
     no_cov = np.zeros((3, 3))
     hypotheses, proposed, best_p = 0, 0, 1.0
     empty = np.empty(0, dtype=np.int64)
@@ -439,7 +440,7 @@ def _identify(bearings, order, pair_a, pair_b, pair_angle, max_angle, sky, tol, 
                 if min(s01, s02, s12) < 2.0 * tol or max(s01, s02, s12) > max_angle + tol:
                     continue
                 triples = _catalog_triangles(
-                    pair_a, pair_b, pair_angle, vectors, s01, s02, s12, tol
+                    pair_a, pair_b, pair_angle, vectors, sky[6], s01, s02, s12, tol, head
                 )
                 m = len(triples)
                 if m == 0:
@@ -522,31 +523,10 @@ def _identify(bearings, order, pair_a, pair_b, pair_angle, max_angle, sky, tol, 
 
 
 @njit(cache=True)
-def _local_pairs(vectors, max_angle):
-    """As database.build_pairs: pairs (a < b) closer than ``max_angle``, sorted by angle."""
-    n = len(vectors)
-    limit2 = _chord(max_angle) ** 2
-    a = np.empty(n * (n - 1) // 2, dtype=np.int64)
-    b = np.empty(n * (n - 1) // 2, dtype=np.int64)
-    angle = np.empty(n * (n - 1) // 2)
-    m = 0
-    for i in range(n):
-        for j in range(i + 1, n):
-            d2 = 0.0
-            for k in range(3):
-                d2 += (vectors[i, k] - vectors[j, k]) ** 2
-            if d2 <= limit2:
-                a[m], b[m], angle[m] = i, j, _angle(vectors[i], vectors[j])
-                m += 1
-    order = np.argsort(angle[:m], kind="mergesort")
-    return a[:m][order], b[:m][order], angle[:m][order]
-
-
-@njit(cache=True)
 def _cone_rows(axis, radius, sky):
     work = np.empty(len(sky[0]), dtype=np.int64)
     n = _cone(axis, _chord(radius) ** 2, sky, work)
-    return np.sort(work[:n])
+    return work[:n].copy()
 
 
 # ---------------------------------------------------------------------------- attitude fit
@@ -587,6 +567,55 @@ def _residuals_jacobian(R, icrs, xy, focal, cx, cy, with_focal):
 
 
 @njit(cache=True)
+def _cholesky(N):
+    """Lower-triangular L with L L^T = N (a few parameters), and whether N was positive
+    definite."""
+    p = len(N)
+    L = np.zeros((p, p))
+    for i in range(p):
+        for j in range(i + 1):
+            s = N[i, j]
+            for k in range(j):
+                s -= L[i, k] * L[j, k]
+            if i == j:
+                if s <= 0.0:
+                    return L, False
+                L[i, i] = math.sqrt(s)
+            else:
+                L[i, j] = s / L[j, j]
+    return L, True
+
+
+@njit(cache=True)
+def _cholesky_solve(L, g):
+    """x with L L^T x = g."""
+    p = len(g)
+    y = np.empty(p)
+    for i in range(p):
+        s = g[i]
+        for k in range(i):
+            s -= L[i, k] * y[k]
+        y[i] = s / L[i, i]
+    x = np.empty(p)
+    for i in range(p - 1, -1, -1):
+        s = y[i]
+        for k in range(i + 1, p):
+            s -= L[k, i] * x[k]
+        x[i] = s / L[i, i]
+    return x
+
+
+@njit(cache=True)
+def _normal_step(J, res):
+    """The least-squares step -(J^T J)^-1 J^T res (3 or 4 parameters), and whether J^T J was
+    positive definite."""
+    L, definite = _cholesky(J.T @ J)
+    if not definite:
+        return np.zeros(J.shape[1]), False
+    return _cholesky_solve(L, -(J.T @ res)), True
+
+
+@njit(cache=True)
 def _fit(R0, icrs, xy, focal, cx, cy):
     """As refine.refine_attitude with the focal length held. Returns (ok, R, residuals (n, 2),
     rotation covariance, variance_px2, leverage (n, 2, 2), rms, sigma boresight / roll
@@ -598,15 +627,17 @@ def _fit(R0, icrs, xy, focal, cx, cy):
         res, J = _residuals_jacobian(R, icrs, xy, focal, cx, cy, False)
         if cost0 < 0:
             cost0 = res @ res
-        step = np.linalg.lstsq(J, -res)[0]
+        step, definite = _normal_step(J, res)
+        if not definite:
+            break
         R = _rotate_by(step, R)
         if np.max(np.abs(step)) < _STEP_TOL_RAD:
             break
     res, J = _residuals_jacobian(R, icrs, xy, focal, cx, cy, False)
     cost = res @ res
     ok = np.all(np.isfinite(res)) and cost <= cost0
-    N = J.T @ J
-    ok = ok and abs(np.linalg.det(N)) > 0.0
+    L, definite = _cholesky(J.T @ J)
+    ok = ok and definite
     residuals = np.empty((n, 2))
     residuals[:, 0] = res[:n]
     residuals[:, 1] = res[n:]
@@ -614,7 +645,11 @@ def _fit(R0, icrs, xy, focal, cx, cy):
     if not ok:
         return False, R, residuals, np.zeros((3, 3)), 0.0, leverage, 0.0, 0.0, 0.0
     s2 = cost / max(2 * n - 3, 1)
-    N_inv = np.linalg.inv(N)
+    N_inv = np.empty((3, 3))
+    for i in range(3):
+        unit = np.zeros(3)
+        unit[i] = 1.0
+        N_inv[:, i] = _cholesky_solve(L, unit)
     cov = s2 * N_inv
     for s in range(n):
         for i in range(2):
@@ -726,13 +761,13 @@ def _shared_rms(obs_a, cat_a, res_a, obs_b, cat_b, res_b):
 def _free_focal_step(R, icrs, xy, focal, cx, cy):
     """As refine.free_focal_step: (focal length, its 1-sigma) from one Gauss-Newton step."""
     res, J = _residuals_jacobian(R, icrs, xy, focal, cx, cy, True)
-    step = np.linalg.lstsq(J, -res)[0]
+    step, definite = _normal_step(J, res)
+    if not definite:
+        return focal, np.inf
     left = res + J @ step
     s2 = (left @ left) / max(len(res) - 4, 1)
-    N = J.T @ J
-    var = np.inf
-    if abs(np.linalg.det(N)) > 0.0:
-        var = s2 * np.linalg.inv(N)[3, 3]
+    L, _ = _cholesky(J.T @ J)
+    var = s2 / L[3, 3] ** 2  # (J^T J)^-1 [3, 3]
     f = focal * math.exp(step[3])
     return f, f * math.sqrt(max(var, 0.0))
 
@@ -811,6 +846,36 @@ def _conclude(obs, cat, R, xy, sky, focal, cx, cy, width, height, half_diagonal,
 
 # ---------------------------------------------------------------------------- Python side
 
+_LOADED: set[str] = set()  # kernels this process has called (their code is loaded)
+
+
+def _say_compiling() -> None:
+    if "notice" not in _LOADED:  # once per process
+        _LOADED.add("notice")
+        print(
+            "starnav: compiling the solver's machine code (once per installation, ~30 s)",
+            file=sys.stderr,
+            flush=True,
+        )
+
+
+@contextmanager
+def _first_use(kernel: str) -> Iterator[None]:
+    """Around a kernel's first call in a process: it loads the cached machine code (~0.1 s),
+    or compiles it, the first time after installing (~30 s on 2 cores in all). When the wait
+    passes a second, say why on stderr."""
+    if kernel in _LOADED:
+        yield
+        return
+    notice = threading.Timer(1.0, _say_compiling)
+    notice.daemon = True
+    notice.start()
+    try:
+        yield
+    finally:
+        notice.cancel()
+        _LOADED.add(kernel)
+
 
 def identify(
     bearings: np.ndarray,
@@ -832,30 +897,31 @@ def identify(
         return IdentifyOutcome(None, "fewer than 3 stars", 0)
     radii = np.asarray(settings.match_radii_rad, dtype=np.float64)
     sky = database_sky(database)
-    if R_prior is None:
-        parity = settings.parity or 0
-        pairs = (database.pair_a, database.pair_b, database.pair_angle_rad)
-        rows = None
-    else:
+    pairs = (database.pair_a, database.pair_b, database.pair_angle_rad)
+    parity = settings.parity or 0
+    if R_prior is not None:
+        # the catalog stars the prior allows: within the field plus 3 sigma of its boresight
         radius = _field_radius(screened, settings.match_radius_rad) + 3.0 * math.radians(
             prior_sigma_deg
         )
-        rows = _cone_rows(np.ascontiguousarray(R_prior[2]), radius, sky.args())
-        sky = local_sky(sky.vectors[rows])
-        pairs = _local_pairs(sky.vectors, database.max_angle_rad)
+        allowed = np.zeros(len(sky.vectors), dtype=np.bool_)
+        with _first_use("cone"):
+            allowed[_cone_rows(np.ascontiguousarray(R_prior[2]), radius, sky.args())] = True
+        sky = replace(sky, allowed=allowed)
         parity = 1 if np.linalg.det(R_prior) > 0 else -1
-    status, obs, cat, R, par, p, hypotheses, proposed, best_p = _identify(
-        screened,
-        local_order,
-        *pairs,
-        database.max_angle_rad,
-        sky.args(),
-        settings.pair_tol_rad,
-        radii,
-        settings.max_false_match_probability,
-        parity,
-        settings.max_hypotheses,
-    )
+    with _first_use("identify"):
+        status, obs, cat, R, par, p, hypotheses, proposed, best_p = _identify(
+            screened,
+            local_order,
+            *pairs,
+            database.max_angle_rad,
+            sky.args(),
+            settings.pair_tol_rad,
+            radii,
+            settings.max_false_match_probability,
+            parity,
+            settings.max_hypotheses,
+        )
     if status == DEFER:
         return None
     if status == AMBIGUOUS:
@@ -870,8 +936,6 @@ def identify(
         return IdentifyOutcome(None, reason, hypotheses)
     if len(used) < len(bearings):
         obs = used[obs]
-    if rows is not None:
-        cat = rows[cat]
     found = Identification(obs.astype(np.intp), cat.astype(np.intp), R, int(par), p, hypotheses)
     return IdentifyOutcome(found, "", hypotheses)
 
@@ -926,24 +990,25 @@ def conclude(
 ) -> Concluded | None:
     """The attitude fit and refusals of ``api.conclude`` for a pinhole camera with the focal
     length held; None when the numpy path must decide."""
-    out = _conclude(
-        np.ascontiguousarray(found.obs_index, dtype=np.int64),
-        np.ascontiguousarray(found.cat_index, dtype=np.int64),
-        np.ascontiguousarray(found.R_cam_from_icrs, dtype=np.float64),
-        np.ascontiguousarray(xy, dtype=np.float64),
-        database_sky(database).args(),
-        float(camera.focal_px),
-        float(camera.cx),
-        float(camera.cy),
-        float(camera.width),
-        float(camera.height),
-        camera.half_diagonal_rad,
-        np.asarray(settings.match_radii_rad, dtype=np.float64),
-        float(sigma_px),
-        int(found.hypotheses),
-        settings.max_false_match_probability,
-        float(min_matched_fraction),
-    )
+    with _first_use("conclude"):
+        out = _conclude(
+            np.ascontiguousarray(found.obs_index, dtype=np.int64),
+            np.ascontiguousarray(found.cat_index, dtype=np.int64),
+            np.ascontiguousarray(found.R_cam_from_icrs, dtype=np.float64),
+            np.ascontiguousarray(xy, dtype=np.float64),
+            database_sky(database).args(),
+            float(camera.focal_px),
+            float(camera.cx),
+            float(camera.cy),
+            float(camera.width),
+            float(camera.height),
+            camera.half_diagonal_rad,
+            np.asarray(settings.match_radii_rad, dtype=np.float64),
+            float(sigma_px),
+            int(found.hypotheses),
+            settings.max_false_match_probability,
+            float(min_matched_fraction),
+        )
     if out[0] == DEFER:
         return None
     return Concluded(*out[2:10], out[1], *out[10:])

@@ -8,6 +8,8 @@ for both parities. Roll is the position angle of image "up" (-y) from North thro
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 ARCSEC_PER_RAD = 180.0 / np.pi * 3600.0
@@ -55,14 +57,18 @@ def attitude_from_radec_roll(
 
 def radec_roll_from_attitude(R_cam_from_icrs: np.ndarray) -> tuple[float, float, float, int]:
     """(ra_deg, dec_deg, roll_deg, parity) of an attitude matrix; roll in [0, 360)."""
-    R = np.asarray(R_cam_from_icrs, dtype=float)
-    z = R[2]
-    ra, dec = unit_to_radec(z)
-    north, east = north_east(z)
-    up = -R[1]
-    roll = np.degrees(np.arctan2(up @ east, up @ north)) % 360.0
-    parity = 1 if np.linalg.det(R) > 0 else -1
-    return float(np.degrees(ra)), float(np.degrees(dec)), float(roll), parity
+    (x0, x1, x2), (y0, y1, y2), (z0, z1, z2) = np.asarray(R_cam_from_icrs, dtype=float).tolist()
+    # as unit_to_radec and north_east, on scalars (this runs once per solve)
+    ra = math.atan2(z1, z0) % (2.0 * math.pi)
+    dec = math.atan2(z2, math.hypot(z0, z1))
+    east = (-math.sin(ra), math.cos(ra))  # z component 0
+    north = (-math.sin(dec) * math.cos(ra), -math.sin(dec) * math.sin(ra), math.cos(dec))
+    up = (-y0, -y1, -y2)
+    up_east = up[0] * east[0] + up[1] * east[1]
+    up_north = up[0] * north[0] + up[1] * north[1] + up[2] * north[2]
+    roll = math.degrees(math.atan2(up_east, up_north)) % 360.0
+    det = x0 * (y1 * z2 - y2 * z1) - x1 * (y0 * z2 - y2 * z0) + x2 * (y0 * z1 - y1 * z0)
+    return math.degrees(ra), math.degrees(dec), roll, 1 if det > 0 else -1
 
 
 def angle_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:

@@ -104,9 +104,10 @@ def check_star_list(
             f"{width:g} x {height:g} image"
         )
     rounded = np.round(xy, 6)
-    _, first, counts = np.unique(rounded, axis=0, return_index=True, return_counts=True)
-    if (counts > 1).any():
-        row = int(first[np.argmax(counts > 1)])
+    order = np.lexsort((rounded[:, 1], rounded[:, 0]))  # stable: first occurrence first
+    same = np.flatnonzero((np.diff(rounded[order], axis=0) == 0).all(axis=1))
+    if len(same):
+        row = int(order[same[0]])
         raise StarListError(f"duplicate star position ({xy[row, 0]:g}, {xy[row, 1]:g}) px")
     if labels is None:
         labels = tuple(str(n + 1) for n in range(len(xy)))
