@@ -273,8 +273,11 @@ def check_frames(catalog, fov_deg: float, width: int, seed: int) -> list[Frame]:
     return frames
 
 
-def starnav_solve(frame: Frame, catalog, fov_deg: float, width: int, sigma_px: float) -> dict:
-    """starnav's answer in the adapters' form (attitude kept as the matrix)."""
+def starnav_solve(
+    frame: Frame, catalog, fov_deg: float, width: int, sigma_px: float, compiled: bool = True
+) -> dict:
+    """starnav's answer in the adapters' form (attitude kept as the matrix); ``compiled``
+    False: its numpy path."""
     t0 = time.perf_counter()
     try:
         r = solve_verbose(
@@ -284,6 +287,7 @@ def starnav_solve(frame: Frame, catalog, fov_deg: float, width: int, sigma_px: f
             brightness=frame.brightness,
             catalog=catalog,
             sigma_px=sigma_px,
+            compiled=compiled,
         )
     except StarnavError as exc:  # fewer than 3 points, for example
         return {"error": str(exc), "time_ms": None}
@@ -336,7 +340,7 @@ def peak_rss_mb() -> float:
         return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
 
 
-def starnav_worker() -> None:
+def starnav_worker(compiled: bool) -> None:
     """Solve JSON-line frames from stdin with starnav (peers' protocol) and report memory."""
     catalog = load_catalog(None, mag_limit=MAG_LIMIT)
     for line in sys.stdin:
@@ -344,7 +348,9 @@ def starnav_worker() -> None:
         xy = np.asarray(fr["xy"], dtype=float).reshape(-1, 2)
         get_database(catalog, make_camera(width=fr["width"], height=None, fov_deg=fr["fov_deg"]))
         frame = Frame(xy, np.arange(len(xy), 0, -1, dtype=float), np.eye(3), 1, 0, 0)
-        out = starnav_solve(frame, catalog, fr["fov_deg"], fr["width"], fr["sigma_px"])
+        out = starnav_solve(
+            frame, catalog, fr["fov_deg"], fr["width"], fr["sigma_px"], compiled=compiled
+        )
         out.pop("R", None)
         print(json.dumps(out))
     print(json.dumps({"done": True, "peak_rss_mb": peak_rss_mb()}))
@@ -371,7 +377,8 @@ class Solver:
 def check_conventions(solver: Solver, db_arg, frames, fov, width, catalog) -> dict:
     """Run the noise-free frames; stop unless every answer is within CHECK_TOL_DEG."""
     if solver.peer is None:
-        outs = [starnav_solve(f, catalog, fov, width, 0.1) for f in frames]
+        compiled = "--numpy" not in solver.options
+        outs = [starnav_solve(f, catalog, fov, width, 0.1, compiled) for f in frames]
     else:
         outs, _ = run_adapter(
             solver.python,
@@ -412,6 +419,28 @@ def summarize(frames, outs) -> dict:
     return row
 
 
+def targets(rows: list[tuple[Solver, dict, dict]]) -> list[str]:
+    """The issue's targets for one scenario, from this run's rows (the first row is starnav)."""
+    ours = rows[0][1]
+    peers = [(solver, r) for solver, r, _ in rows if solver.peer is not None]
+    best = max(r["correct"] for _, r in peers)
+    wrong = ours["wrong"] + ours["inexact"]
+    out = [
+        f"Targets: solved {ours['correct']} vs the best peer's {best} "
+        f"({'met' if ours['correct'] >= best else 'NOT met'}), {wrong} wrong; max "
+        f"{fmt_ms(ours['max_ms'])} ms (<= 50: {'met' if ours['max_ms'] <= 50 else 'NOT met'}); "
+        "median against"
+    ]
+    for solver, r in peers:
+        ratio = ours["median_ms"] / r["median_ms"]
+        goal = 1 / 3 if solver.peer.name == "cedar-solve" else 3.0
+        verdict = "met" if ratio <= goal else "NOT met"
+        out.append(
+            f"{solver.label} ({solver.database}): x{ratio:.2f} (target x{goal:.2g}: {verdict})"
+        )
+    return [out[0] + " " + "; ".join(out[1:]) + "."]
+
+
 def fmt_ms(v: float) -> str:
     return f"{v:.2f}" if v < 10 else f"{v:.1f}"
 
@@ -444,9 +473,10 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=2026)
     parser.add_argument("--out", type=Path, default=DOC, help="markdown file ('-': none)")
     parser.add_argument("--starnav-worker", action="store_true", help=argparse.SUPPRESS)
+    parser.add_argument("--numpy", action="store_true", help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.starnav_worker:
-        starnav_worker()
+        starnav_worker(compiled=not args.numpy)
         return
     t_start = time.time()
     root = cache_dir()
@@ -460,7 +490,17 @@ def main() -> None:
         db = get_database(catalog, make_camera(width=width, height=None, fov_deg=fov))
         size = db.path.stat().st_size if db.path else db.nbytes
         starnav_dbs[fov] = {"build_s": db.build_s, "bytes": size}
-    solvers = [Solver(f"starnav {starnav.__version__}", "Hp <= 6 pairs", None, None, False)]
+    solvers = [
+        Solver(f"starnav {starnav.__version__}", "Hp <= 6 pairs", None, None, False),
+        Solver(
+            f"starnav {starnav.__version__}",
+            "Hp <= 6 pairs; numpy path (`compiled=False`)",
+            None,
+            None,
+            False,
+            ("--numpy",),
+        ),
+    ]
     installs = {}
     for peer in PEERS:
         python, installs[peer.name] = peer_python(peer, root)
@@ -507,11 +547,17 @@ def main() -> None:
             db_arg, db_info = database_for(solver, fov)
             t0 = time.time()
             if solver.peer is None:
+                compiled = "--numpy" not in solver.options
                 outs = [
-                    starnav_solve(f, catalog, fov, width, sigma)
+                    starnav_solve(f, catalog, fov, width, sigma, compiled)
                     for f in tqdm(frames, desc=f"starnav {name}", file=sys.stderr, leave=False)
                 ]
-                cmd = [sys.executable, str(Path(__file__).resolve()), "--starnav-worker"]
+                cmd = [
+                    sys.executable,
+                    str(Path(__file__).resolve()),
+                    "--starnav-worker",
+                    *solver.options,
+                ]
                 proc = subprocess.run(
                     cmd,
                     input="".join(json.dumps(p) + "\n" for p in payload),
@@ -544,6 +590,8 @@ def main() -> None:
             f"starnav's time is `SolveResult.time_ms` (identification and fit); its whole "
             f"`solve_verbose` call, input checks and database look-up included, took "
             f"{np.median(calls):.2f} ms median, {np.percentile(calls, 95):.2f} ms p95.",
+            "",
+            *targets(rows),
             "",
         ]
         if "in_view" in spec:

@@ -21,7 +21,7 @@ from scipy.spatial.transform import Rotation
 from tqdm import tqdm
 
 from docblock import replace_block
-from lost_in_space import machine
+from lost_in_space import machine, warm_up
 from starnav.api import solve_verbose
 from starnav.camera import Camera
 from starnav.catalog import load_catalog
@@ -53,18 +53,7 @@ def main() -> None:
     R = attitude_from_radec_roll(rng.uniform(0, 360), rng.uniform(-60, 60), rng.uniform(0, 360))
     # a steady turn about a fixed axis in the camera frame: mostly across the sky, a little roll
     step = Rotation.from_rotvec(np.radians(args.step_deg) * np.array([0.96, 0.2, 0.2])).as_matrix()
-    # load (or compile, the first time after installing) the machine code before timing
-    t_load = time.perf_counter()
-    warm = simulate_frame(catalog, camera, R_cam_from_icrs=R, seed=rng)
-    for tracks in (False, True):
-        solve_verbose(
-            warm.xy,
-            width=512,
-            fov_deg=12.0,
-            catalog=catalog,
-            prior=warm.R_cam_from_icrs if tracks else None,
-        )
-    load_s = time.perf_counter() - t_load
+    load_s = warm_up(catalog, camera)
     prior = None
     rows = {name: [] for name in MODES}
     outcome = {name: {"correct": 0, "wrong": 0, "none": 0} for name in rows}

@@ -12,7 +12,6 @@ from pathlib import Path
 
 import numpy as np
 
-from starnav import compiled as fast
 from starnav.attitude import refine_attitude
 from starnav.attitude.refine import free_focal_step
 from starnav.camera import Camera
@@ -239,10 +238,12 @@ def solve_verbose(
         if stars.brightness is not None
         else np.arange(len(bearings))
     )
+    if compiled:  # imported here: numba takes ~0.2 s to import, which other commands skip
+        from starnav import compiled as fast
     outcome = None
     if R_prior is not None:
-        outcome = (
-            fast.identify(
+        if compiled:
+            outcome = fast.identify(
                 bearings,
                 order,
                 database,
@@ -250,9 +251,6 @@ def solve_verbose(
                 R_prior=R_prior,
                 prior_sigma_deg=prior_sigma_deg,
             )
-            if compiled
-            else None
-        )
         if outcome is None:  # not compiled, or the compiled path deferred to the numpy one
             tracker = Tracking(R_prior=R_prior, sigma_deg=prior_sigma_deg)
             outcome = tracker.identify(bearings, order, database, settings)
@@ -716,6 +714,11 @@ def solve_batch(
             if progress:
                 progress(1)
     else:
+        # the first frame here: it loads the compiled code, which forked workers then share
+        out.append(_solve_one(jobs[0]))
+        if progress:
+            progress(1)
+        jobs = jobs[1:]
         context = multiprocessing.get_context("fork" if os.name == "posix" else "spawn")
         with ProcessPoolExecutor(max_workers=workers, mp_context=context) as pool:
             for result in pool.map(_solve_one, jobs, chunksize=max(1, len(jobs) // (8 * workers))):
