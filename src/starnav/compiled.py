@@ -152,10 +152,10 @@ def _cone(axis, chord2, sky, out):
                 r = rows[m]
                 if not allowed[r]:
                     continue
-                d = 0.0
-                for k in range(3):
-                    d += (vectors[r, k] - axis[k]) ** 2
-                if d <= chord2:
+                dx = vectors[r, 0] - axis[0]
+                dy = vectors[r, 1] - axis[1]
+                dz = vectors[r, 2] - axis[2]
+                if dx * dx + dy * dy + dz * dz <= chord2:
                     out[n] = r
                     n += 1
     return n
@@ -231,15 +231,43 @@ def _wahba(b, r, parity):
             bi = -b[k, i] if (parity < 0 and i == 1) else b[k, i]
             for j in range(3):
                 B[i, j] += bi * r[k, j]
-    U, _, Vt = np.linalg.svd(B)
-    d = _det3(U[:, 0], U[:, 1], U[:, 2]) * _det3(Vt[0], Vt[1], Vt[2])
-    for i in range(3):
-        U[i, 2] *= d
-    R = U @ Vt
+    R = _nearest_rotation(B)
     if parity < 0:
         for j in range(3):
             R[1, j] = -R[1, j]
     return R
+
+
+@njit(cache=True)
+def _nearest_rotation(B):
+    """The rotation nearest to B (3x3): U diag(1, 1, det(U V^T)) V^T of B's SVD. With
+    det(B) clearly positive it is B's orthogonal polar factor, found by Newton's iteration
+    X <- (g X + X^-T / g) / 2 (Higham; a few 3x3 inverses instead of an SVD); otherwise,
+    or if that does not settle to 1e-15, by LAPACK's SVD."""
+    scale = math.sqrt(np.sum(B * B))
+    det = _det3(B[0], B[1], B[2])
+    if scale > 0.0 and det > 1e-12 * scale**3:
+        X = B / scale
+        for _ in range(30):
+            # X^-T: the cofactor matrix over the determinant
+            d = _det3(X[0], X[1], X[2])
+            C = np.empty((3, 3))
+            for i in range(3):
+                i1, i2 = (i + 1) % 3, (i + 2) % 3
+                for j in range(3):
+                    j1, j2 = (j + 1) % 3, (j + 2) % 3
+                    C[i, j] = (X[i1, j1] * X[i2, j2] - X[i1, j2] * X[i2, j1]) / d
+            g = (abs(d) ** (-1.0 / 3.0)) if abs(d) > 0 else 1.0  # determinant scaling
+            Y = 0.5 * (g * X + C / g)
+            change = np.max(np.abs(Y - X))
+            X = Y
+            if change < 1e-15:
+                return X
+    U, _, Vt = np.linalg.svd(B)
+    d = _det3(U[:, 0], U[:, 1], U[:, 2]) * _det3(Vt[0], Vt[1], Vt[2])
+    for i in range(3):
+        U[i, 2] *= d
+    return U @ Vt
 
 
 @njit(cache=True)
@@ -258,9 +286,10 @@ def _match(bearings, R, sky, radius, cov, gate, field_rad, work):
     cam = np.empty((n_cone, 3))
     radius2 = np.empty(n_cone)
     for m in range(n_cone):
-        v = vectors[work[m]]
+        row = work[m]
+        v0, v1, v2 = vectors[row, 0], vectors[row, 1], vectors[row, 2]
         for i in range(3):
-            cam[m, i] = R[i, 0] * v[0] + R[i, 1] * v[1] + R[i, 2] * v[2]
+            cam[m, i] = R[i, 0] * v0 + R[i, 1] * v1 + R[i, 2] * v2
         radius2[m] = base2
         if use_gate:
             var = trace
@@ -268,33 +297,31 @@ def _match(bearings, R, sky, radius, cov, gate, field_rad, work):
                 for j in range(3):
                     var -= cam[m, i] * cov[i, j] * cam[m, j]
             radius2[m] += 9.0 * max(var, 0.0)
-    # candidate pairs, point by point
-    cap = 2 * n_b + 8
-    e_b = np.empty(cap, dtype=np.int64)
-    e_m = np.empty(cap, dtype=np.int64)
-    e_d2 = np.empty(cap)
+    # candidate pairs, point by point: counted, then listed (no array grows in a loop)
     n_e = 0
-    row_deg = np.zeros(n_b, dtype=np.int64)
-    col_deg = np.zeros(max(n_cone, 1), dtype=np.int64)
     for b in range(n_b):
         for m in range(n_cone):
-            d2 = 0.0
-            for i in range(3):
-                d2 += (bearings[b, i] - cam[m, i]) ** 2
+            dx = bearings[b, 0] - cam[m, 0]
+            dy = bearings[b, 1] - cam[m, 1]
+            dz = bearings[b, 2] - cam[m, 2]
+            n_e += dx * dx + dy * dy + dz * dz <= radius2[m]
+    e_b = np.empty(n_e, dtype=np.int64)
+    e_m = np.empty(n_e, dtype=np.int64)
+    e_d2 = np.empty(n_e)
+    row_deg = np.zeros(n_b, dtype=np.int64)
+    col_deg = np.zeros(max(n_cone, 1), dtype=np.int64)
+    e = 0
+    for b in range(n_b):
+        for m in range(n_cone):
+            dx = bearings[b, 0] - cam[m, 0]
+            dy = bearings[b, 1] - cam[m, 1]
+            dz = bearings[b, 2] - cam[m, 2]
+            d2 = dx * dx + dy * dy + dz * dz
             if d2 <= radius2[m]:
-                if n_e == cap:
-                    cap *= 2
-                    e_b2, e_m2, e_d22 = (
-                        np.empty(cap, np.int64),
-                        np.empty(cap, np.int64),
-                        np.empty(cap),
-                    )
-                    e_b2[:n_e], e_m2[:n_e], e_d22[:n_e] = e_b[:n_e], e_m[:n_e], e_d2[:n_e]
-                    e_b, e_m, e_d2 = e_b2, e_m2, e_d22
-                e_b[n_e], e_m[n_e], e_d2[n_e] = b, m, d2
+                e_b[e], e_m[e], e_d2[e] = b, m, d2
                 row_deg[b] += 1
                 col_deg[m] += 1
-                n_e += 1
+                e += 1
     chosen = np.zeros(n_e, dtype=np.bool_)
     group = np.full(n_e, -1, dtype=np.int64)
     deferred = False
@@ -354,35 +381,17 @@ def _match(bearings, R, sky, radius, cov, gate, field_rad, work):
 
 
 @njit(cache=True)
-def _catalog_triangles(pair_a, pair_b, pair_angle, vectors, allowed, s_ij, s_ik, s_jk, tol, head):
-    """As pyramid.catalog_triangles, in the same order: rows (a, b, c) with sides ab, ac, bc
-    within ``tol`` of the measured ij, ik, jk, of allowed stars only. ``head``: -1 per catalog
-    row (work space, left as found)."""
-    lo1 = np.searchsorted(pair_angle, s_ij - tol)
-    hi1 = np.searchsorted(pair_angle, s_ij + tol)
-    lo2 = np.searchsorted(pair_angle, s_ik - tol)
-    hi2 = np.searchsorted(pair_angle, s_ik + tol)
-    n1, n2 = hi1 - lo1, hi2 - lo2
-    out = np.empty((0, 3), dtype=np.int64)
-    if n1 == 0 or n2 == 0:
-        return out
-    # side ik both ways, as a list per first star in the order of the pairs (entry k of the
-    # doubled list: pair lo2 + k, then reversed for k >= n2)
-    after = np.empty(2 * n2, dtype=np.int64)
-    for k in range(2 * n2 - 1, -1, -1):
-        x, y = pair_a[lo2 + k % n2], pair_b[lo2 + k % n2]
-        first, other = (x, y) if k < n2 else (y, x)
-        if allowed[first] and allowed[other]:
-            after[k] = head[first]
-            head[first] = k
-    cos_hi = math.cos(s_jk + tol)
-    cos_lo = math.cos(max(s_jk - tol, 0.0))
-    cap = 64
-    out = np.empty((cap, 3), dtype=np.int64)
+def _join(pair_a, pair_b, lo1, n1, lo2, n2, head, after, allowed, vectors, cos_hi, cos_lo, out):
+    """The triangles of _catalog_triangles: side ij (both ways) joined to the lists of side ik
+    at its first star, side jk checked; written to ``out`` unless it has no rows (then only
+    counted). Returns how many."""
     n = 0
+    fill = len(out) > 0
     for k in range(2 * n1):
-        x, y = np.int64(pair_a[lo1 + k % n1]), np.int64(pair_b[lo1 + k % n1])
-        a, b = (x, y) if k < n1 else (y, x)
+        if k < n1:
+            a, b = np.int64(pair_a[lo1 + k]), np.int64(pair_b[lo1 + k])
+        else:
+            a, b = np.int64(pair_b[lo1 + k - n1]), np.int64(pair_a[lo1 + k - n1])
         if not (allowed[a] and allowed[b]):
             continue
         m = head[a]
@@ -394,17 +403,56 @@ def _catalog_triangles(pair_a, pair_b, pair_angle, vectors, allowed, s_ij, s_ik,
             cos_bc = vectors[b, 0] * vectors[c, 0] + vectors[b, 1] * vectors[c, 1]
             cos_bc += vectors[b, 2] * vectors[c, 2]
             if cos_bc >= cos_hi and cos_bc <= cos_lo:
-                if n == cap:
-                    cap *= 2
-                    bigger = np.empty((cap, 3), dtype=np.int64)
-                    bigger[:n] = out[:n]
-                    out = bigger
-                out[n, 0], out[n, 1], out[n, 2] = a, b, c
+                if fill:
+                    out[n, 0], out[n, 1], out[n, 2] = a, b, c
                 n += 1
-    for k in range(n2):  # leave the work space as found
-        head[pair_a[lo2 + k]] = -1
-        head[pair_b[lo2 + k]] = -1
-    return out[:n]
+    return n
+
+
+@njit(cache=True)
+def _catalog_triangles(
+    pair_a, pair_b, pair_angle, vectors, allowed, s_ij, s_ik, s_jk, tol, head, mark
+):
+    """As pyramid.catalog_triangles, in the same order: rows (a, b, c) with sides ab, ac, bc
+    within ``tol`` of the measured ij, ik, jk, of allowed stars only. ``head`` (-1) and
+    ``mark`` (False) per catalog row: work space, left as found."""
+    lo1 = np.searchsorted(pair_angle, s_ij - tol)
+    hi1 = np.searchsorted(pair_angle, s_ij + tol)
+    lo2 = np.searchsorted(pair_angle, s_ik - tol)
+    hi2 = np.searchsorted(pair_angle, s_ik + tol)
+    n1, n2 = hi1 - lo1, hi2 - lo2
+    out = np.empty((0, 3), dtype=np.int64)
+    if n1 == 0 or n2 == 0:
+        return out
+    # side ik both ways, as a list per first star in the order of the pairs (entry k of the
+    # doubled list: pair lo2 + k, then reversed for k >= n2)
+    # only stars that start a side ij can start a triangle: mark them, link side ik's entries
+    # (both ways) that start at a marked star into a list per star, in the pairs' order
+    for k in range(n1):
+        mark[pair_a[lo1 + k]] = True
+        mark[pair_b[lo1 + k]] = True
+    after = np.empty(2 * n2, dtype=np.int64)
+    for k in range(2 * n2 - 1, n2 - 1, -1):  # the reversed half, last entry first
+        first = pair_b[lo2 + k - n2]
+        if mark[first] and allowed[first] and allowed[pair_a[lo2 + k - n2]]:
+            after[k] = head[first]
+            head[first] = k
+    for k in range(n2 - 1, -1, -1):
+        first = pair_a[lo2 + k]
+        if mark[first] and allowed[first] and allowed[pair_b[lo2 + k]]:
+            after[k] = head[first]
+            head[first] = k
+    cos_hi = math.cos(s_jk + tol)
+    cos_lo = math.cos(max(s_jk - tol, 0.0))
+    counted = _join(pair_a, pair_b, lo1, n1, lo2, n2, head, after, allowed, vectors,
+                    cos_hi, cos_lo, np.empty((0, 3), dtype=np.int64))  # fmt: skip
+    out = np.empty((counted, 3), dtype=np.int64)
+    _join(pair_a, pair_b, lo1, n1, lo2, n2, head, after, allowed, vectors, cos_hi, cos_lo, out)
+    for k in range(n1):  # leave the work space as found
+        for star in (pair_a[lo1 + k], pair_b[lo1 + k]):
+            head[star] = -1
+            mark[star] = False
+    return out
 
 
 @njit(cache=True)
@@ -421,6 +469,8 @@ def _identify(bearings, order, pair_a, pair_b, pair_angle, max_angle, sky, tol, 
     screen2 = _chord(radius) ** 2
     work = np.empty(len(vectors), dtype=np.int64)
     head = np.full(len(vectors), -1, dtype=np.int64)
+    mark = np.zeros(len(vectors), dtype=np.bool_)
+    cam = np.empty((len(vectors), 3))  # cone stars in the camera frame of a hypothesis
     no_cov = np.zeros((3, 3))
     hypotheses, proposed, best_p = 0, 0, 1.0
     empty = np.empty(0, dtype=np.int64)
@@ -440,7 +490,7 @@ def _identify(bearings, order, pair_a, pair_b, pair_angle, max_angle, sky, tol, 
                 if min(s01, s02, s12) < 2.0 * tol or max(s01, s02, s12) > max_angle + tol:
                     continue
                 triples = _catalog_triangles(
-                    pair_a, pair_b, pair_angle, vectors, sky[6], s01, s02, s12, tol, head
+                    pair_a, pair_b, pair_angle, vectors, sky[6], s01, s02, s12, tol, head, mark
                 )
                 m = len(triples)
                 if m == 0:
@@ -474,14 +524,19 @@ def _identify(bearings, order, pair_a, pair_b, pair_angle, max_angle, sky, tol, 
                     R = _wahba(tri, vectors[triples[h]], parities[h])
                     Rs[h] = R
                     n_cone = _cone(R[2], _chord(field_rad) ** 2, sky, work)
+                    for c in range(n_cone):
+                        row = work[c]
+                        v0, v1, v2 = vectors[row, 0], vectors[row, 1], vectors[row, 2]
+                        for k in range(3):
+                            cam[c, k] = R[k, 0] * v0 + R[k, 1] * v1 + R[k, 2] * v2
                     for b in range(n_total):
                         for c in range(n_cone):
-                            v = vectors[work[c]]
-                            d2 = 0.0
-                            for k in range(3):
-                                ck = R[k, 0] * v[0] + R[k, 1] * v[1] + R[k, 2] * v[2]
-                                d2 += (bearings[b, k] - ck) ** 2
-                            if d2 < screen2:
+                            dx = bearings[b, 0] - cam[c, 0]
+                            if dx * dx >= screen2:
+                                continue
+                            dy = bearings[b, 1] - cam[c, 1]
+                            dz = bearings[b, 2] - cam[c, 2]
+                            if dx * dx + dy * dy + dz * dz < screen2:
                                 agree[h] += 1
                                 break
                 for h in np.argsort(-agree, kind="mergesort"):
@@ -807,10 +862,11 @@ def _conclude(obs, cat, R, xy, sky, focal, cx, cy, width, height, half_diagonal,
     R = fit[1]
     dist = np.empty(len(obs))
     for s in range(len(obs)):
-        v = vectors[cat[s]]
+        row = cat[s]
+        v0, v1, v2 = vectors[row, 0], vectors[row, 1], vectors[row, 2]
         d2 = 0.0
         for k in range(3):
-            ck = R[k, 0] * v[0] + R[k, 1] * v[1] + R[k, 2] * v[2]
+            ck = R[k, 0] * v0 + R[k, 1] * v1 + R[k, 2] * v2
             d2 += (bearings[obs[s], k] - ck) ** 2
         dist[s] = math.sqrt(d2)
     area = 1.0 - math.cos(field_rad)
@@ -829,10 +885,11 @@ def _conclude(obs, cat, R, xy, sky, focal, cx, cy, width, height, half_diagonal,
     inside = 0
     limit = math.cos(half_diagonal + 0.01)
     for m in range(n_front):
-        v = vectors[work[m]]
-        c0 = R[0, 0] * v[0] + R[0, 1] * v[1] + R[0, 2] * v[2]
-        c1 = R[1, 0] * v[0] + R[1, 1] * v[1] + R[1, 2] * v[2]
-        c2 = R[2, 0] * v[0] + R[2, 1] * v[1] + R[2, 2] * v[2]
+        row = work[m]
+        v0, v1, v2 = vectors[row, 0], vectors[row, 1], vectors[row, 2]
+        c0 = R[0, 0] * v0 + R[0, 1] * v1 + R[0, 2] * v2
+        c1 = R[1, 0] * v0 + R[1, 1] * v1 + R[1, 2] * v2
+        c2 = R[2, 0] * v0 + R[2, 1] * v1 + R[2, 2] * v2
         if c2 > 0.0 and c2 > limit:
             x, y = cx + focal * c0 / c2, cy + focal * c1 / c2
             if 0.0 <= x <= width and 0.0 <= y <= height:
