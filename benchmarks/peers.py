@@ -29,6 +29,7 @@ roll 0.5° or more off, or the wrong parity; inexact = the rest of the answers; 
 from __future__ import annotations
 
 import argparse
+import gc
 import json
 import resource
 import subprocess
@@ -548,6 +549,10 @@ def main() -> None:
             t0 = time.time()
             if solver.peer is None:
                 compiled = "--numpy" not in solver.options
+                # the answers kept so far are this script's, not the solver's: out of the
+                # collector's sight, so that no full collection over them lands in a solve
+                gc.collect()
+                gc.freeze()
                 outs = [
                     starnav_solve(f, catalog, fov, width, sigma, compiled)
                     for f in tqdm(frames, desc=f"starnav {name}", file=sys.stderr, leave=False)
