@@ -27,7 +27,7 @@ import threading
 import weakref
 from collections.abc import Iterator
 from contextlib import contextmanager
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 from numba import njit
@@ -579,9 +579,21 @@ def _identify(bearings, order, pair_a, pair_b, pair_angle, max_angle, sky, tol, 
 
 @njit(cache=True)
 def _cone_rows(axis, radius, sky):
+    """Rows of the sky's vectors within ``radius`` (rad) of ``axis``."""
     work = np.empty(len(sky[0]), dtype=np.int64)
     n = _cone(axis, _chord(radius) ** 2, sky, work)
     return work[:n].copy()
+
+
+@njit(cache=True)
+def _prior_stars(bearings, R_prior, match_radius, sigma, sky):
+    """As identify.tracking: the catalog stars within the field plus 3 ``sigma`` of the prior
+    boresight (a mask over the catalog), and the prior's parity."""
+    radius = _field_radius(bearings, match_radius) + 3.0 * sigma
+    allowed = np.zeros(len(sky[0]), dtype=np.bool_)
+    allowed[_cone_rows(R_prior[2].copy(), radius, sky)] = True
+    parity = 1 if _det3(R_prior[0], R_prior[1], R_prior[2]) > 0 else -1
+    return allowed, parity
 
 
 # ---------------------------------------------------------------------------- attitude fit
@@ -956,23 +968,25 @@ def identify(
     sky = database_sky(database)
     pairs = (database.pair_a, database.pair_b, database.pair_angle_rad)
     parity = settings.parity or 0
+    sky_args = sky.args()
     if R_prior is not None:
         # the catalog stars the prior allows: within the field plus 3 sigma of its boresight
-        radius = _field_radius(screened, settings.match_radius_rad) + 3.0 * math.radians(
-            prior_sigma_deg
-        )
-        allowed = np.zeros(len(sky.vectors), dtype=np.bool_)
-        with _first_use("cone"):
-            allowed[_cone_rows(np.ascontiguousarray(R_prior[2]), radius, sky.args())] = True
-        sky = replace(sky, allowed=allowed)
-        parity = 1 if np.linalg.det(R_prior) > 0 else -1
+        with _first_use("prior"):
+            allowed, parity = _prior_stars(
+                screened,
+                np.ascontiguousarray(R_prior, dtype=np.float64),
+                settings.match_radius_rad,
+                math.radians(prior_sigma_deg),
+                sky_args,
+            )
+        sky_args = (*sky_args[:6], allowed)
     with _first_use("identify"):
         status, obs, cat, R, par, p, hypotheses, proposed, best_p = _identify(
             screened,
             local_order,
             *pairs,
             database.max_angle_rad,
-            sky.args(),
+            sky_args,
             settings.pair_tol_rad,
             radii,
             settings.max_false_match_probability,
