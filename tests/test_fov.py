@@ -11,8 +11,9 @@ from starnav.camera import Camera, load_camera, save_camera
 from starnav.catalog import load_catalog
 from starnav.cli import main
 from starnav.errors import CameraError, StarnavError
-from starnav.fov import band_grid, solve_fov
+from starnav.fov import band_grid, load_bands, solve_fov
 from starnav.geometry import attitude_difference_deg
+from starnav.identify.pattern4 import catalog_nbytes
 from starnav.simulate import simulate_frame
 
 
@@ -31,6 +32,21 @@ def test_band_grid_covers_the_range_on_the_fixed_grid():
     tops = {round(t, 6) for _, _, t in bands}
     assert {round(t, 6) for _, _, t in band_grid(11.0, 13.0)} <= tops
     assert len(band_grid(19.0, 21.0)) == 2  # 20° is a grid edge
+
+
+def test_the_10_to_30_degree_tables_fit_in_20_mb():
+    """Issue 8: what the search holds in memory for a 10-30° range on a 1024 px square image
+    (pattern tables, catalogs, KD-trees) is at most 20 MB; ranges sharing grid bands share
+    their tables and catalogs."""
+    bands = load_bands(10.0, 30.0, 1024, 1024, None, None)
+    assert len(bands) == 4
+    for band in bands:
+        assert band.catalog is band.database.catalog
+        assert band.nbytes == band.table.nbytes + catalog_nbytes(band.database)
+    assert sum(band.nbytes for band in bands) <= 20e6
+    narrower = load_bands(12.0, 25.0, 1024, 1024, None, None)
+    held = {(id(band.table), id(band.catalog)) for band in bands}
+    assert {(id(band.table), id(band.catalog)) for band in narrower} <= held
 
 
 @pytest.mark.parametrize(

@@ -1,10 +1,12 @@
 """The 4-star pattern algorithm (tetra3 / cedar-solve idea): its table and its answers."""
 
+import dataclasses
 import math
 import time
 
 import numpy as np
 import pytest
+from scipy.spatial import cKDTree
 
 import starnav
 from starnav.api import get_database
@@ -41,11 +43,17 @@ def test_table_keys_order_and_size(database, table):
     vectors = database.catalog.vectors
     assert len(table) > 100_000
     assert np.all(np.diff(table.keys.astype(np.int64)) >= 0)
+    # 10 bytes a pattern (key 4, code 4, largest edge 2) and the fields, a small part
+    assert table.nbytes == 10 * len(table) + table.fields.nbytes
+    assert table.fields.nbytes < 0.05 * table.nbytes
     assert table.nbytes < 20e6
     rows = np.random.default_rng(0).choice(len(table), 3000, replace=False)
-    v = vectors[table.stars[rows].astype(np.intp)]
+    stars = table.stars(rows)
+    v = vectors[stars]
     edges = np.sort(p4.pattern_edges(v), axis=1)
-    assert np.allclose(table.largest_edge_rad[rows], edges[:, 5], rtol=1e-6)
+    step = table.edge_step_rad
+    assert step < 2e-5  # about 1 pixel in 15 at this camera's scale
+    assert np.all(np.abs(table.largest_edge_steps[rows] * step - edges[:, 5]) <= 0.5001 * step)
     assert edges[:, 5].max() <= database.max_angle_rad
     digits = np.minimum((edges[:, :5] / edges[:, 5:] * table.bins).astype(np.int64), table.bins - 1)
     key = np.zeros(len(rows), dtype=np.int64)
@@ -56,10 +64,52 @@ def test_table_keys_order_and_size(database, table):
     assert (np.diff(p4.centroid_distances(v), axis=1) >= -1e-12).all()
 
 
+def test_table_codes_decode_to_distinct_patterns_of_their_fields(database, table):
+    """Every pattern once; each is a 4-subset of the brightest stars of the field it names."""
+    every = np.sort(table.stars(np.arange(len(table))), axis=1)
+    assert len(np.unique(every, axis=0)) == len(table)
+    assert every.min() >= 0 and every.max() < len(database.catalog)
+    rows = np.random.default_rng(1).choice(len(table), 500, replace=False)
+    k = table.fields.shape[1]
+    field = table.codes[rows].astype(np.int64) // (math.comb(k, 4) * 24)
+    for star_rows, f in zip(table.stars(rows), field, strict=True):
+        assert set(star_rows.tolist()) <= set(table.fields[f].tolist())
+    # the fields' rows are ascending, padded with the catalog size
+    fields, n = table.fields.astype(np.int64), len(database.catalog)
+    assert ((np.diff(fields, axis=1) > 0) | (fields[:, 1:] == n)).all()
+    assert fields.max() <= n
+
+
+@pytest.mark.parametrize("scale_range", [None, (0.97, 1.03)])
+def test_the_quick_test_on_the_rounded_largest_edge_loses_no_match(
+    hip_1991, database, table, scale_range
+):
+    """The stored largest edge (rounded to a step) only speeds the search: the matches are
+    those found with every candidate's exact edges computed (a table whose stored edges pass
+    everything), with the scale known and up to a scale."""
+    frame = simulate_frame(hip_1991, CAMERA, noise_px=0.1, seed=4)
+    bearings = CAMERA.pixels_to_bearings(frame.xy)
+    order = np.argsort(-frame.brightness, kind="stable")[:8]
+    obs = bearings[order[p4.breadth_first_combinations(8)]]
+    tol = 10.0 / CAMERA.focal_px  # loose: many catalog patterns near the limits
+    args = (database.catalog.vectors, tol, database.max_angle_rad, None)
+    options = {"scale_range": scale_range, "rel_tol": 0.0 if scale_range is None else 0.005}
+    hyp = p4.match_patterns(obs, table, *args, **options)
+    no_quick_test = dataclasses.replace(
+        table, largest_edge_steps=np.zeros_like(table.largest_edge_steps), edge_step_rad=10.0
+    )
+    ref = p4.match_patterns(obs, no_quick_test, *args, **options)
+    assert len(ref.pattern) > 3 * len(obs)
+    for name in ("pattern", "obs_local", "cat_rows", "parity"):
+        assert np.array_equal(getattr(hyp, name), getattr(ref, name))
+    truth = tuple(sorted(hip_1991.rows(frame.true_id[order[:4]]).tolist()))
+    assert truth in {tuple(sorted(c.tolist())) for c in hyp.cat_rows[hyp.pattern == 0]}
+
+
 def test_table_holds_the_brightest_patterns_of_simulated_frames(hip_1991, table):
     """The pattern of the 4 brightest stars of a frame is in the table almost always, and some
     pattern of the brightest 6 always (what identification relies on)."""
-    held = {tuple(r) for r in np.sort(table.stars.astype(np.int64), axis=1)}
+    held = {tuple(r) for r in np.sort(table.stars(np.arange(len(table))), axis=1)}
     rng = np.random.default_rng(26)
     first = any_of_6 = tried = 0
     for _ in range(40):
@@ -81,15 +131,27 @@ def test_table_is_cached_in_memory_and_on_disk(database, table, monkeypatch):
     monkeypatch.setattr(p4, "_TABLES", {})
     again = p4.Pattern4().table(database)
     assert again.from_cache and again is not table
-    assert np.array_equal(again.keys, table.keys) and np.array_equal(again.stars, table.stars)
+    for name in ("keys", "codes", "fields", "largest_edge_steps"):
+        assert np.array_equal(getattr(again, name), getattr(table, name))
+    assert again.edge_step_rad == table.edge_step_rad
 
 
 def test_database_nbytes_counts_table_catalog_and_tree(database, table):
-    """The pattern table plus what verification searches (vectors and KD-tree), not pairs."""
+    """The pattern table plus what verification searches (catalog and KD-tree), not pairs."""
     nbytes = make_identifier("pattern4").database_nbytes(database)
-    assert nbytes == table.nbytes + database.verification_nbytes
-    assert database.verification_nbytes > 2 * database.catalog.vectors.nbytes
+    assert nbytes == table.nbytes + p4.catalog_nbytes(database)
     assert nbytes < table.nbytes + database.nbytes
+
+
+def test_catalog_nbytes_counts_each_array_once(database):
+    cat, tree = database.catalog, database.tree
+    arrays = cat.ids.nbytes + cat.ra_deg.nbytes + cat.dec_deg.nbytes + cat.mag.nbytes
+    held = arrays + cat.vectors.nbytes + tree.indices.nbytes + 72 * tree.size
+    assert np.shares_memory(tree.data, cat.vectors)  # scipy keeps the vectors: no copy
+    assert p4.catalog_nbytes(database) == held
+    # a tree over a copy of the vectors holds them twice
+    copied = dataclasses.replace(database, tree=cKDTree(cat.vectors.copy()))
+    assert p4.catalog_nbytes(copied) == held + cat.vectors.nbytes
 
 
 def test_bad_options_are_refused():

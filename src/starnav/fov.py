@@ -99,7 +99,9 @@ def load_band(table_diagonal_deg: float, lo: float, hi: float, catalog: Catalog)
         _DATABASES[key] = catalog_only(cat, math.radians(table_diagonal_deg))
     database = _DATABASES[key]
     table = build_pattern_table(database, field_radius_fraction=FIELD_RADIUS_FRACTION)
-    return Band(lo, hi, cat, database, table) if len(table) else None
+    # the database's catalog, not ``cat``: one copy of each band's catalog however many
+    # ranges and image shapes share it
+    return Band(lo, hi, database.catalog, database, table) if len(table) else None
 
 
 def search_catalog(catalog: Catalog | str | Path | None, epoch_year: float | None) -> Catalog:

@@ -61,8 +61,11 @@ class PairDatabase:
 
     @property
     def verification_nbytes(self) -> int:
-        """Bytes of what every verification searches: catalog vectors and their KD-tree."""
-        return int(self.catalog.vectors.nbytes + self.tree.data.nbytes + self.tree.indices.nbytes)
+        """Bytes of what every verification searches: catalog vectors and their KD-tree (its
+        copy of the vectors counted only when it is one)."""
+        shared = np.shares_memory(self.tree.data, self.catalog.vectors)
+        data = 0 if shared else self.tree.data.nbytes
+        return int(self.catalog.vectors.nbytes + data + self.tree.indices.nbytes)
 
     def pairs_within(self, angle_rad: float, tol_rad: float) -> tuple[np.ndarray, np.ndarray]:
         """Catalog pairs (a, b) whose separation is within ``tol_rad`` of ``angle_rad``."""

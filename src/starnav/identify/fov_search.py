@@ -34,6 +34,7 @@ from starnav.identify.database import PairDatabase
 from starnav.identify.pattern4 import (
     PatternTable,
     breadth_first_combinations,
+    catalog_nbytes,
     match_patterns,
     pattern_edges,
 )
@@ -49,13 +50,18 @@ _FOCAL_STEPS = 3  # Gauss-Newton steps of a pattern's focal length
 class Band:
     """One band of the FOV search: horizontal FOV ``fov_lo_deg``..``fov_hi_deg`` (degrees),
     its ``catalog``, ``database`` (catalog vectors and KD-tree, for the verification; no pair
-    table) and pattern ``table``."""
+    table; its catalog is ``catalog``) and pattern ``table``."""
 
     fov_lo_deg: float
     fov_hi_deg: float
     catalog: Catalog
     database: PairDatabase
     table: PatternTable
+
+    @property
+    def nbytes(self) -> int:
+        """Bytes the search holds for the band: pattern table, catalog and KD-tree."""
+        return self.table.nbytes + catalog_nbytes(self.database)
 
 
 @dataclass(frozen=True, eq=False)

@@ -22,12 +22,12 @@ from the orientation of the pattern), verified on the whole field by ``Hypothesi
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import itertools
 import math
 import time
 from dataclasses import dataclass
-from functools import cache
 from pathlib import Path
 
 import numpy as np
@@ -38,7 +38,7 @@ from starnav.identify.base import IdentifyOutcome, MatchSettings, screen_stars_o
 from starnav.identify.database import PairDatabase, cache_dir, load_cached, save_cached
 from starnav.identify.verify import HypothesisTester
 
-_FORMAT_VERSION = 1
+_FORMAT_VERSION = 2  # 2: stars as (field, subset, order) codes, largest edge in uint16 steps
 # the six edges of a pattern (star pairs) and its four triangles
 _PAIRS = np.array([(0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)])
 _TRIPLES = np.array([(0, 1, 2), (0, 1, 3), (0, 2, 3), (1, 2, 3)])
@@ -51,10 +51,11 @@ _PERM_EDGES = np.array([[_EDGE_INDEX[(int(p[i]), int(p[j]))] for i, j in _PAIRS]
 _MAX_PROBES = 200_000  # bin look-ups per batch of observed patterns (bounds memory)
 _BUILD_BLOCK = 4096  # lattice fields expanded at once while building
 _MAX_PATTERN_ROWS = 5e7  # patterns expanded before removing duplicates (about 0.4 GB)
+_EDGE_STEPS = 65535  # the table's largest edge in uint16 steps
 FIELD_RADIUS_FRACTION = 0.85  # lattice field radius / half the field diagonal
 
 
-@cache
+@functools.cache
 def breadth_first_combinations(n: int) -> np.ndarray:
     """Every 4-subset of ``range(n)``, shape (C(n, 4), 4), in tetra3's breadth-first order:
     all subsets of the first m stars come before any subset holding star m, so the brightest
@@ -98,14 +99,24 @@ class PatternTable:
 
     ``keys`` (m,) ascending: the five sorted edge ratios (each edge / the largest), quantised
     into ``bins`` bins each, as the base-``bins`` number with the smallest ratio most
-    significant; ``stars`` (m, 4): catalog rows in canonical order (ascending distance from the
-    pattern centroid); ``largest_edge_rad`` (m,): the largest edge (radians). ``build_s``:
-    seconds the build took; ``from_cache``, ``path``: as for ``PairDatabase``.
+    significant. ``fields`` (f, k): the lattice fields the patterns come from, each as its
+    ``k = stars_per_field`` brightest catalog rows, ascending (padded with the catalog size
+    where a field holds fewer stars). ``codes`` (m,): which stars, as the number
+    ``(field * C(k, 4) + subset) * 24 + order``: the 4-subset ``subset`` (a row of
+    ``breadth_first_combinations(k)``) of field ``field``, put in canonical order (ascending
+    distance from the pattern centroid) by the permutation ``order`` (a row of ``_PERMS``).
+    ``stars(rows)`` decodes them. ``largest_edge_steps`` (m,) uint16: each pattern's largest
+    edge in steps of ``edge_step_rad`` (radians; the largest edge of the table / 65535),
+    rounded: a quick first test, within half a step; the exact edges are recomputed from the
+    catalog vectors. ``build_s``: seconds the build took; ``from_cache``, ``path``: as for
+    ``PairDatabase``.
     """
 
     keys: np.ndarray
-    stars: np.ndarray
-    largest_edge_rad: np.ndarray
+    codes: np.ndarray
+    fields: np.ndarray
+    largest_edge_steps: np.ndarray
+    edge_step_rad: float
     bins: int
     build_s: float
     from_cache: bool
@@ -113,11 +124,48 @@ class PatternTable:
 
     @property
     def nbytes(self) -> int:
-        """Bytes of the arrays searched (keys, star rows, largest edges)."""
-        return int(self.keys.nbytes + self.stars.nbytes + self.largest_edge_rad.nbytes)
+        """Bytes of the arrays held (keys, codes, fields, largest edges)."""
+        return int(
+            self.keys.nbytes
+            + self.codes.nbytes
+            + self.fields.nbytes
+            + self.largest_edge_steps.nbytes
+        )
 
     def __len__(self) -> int:
         return len(self.keys)
+
+    def stars(self, rows: np.ndarray) -> np.ndarray:
+        """Catalog rows (len(rows), 4) of the patterns at table ``rows``, canonical order."""
+        k = self.fields.shape[1]
+        ordered = ordered_subsets(k)
+        field, which = np.divmod(self.codes[rows].astype(np.intp), len(ordered))
+        # ``take``: several times faster than fancy indexing on these sizes
+        index = ordered.take(which, axis=0)
+        index += field[:, None] * k
+        return self.fields.ravel().take(index).astype(np.intp)
+
+
+@functools.cache
+def ordered_subsets(n: int) -> np.ndarray:
+    """Row ``subset * 24 + order``: the 4-subset ``subset`` of ``range(n)`` (a row of
+    ``breadth_first_combinations(n)``) permuted by ``_PERMS[order]``, shape (C(n, 4) * 24, 4)."""
+    return breadth_first_combinations(n)[:, _PERMS].reshape(-1, 4)
+
+
+_KDTREE_NODE_BYTES = 72  # scipy's ckdtreenode: nine 8-byte fields
+
+
+def catalog_nbytes(database: PairDatabase) -> int:
+    """Bytes of what verification searches, each array once: the catalog's arrays (ids,
+    positions, magnitudes, unit vectors) and its KD-tree (indices and nodes; the tree's data
+    is the unit vectors themselves unless scipy had to copy them)."""
+    catalog, tree = database.catalog, database.tree
+    arrays = (catalog.ids, catalog.ra_deg, catalog.dec_deg, catalog.mag, catalog.vectors)
+    data = 0 if np.shares_memory(tree.data, catalog.vectors) else tree.data.nbytes
+    return int(
+        sum(a.nbytes for a in arrays) + data + tree.indices.nbytes + tree.size * _KDTREE_NODE_BYTES
+    )
 
 
 def _key_dtype(bins: int) -> type:
@@ -126,9 +174,11 @@ def _key_dtype(bins: int) -> type:
 
 def _field_patterns(
     database: PairDatabase, stars_per_field: int, field_radius_rad: float, oversampling: float
-) -> np.ndarray:
-    """The distinct 4-subsets (catalog rows, ascending, shape (m, 4)) of the brightest
-    ``stars_per_field`` stars of every lattice field of radius ``field_radius_rad``."""
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The distinct 4-subsets of the brightest ``stars_per_field`` stars of every lattice
+    field of radius ``field_radius_rad``: the fields (f, stars_per_field), catalog rows
+    ascending, padded with the catalog size; and for each distinct pattern one field holding
+    it and its subset number (a row of ``breadth_first_combinations(stars_per_field)``)."""
     catalog = database.catalog
     n_cat = len(catalog)
     # the number of fields: ``oversampling`` times the number of field-sized squares on the sky
@@ -161,17 +211,30 @@ def _field_patterns(
             f"{len(top) * len(combos):.2g} 4-star patterns (limit {_MAX_PATTERN_ROWS:.0e}): use "
             "fewer stars per field or a brighter magnitude limit"
         )
-    # rows ascending in each set, so every subset comes out ascending and duplicates are equal
+    # rows ascending in each field, so every subset comes out ascending and duplicates are
+    # equal: one number per subset (its four rows), sorted and deduplicated, then for each
+    # distinct pattern one (field, subset) that makes it
     bits = max(1, math.ceil(math.log2(n_cat + 1)))
-    if 4 * bits > 63:
+    if 4 * bits > 64:  # a catalog too large for 16-bit rows: whole rows compared
         p = top[:, combos].reshape(-1, 4)
-        return _unique(p[p[:, 3] < n_cat])
-    code = top[:, combos[:, 0]]
-    for k in (1, 2, 3):
-        code = (code << bits) | top[:, combos[:, k]]
-    code = _unique(code[top[:, combos[:, 3]] < n_cat])
-    mask = (1 << bits) - 1
-    return np.column_stack([(code >> (k * bits)) & mask for k in (3, 2, 1, 0)])
+        valid = np.flatnonzero(p[:, 3] < n_cat)
+        first = np.unique(p[valid], axis=0, return_index=True)[1]
+        field, subset = np.divmod(valid[first], len(combos))
+    else:
+        code = top[:, combos[:, 0]].astype(np.uint64)
+        for k in (1, 2, 3):
+            code = (code << np.uint64(bits)) | top[:, combos[:, k]].astype(np.uint64)
+        distinct = _unique(code[top[:, combos[:, 3]] < n_cat])
+        which = np.full(len(distinct), -1, dtype=np.int64)
+        for f0 in range(0, len(top), _BUILD_BLOCK):
+            block = code[f0 : f0 + _BUILD_BLOCK].ravel()
+            flat = np.arange(f0 * len(combos), f0 * len(combos) + len(block))
+            pos = np.searchsorted(distinct, block)
+            hit = (pos < len(distinct)) & (distinct[np.minimum(pos, len(distinct) - 1)] == block)
+            which[pos[hit]] = flat[hit]  # any field holding the pattern will do
+        field, subset = np.divmod(which, len(combos))
+    used, field = np.unique(field, return_inverse=True)  # only fields some pattern points to
+    return top[used], field, subset
 
 
 def _unique(a: np.ndarray) -> np.ndarray:
@@ -184,15 +247,21 @@ def _unique(a: np.ndarray) -> np.ndarray:
     return a[np.concatenate([[True], (a[1:] != a[:-1]).any(axis=1)])] if len(a) else a
 
 
+# the row of ``_PERMS`` of a permutation (p0, p1, p2, p3), looked up at 64 p0 + 16 p1 + 4 p2 + p3
+_PERM_ROW = np.zeros(256, dtype=np.int64)
+_PERM_ROW[_PERMS @ np.array([64, 16, 4, 1])] = np.arange(len(_PERMS))
+
+
 def _pattern_keys(
-    vectors: np.ndarray, patterns: np.ndarray, bins: int
+    vectors: np.ndarray, fields: np.ndarray, field: np.ndarray, subset: np.ndarray, bins: int
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Keys, canonical star order and largest edge of catalog ``patterns`` (m, 4)."""
-    if len(patterns) == 0:  # a catalog too sparse for any pattern
-        return np.empty(0, np.int64), np.empty((0, 4), np.intp), np.empty(0)
-    keys, stars, largest = [], [], []
-    for k in range(0, len(patterns), 200_000):  # bounds the memory of the (m, 4, 3) vectors
-        p = patterns[k : k + 200_000]
+    """Keys, codes (see ``PatternTable``) and largest edges (radians) of the patterns
+    ``subset`` of ``fields[field]``, sorted by key."""
+    combos = breadth_first_combinations(fields.shape[1])
+    keys, codes, largest = [], [], []
+    for k in range(0, len(field), 200_000):  # bounds the memory of the (m, 4, 3) vectors
+        f, s = field[k : k + 200_000], subset[k : k + 200_000]
+        p = fields[f[:, None], combos[s]]
         v = vectors[p]
         edges = np.sort(pattern_edges(v), axis=1)
         ratios = edges[:, :5] / edges[:, 5:]
@@ -203,11 +272,14 @@ def _pattern_keys(
         keys.append(key)
         # canonical order: nearest the centroid first (the largest projection on the mean)
         closeness = np.einsum("mki,mi->mk", v, v.sum(axis=1))
-        stars.append(np.take_along_axis(p, np.argsort(-closeness, axis=1), axis=1))
+        order = _PERM_ROW[np.argsort(-closeness, axis=1) @ np.array([64, 16, 4, 1])]
+        codes.append((f * len(combos) + s) * len(_PERMS) + order)
         largest.append(edges[:, 5])
+    if not keys:  # a catalog too sparse for any pattern
+        return np.empty(0, np.int64), np.empty(0, np.int64), np.empty(0)
     key = np.concatenate(keys)
     order = np.argsort(key, kind="stable")
-    return key[order], np.concatenate(stars)[order], np.concatenate(largest)[order]
+    return key[order], np.concatenate(codes)[order], np.concatenate(largest)[order]
 
 
 _TABLES: dict[tuple, PatternTable] = {}  # in-memory, per process
@@ -237,11 +309,14 @@ def build_pattern_table(
     key = hashlib.sha1(f"{_FORMAT_VERSION}|{mem_key}".encode()).hexdigest()[:20]
     path = cache_dir() / f"pattern4-{key}.npz"
     data = load_cached(path) if use_cache else None
-    if data is not None and {"keys", "stars", "largest_edge_rad", "bins", "build_s"} <= data.keys():
+    names = {"keys", "codes", "fields", "largest_edge_steps", "edge_step_rad", "bins", "build_s"}
+    if data is not None and names <= data.keys():
         table = PatternTable(
             data["keys"],
-            data["stars"],
-            data["largest_edge_rad"],
+            data["codes"],
+            data["fields"],
+            data["largest_edge_steps"],
+            float(data["edge_step_rad"]),
             int(data["bins"]),
             float(data["build_s"]),
             True,
@@ -251,21 +326,23 @@ def build_pattern_table(
         return table
     t0 = time.perf_counter()
     radius = 0.5 * field_radius_fraction * database.max_angle_rad
-    patterns = _field_patterns(database, stars_per_field, radius, oversampling)
-    keys, stars, largest = _pattern_keys(catalog.vectors, patterns, bins)
-    index_type = np.uint16 if len(catalog) <= np.iinfo(np.uint16).max else np.int32
+    fields, field, subset = _field_patterns(database, stars_per_field, radius, oversampling)
+    keys, codes, largest = _pattern_keys(catalog.vectors, fields, field, subset, bins)
+    step = float(largest.max()) / _EDGE_STEPS if len(largest) and largest.max() > 0 else 1.0
+    steps = np.rint(largest / step).astype(np.uint16)
+    # 16-bit rows when they (and the padding, the catalog size) fit
+    fields = fields.astype(np.uint16 if len(catalog) <= np.iinfo(np.uint16).max else np.int32)
+    n_codes = len(fields) * math.comb(stars_per_field, 4) * len(_PERMS)
+    codes = codes.astype(np.uint32 if n_codes <= np.iinfo(np.uint32).max + 1 else np.int64)
     keys = keys.astype(_key_dtype(bins))
-    stars = stars.astype(index_type)
-    largest = largest.astype(np.float32)
     build_s = time.perf_counter() - t0
+    arrays = {"keys": keys, "codes": codes, "fields": fields, "largest_edge_steps": steps}
     saved = (
-        save_cached(
-            path, keys=keys, stars=stars, largest_edge_rad=largest, bins=bins, build_s=build_s
-        )
+        save_cached(path, **arrays, edge_step_rad=step, bins=bins, build_s=build_s)
         if use_cache
         else None
     )
-    table = PatternTable(keys, stars, largest, bins, build_s, False, saved)
+    table = PatternTable(keys, codes, fields, steps, step, bins, build_s, False, saved)
     if use_cache:
         _TABLES[mem_key] = table
     return table
@@ -361,27 +438,37 @@ def match_patterns(
     cand_row = np.repeat(start, count) + (
         np.arange(n_cand) - np.repeat(np.cumsum(count) - count, count)
     )
-    # the stored largest edge is a quick first test (float32: 1e-7 rad of rounding)
-    cat_largest = table.largest_edge_rad[cand_row]
+    # the stored largest edge (within half a step) is a quick first test; the same test on
+    # the exact edges, recomputed from the catalog vectors, follows
+    step = table.edge_step_rad
+    near = table.largest_edge_steps[cand_row] * step
+    obs_largest = largest[cand_pat]
     if scale_range is None:
-        ok = np.abs(cat_largest - largest[cand_pat]) <= tol_rad + 1e-7
+        ok = np.abs(near - obs_largest) <= tol_rad + step
     else:
-        obs_largest = largest[cand_pat]
+        ok = (near + step >= lo_scale * (obs_largest - tol_rad) * (1.0 - rel_tol)) & (
+            near - step <= hi_scale * (obs_largest + tol_rad) * (1.0 + rel_tol)
+        )
+    cand_pat, cand_row = cand_pat[ok], cand_row[ok]
+    cat_stars = table.stars(cand_row)
+    cat_vec = vectors.take(cat_stars, axis=0)
+    cat_edges = pattern_edges(cat_vec)
+    # the largest of six columns: faster than ``max(axis=1)``, which loops over short rows
+    cat_largest = functools.reduce(np.maximum, cat_edges.T)
+    obs_largest = largest[cand_pat]
+    if scale_range is None:
+        ok = np.abs(cat_largest - obs_largest) <= tol_rad
+    else:
         ok = (cat_largest >= lo_scale * (obs_largest - tol_rad) * (1.0 - rel_tol)) & (
             cat_largest <= hi_scale * (obs_largest + tol_rad) * (1.0 + rel_tol)
         )
-    cand_pat, cand_row = cand_pat[ok], cand_row[ok]
-    if len(cand_row) == 0:
-        return _no_matches()
+    if not ok.all():  # only those within half a step of a limit are left out here
+        if not ok.any():
+            return _no_matches()
+        cand_pat, cat_stars, cat_vec = cand_pat[ok], cat_stars[ok], cat_vec[ok]
+        cat_edges, cat_largest = cat_edges[ok], cat_largest[ok]
     # observed edges are multiplied by this to compare with the catalog's
-    scale = (
-        np.ones(len(cand_row))
-        if scale_range is None
-        else table.largest_edge_rad[cand_row].astype(float) / largest[cand_pat]
-    )
-    cat_stars = table.stars[cand_row].astype(np.intp)
-    cat_vec = vectors[cat_stars]
-    cat_edges = pattern_edges(cat_vec)
+    scale = np.ones(len(cand_pat)) if scale_range is None else cat_largest / largest[cand_pat]
 
     # the observed stars in canonical order; where centroid distances are closer than their
     # error allows to tell apart, every order consistent with them is tried
@@ -489,8 +576,9 @@ class Pattern4:
         return build_pattern_table(database, **self.table_options)
 
     def database_nbytes(self, database: PairDatabase) -> int:
-        """Bytes of the pattern table and the catalog vectors (the pair table is not used)."""
-        return self.table(database).nbytes + database.verification_nbytes
+        """Bytes of the pattern table and of the catalog and KD-tree (``catalog_nbytes``; the
+        pair table is not used)."""
+        return self.table(database).nbytes + catalog_nbytes(database)
 
     @screen_stars_only
     def identify(
