@@ -12,6 +12,7 @@ from starnav import compiled
 from starnav.api import get_database
 from starnav.camera import Camera
 from starnav.catalog import load_catalog
+from starnav.fov import solve_fov
 from starnav.identify.verify import match_catalog
 from starnav.simulate import simulate_frame
 
@@ -52,6 +53,8 @@ def _assert_same(fast, slow):
     assert a.rms_px == pytest.approx(b.rms_px, rel=1e-6)
     assert a.sigma_boresight_arcsec == pytest.approx(b.sigma_boresight_arcsec, rel=1e-6)
     assert a.sigma_roll_arcsec == pytest.approx(b.sigma_roll_arcsec, rel=1e-6)
+    assert a.focal_px == pytest.approx(b.focal_px, rel=1e-12)
+    assert a.sigma_focal_px == pytest.approx(b.sigma_focal_px, rel=1e-6, abs=1e-12)
     assert a.algorithm == b.algorithm
 
 
@@ -96,6 +99,60 @@ def test_same_answers_when_tracking(hip6):
         _assert_same(fast, slow)
         tracked += fast.solution is not None and fast.solution.algorithm == "tracking"
     assert tracked >= 30
+
+
+def test_same_answers_with_the_focal_length_fitted(hip6):
+    """A field of view given 0.8 % off, the focal length fitted: both paths fit the same
+    focal length, attitude and error bars."""
+    rng = np.random.default_rng(13)
+    fitted = 0
+    for k in range(40):
+        f = simulate_frame(hip6, CAMERA, parity=1 if k % 2 else -1, noise_px=0.3, seed=rng)
+        if len(f.xy) < 3:
+            continue
+        fast, slow = [
+            starnav.solve_verbose(
+                f.xy,
+                width=512,
+                fov_deg=12.1,
+                brightness=f.brightness,
+                catalog=hip6,
+                sigma_px=0.3,
+                fit_focal=True,
+                compiled=flag,
+            )
+            for flag in (True, False)
+        ]
+        _assert_same(fast, slow)
+        if fast.solution is not None:
+            fitted += 1
+            assert fast.solution.focal_px == pytest.approx(CAMERA.focal_px, rel=2e-3)
+            assert fast.solution.sigma_focal_px > 0
+    assert fitted >= 15  # a pair tolerance of 1.3 px does not cover 0.8 % of 8° for every pair
+
+
+def test_same_answers_with_the_field_of_view_searched(hip6):
+    """The FOV search (4-star patterns up to a scale, its own bands and catalogs) ends in the
+    compiled fit with the focal length free: the same answers as the numpy fit."""
+    rng = np.random.default_rng(14)
+    for _ in range(6):
+        f = simulate_frame(hip6, CAMERA, noise_px=0.2, seed=rng)
+        if len(f.xy) < 6:
+            continue
+        fast, slow = [
+            solve_fov(
+                f.xy,
+                width=512,
+                brightness=f.brightness,
+                fov_range_deg=(10.0, 14.0),
+                sigma_px=0.2,
+                compiled=flag,
+            )
+            for flag in (True, False)
+        ]
+        _assert_same(fast, slow)
+        assert fast.solution is not None
+        assert fast.solution.fov_deg == pytest.approx(12.0, rel=2e-3)
 
 
 def test_same_refusals(hip6):

@@ -199,8 +199,9 @@ def solve_verbose(
     ``Solution`` or ``R_cam_from_icrs``), good to ``prior_sigma_deg`` (1-sigma): tracking mode
     matches the catalog stars near it only, and falls back to ``algorithm`` when that fails
     (``Solution.algorithm`` says which answered); ``compiled``: run the numba-compiled path
-    (``starnav.compiled``) where it applies - the ``pyramid`` algorithm and tracking, the focal
-    length held - False runs the numpy path, which gives the same answers several times slower.
+    (``starnav.compiled``) where it applies - the identification of the ``pyramid`` algorithm
+    and of tracking, and the attitude fit - False runs the numpy path, which gives the same
+    answers several times slower.
     """
     camera = make_camera(width=width, height=height, fov_deg=fov_deg)
     stars = check_star_list(
@@ -256,10 +257,9 @@ def solve_verbose(
             outcome = tracker.identify(bearings, order, database, settings)
         if outcome.identification is not None:
             algorithm = Tracking.name
-    use_fast = compiled and not fit_focal
     if outcome is None or outcome.identification is None:  # lost in space
         outcome = None
-        if use_fast and algorithm == "pyramid":
+        if compiled and algorithm == "pyramid":
             outcome = fast.identify(bearings, order, database, settings)
         if outcome is None:
             outcome = identifier.identify(bearings, order, database, settings)
@@ -267,43 +267,6 @@ def solve_verbose(
     if found is None:
         ms = (time.perf_counter() - t0) * 1e3
         return SolveResult(None, outcome.reason, ms, outcome.hypotheses, database)
-    done = (
-        fast.conclude(
-            found,
-            stars.xy,
-            camera,
-            database,
-            settings,
-            sigma_px=sigma_px,
-            min_matched_fraction=min_matched_fraction,
-        )
-        if use_fast
-        else None
-    )
-    if done is not None:
-        if done.refusal != fast.ACCEPTED:
-            reason = {
-                fast.WRONG_SCALE: lambda: _wrong_scale(done.scale_focal_px, camera),
-                fast.UNCONVINCING: lambda: _unconvincing(done.false_match_probability),
-                fast.TOO_FEW: lambda: _too_few(len(done.obs), done.expected, min_matched_fraction),
-            }[done.refusal]()
-            ms = (time.perf_counter() - t0) * 1e3
-            return SolveResult(None, reason, ms, found.hypotheses, database)
-        return _report(
-            stars,
-            done.obs,
-            done.cat,
-            cat,
-            camera,
-            done.R_cam_from_icrs,
-            done.residuals_px,
-            (done.rms_px, done.sigma_boresight_arcsec, done.sigma_roll_arcsec, 0.0),
-            done.false_match_probability,
-            t0=t0,
-            algorithm=algorithm,
-            hypotheses=found.hypotheses,
-            database=database,
-        )
     return conclude(
         found,
         stars,
@@ -316,6 +279,7 @@ def solve_verbose(
         fit_focal=fit_focal,
         algorithm=algorithm,
         min_matched_fraction=min_matched_fraction,
+        compiled=compiled,
     )
 
 
@@ -333,11 +297,57 @@ def conclude(
     algorithm: str,
     min_matched_fraction: float,
     fit_distortion: bool = False,
+    compiled: bool = True,
 ) -> SolveResult:
     """From an identification to the reported solution: the attitude fit (least squares on
     the image, outliers dropped, the stars the better attitude brings in range taken in),
     the final false-match probability and the refusals. ``t0``: ``time.perf_counter()`` at
-    the start of the solve (for ``time_ms``)."""
+    the start of the solve (for ``time_ms``); ``compiled``: the numba-compiled fit
+    (``starnav.compiled``) for a camera without distortion, False: the numpy one."""
+    if compiled and not fit_distortion and not (camera.k1 or camera.k2):
+        from starnav import compiled as fast  # imported on first use (numba: ~0.2 s)
+
+        done = fast.conclude(
+            found,
+            stars.xy,
+            camera,
+            database,
+            settings,
+            sigma_px=sigma_px,
+            min_matched_fraction=min_matched_fraction,
+            fit_focal=fit_focal,
+        )
+        if done is not None:
+            if done.refusal != fast.ACCEPTED:
+                reason = {
+                    fast.WRONG_SCALE: lambda: _wrong_scale(done.scale_focal_px, camera),
+                    fast.UNCONVINCING: lambda: _unconvincing(done.false_match_probability),
+                    fast.TOO_FEW: lambda: _too_few(
+                        len(done.obs), done.expected, min_matched_fraction
+                    ),
+                }[done.refusal]()
+                ms = (time.perf_counter() - t0) * 1e3
+                return SolveResult(None, reason, ms, found.hypotheses, database)
+            return _report(
+                stars,
+                done.obs,
+                done.cat,
+                cat,
+                camera.with_focal(done.focal_px),
+                done.R_cam_from_icrs,
+                done.residuals_px,
+                (
+                    done.rms_px,
+                    done.sigma_boresight_arcsec,
+                    done.sigma_roll_arcsec,
+                    done.sigma_focal_px,
+                ),
+                done.false_match_probability,
+                t0=t0,
+                algorithm=algorithm,
+                hypotheses=found.hypotheses,
+                database=database,
+            )
     max_false_match_probability = settings.max_false_match_probability
     # least squares on the image, taking in the stars the better attitude brings in range
     fitter = _Fitter(cat, stars.xy, camera, database, settings, sigma_px, fit_focal, fit_distortion)

@@ -10,13 +10,14 @@ are one call for the identification and one for the fit.
 It makes the same decisions as the numpy path: the same triangles in the same order, the same
 hypotheses, false-match probabilities, fit steps and refusals (``tests/test_compiled.py``
 solves frames both ways and compares). Where the numpy path would do something this does not
-- choose between two pairings in the one-to-one match (two catalog stars within the match
-radius of one point, or two points of one star), or fall back to Levenberg-Marquardt because
-Gauss-Newton did not converge - it returns None ("defer") and the caller hands the frame to
-the numpy path. Cone searches use a 1° RA / Dec grid of the catalog instead of the KD-tree.
+- a one-to-one pairing among more than ``_MAX_GROUP_EDGES`` candidate pairs linked through
+shared points or stars, or Levenberg-Marquardt because Gauss-Newton did not converge - it
+returns None ("defer") and the caller hands the frame to the numpy path. Cone searches use a
+1° RA / Dec grid of the catalog instead of the KD-tree.
 
 Numba caches the machine code beside this file (or in numba's user-wide cache directory when
-that is read-only): compiled once per installation, in ~10 s, loaded in ~0.1 s afterwards.
+that is read-only): compiled once per installation, in ~30 s on 2 cores, loaded in ~0.1-0.3 s
+by each process afterwards.
 """
 
 from __future__ import annotations
@@ -32,19 +33,21 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
+# the numpy path's constants, taken from it so that the two paths cannot drift apart
+from starnav.api import (
+    _MAX_REMATCH,
+    _MIN_FIT_STARS,
+    _MIN_STARS_SCALE_CHECK,
+    _OUTLIER_ALPHA,
+    _SCALE_TOLERANCE,
+)
+from starnav.attitude.refine import _MAX_STEPS, _STEP_TOL_RAD
+from starnav.geometry import ARCSEC_PER_RAD
 from starnav.identify.base import Identification, IdentifyOutcome, MatchSettings
 from starnav.identify.database import PairDatabase
 
 GRID_STEP_DEG = 1.0
-ARCSEC_PER_RAD = 180.0 * 3600.0 / math.pi
-_OUTLIER_ALPHA = 1e-3  # as api._OUTLIER_ALPHA
-_MIN_FIT_STARS = 4
-_MAX_REMATCH = 5
-_MIN_STARS_SCALE_CHECK = 6
-_SCALE_TOLERANCE = 0.005
-_MAX_STEPS = 10
 _MAX_GROUP_EDGES = 12  # candidate pairs of one group resolved here (2^12 subsets)
-_STEP_TOL_RAD = 1e-9
 
 # status codes of the kernels
 NOT_FOUND, FOUND, AMBIGUOUS, DEFER = 0, 1, 2, 3
@@ -683,24 +686,30 @@ def _normal_step(J, res):
 
 
 @njit(cache=True)
-def _fit(R0, icrs, xy, focal, cx, cy):
-    """As refine.refine_attitude with the focal length held. Returns (ok, R, residuals (n, 2),
-    rotation covariance, variance_px2, leverage (n, 2, 2), rms, sigma boresight / roll
-    arcsec); ok False where the numpy path would turn to Levenberg-Marquardt."""
+def _fit(R0, icrs, xy, focal0, cx, cy, fit_focal):
+    """As refine.refine_attitude (no distortion; the focal length free when ``fit_focal`` and
+    there are 4 stars). Returns (ok, R, residuals (n, 2), rotation covariance, variance_px2,
+    leverage (n, 2, 2), rms, sigma boresight / roll arcsec, focal, sigma focal px); ok False
+    where the numpy path would turn to Levenberg-Marquardt."""
     n = len(xy)
+    free = fit_focal and n >= 4
+    n_par = 4 if free else 3
     R = R0.copy()
+    focal = focal0
     cost0 = -1.0
     for _ in range(_MAX_STEPS):
-        res, J = _residuals_jacobian(R, icrs, xy, focal, cx, cy, False)
+        res, J = _residuals_jacobian(R, icrs, xy, focal, cx, cy, free)
         if cost0 < 0:
             cost0 = res @ res
         step, definite = _normal_step(J, res)
         if not definite:
             break
-        R = _rotate_by(step, R)
+        R = _rotate_by(step[:3], R)
+        if free:
+            focal = focal * math.exp(step[3])
         if np.max(np.abs(step)) < _STEP_TOL_RAD:
             break
-    res, J = _residuals_jacobian(R, icrs, xy, focal, cx, cy, False)
+    res, J = _residuals_jacobian(R, icrs, xy, focal, cx, cy, free)
     cost = res @ res
     ok = np.all(np.isfinite(res)) and cost <= cost0
     L, definite = _cholesky(J.T @ J)
@@ -710,11 +719,12 @@ def _fit(R0, icrs, xy, focal, cx, cy):
     residuals[:, 1] = res[n:]
     leverage = np.zeros((n, 2, 2))
     if not ok:
-        return False, R, residuals, np.zeros((3, 3)), 0.0, leverage, 0.0, 0.0, 0.0
-    s2 = cost / max(2 * n - 3, 1)
-    N_inv = np.empty((3, 3))
-    for i in range(3):
-        unit = np.zeros(3)
+        return (False, R, residuals, np.zeros((3, 3)), 0.0, leverage, 0.0, 0.0, 0.0, focal,
+                0.0)  # fmt: skip
+    s2 = cost / max(2 * n - n_par, 1)
+    N_inv = np.empty((n_par, n_par))
+    for i in range(n_par):
+        unit = np.zeros(n_par)
         unit[i] = 1.0
         N_inv[:, i] = _cholesky_solve(L, unit)
     cov = s2 * N_inv
@@ -727,7 +737,9 @@ def _fit(R0, icrs, xy, focal, cx, cy):
     rms = math.sqrt(cost / n)
     sigma_b = math.sqrt(max(cov[0, 0] + cov[1, 1], 0.0)) * ARCSEC_PER_RAD
     sigma_r = math.sqrt(max(cov[2, 2], 0.0)) * ARCSEC_PER_RAD
-    return True, R, residuals, cov, s2, leverage, rms, sigma_b, sigma_r
+    sigma_f = focal * math.sqrt(max(cov[3, 3], 0.0)) if free else 0.0
+    return (True, R, residuals, cov[:3, :3].copy(), s2, leverage, rms, sigma_b, sigma_r, focal,
+            sigma_f)  # fmt: skip
 
 
 @njit(cache=True)
@@ -761,40 +773,45 @@ def _bearings(xy, focal, cx, cy):
 
 
 @njit(cache=True)
-def _converge(obs, cat, R, bearings, xy, sky, focal, cx, cy, radius, sigma_px, field_rad, work):
-    """As api._Fitter.converge: fit, drop outliers, rematch until the pairs stop changing.
-    Returns (ok, obs, cat, fit tuple, n_cone of the last match)."""
+def _converge(obs, cat, R, xy, sky, focal, cx, cy, fit_focal, radius, sigma_px, work):
+    """As api._Fitter.converge: fit, drop outliers, rematch until the pairs stop changing (each
+    fit starts from the focal length given; each match takes the points' bearings from the
+    fit's). Returns (ok, obs, cat, fit tuple, n_cone and field radius of the last match)."""
     vectors = sky[0]
-    fit = _fit(R, vectors[cat], xy[obs], focal, cx, cy)
-    n_cone_last = 0
+    fit = _fit(R, vectors[cat], xy[obs], focal, cx, cy, fit_focal)
+    n_cone_last, field_last = 0, 0.0
     if not fit[0]:
-        return False, obs, cat, fit, n_cone_last
-    ok, obs, cat, fit = _drop_outliers(obs, cat, fit, xy, vectors, focal, cx, cy, sigma_px)
+        return False, obs, cat, fit, n_cone_last, field_last
+    ok, obs, cat, fit = _drop_outliers(obs, cat, fit, xy, vectors, focal, cx, cy, fit_focal,
+                                       sigma_px)  # fmt: skip
     if not ok:
-        return False, obs, cat, fit, n_cone_last
+        return False, obs, cat, fit, n_cone_last, field_last
     for _ in range(_MAX_REMATCH):
         s2 = fit[4]
         scale = max(1.0, sigma_px**2 / s2) if s2 > 0 else 1.0
         cov = fit[3] * scale
+        bearings = _bearings(xy, fit[9], cx, cy)
+        field_last = _field_radius(bearings, radius)
         v_obs, v_cat, _, n_cone_last, deferred = _match(
-            bearings, fit[1], sky, radius, cov, True, field_rad, work
+            bearings, fit[1], sky, radius, cov, True, field_last, work
         )
         if deferred:
-            return False, obs, cat, fit, n_cone_last
+            return False, obs, cat, fit, n_cone_last, field_last
         same = len(v_obs) == len(obs) and np.all(v_obs == obs) and np.all(v_cat == cat)
         if same or len(v_obs) < len(obs):
             break
-        fit = _fit(fit[1], vectors[v_cat], xy[v_obs], focal, cx, cy)
+        fit = _fit(fit[1], vectors[v_cat], xy[v_obs], focal, cx, cy, fit_focal)
         if not fit[0]:
-            return False, obs, cat, fit, n_cone_last
-        ok, obs, cat, fit = _drop_outliers(v_obs, v_cat, fit, xy, vectors, focal, cx, cy, sigma_px)
+            return False, obs, cat, fit, n_cone_last, field_last
+        ok, obs, cat, fit = _drop_outliers(v_obs, v_cat, fit, xy, vectors, focal, cx, cy,
+                                           fit_focal, sigma_px)  # fmt: skip
         if not ok:
-            return False, obs, cat, fit, n_cone_last
-    return True, obs, cat, fit, n_cone_last
+            return False, obs, cat, fit, n_cone_last, field_last
+    return True, obs, cat, fit, n_cone_last, field_last
 
 
 @njit(cache=True)
-def _drop_outliers(obs, cat, fit, xy, vectors, focal, cx, cy, sigma_px):
+def _drop_outliers(obs, cat, fit, xy, vectors, focal, cx, cy, fit_focal, sigma_px):
     """As api._Fitter.drop_outliers."""
     while len(obs) > _MIN_FIT_STARS:
         t = _studentized(fit[2], fit[5], sigma_px)
@@ -803,7 +820,7 @@ def _drop_outliers(obs, cat, fit, xy, vectors, focal, cx, cy, sigma_px):
             break
         keep = np.arange(len(obs)) != worst
         obs, cat = obs[keep], cat[keep]
-        fit = _fit(fit[1], vectors[cat], xy[obs], focal, cx, cy)
+        fit = _fit(fit[1], vectors[cat], xy[obs], focal, cx, cy, fit_focal)
         if not fit[0]:
             return False, obs, cat, fit
     return True, obs, cat, fit
@@ -840,38 +857,38 @@ def _free_focal_step(R, icrs, xy, focal, cx, cy):
 
 
 @njit(cache=True)
-def _conclude(obs, cat, R, xy, sky, focal, cx, cy, width, height, half_diagonal, radii,
+def _conclude(obs, cat, R, xy, sky, focal, cx, cy, width, height, fit_focal, radii,
               sigma_px, hypotheses, max_p, min_matched_fraction):  # fmt: skip
-    """As api.conclude without fit_focal or distortion. Returns (status, refusal, obs, cat, R,
-    residuals, rms, sigma boresight / roll arcsec, p_false, focal fitted by the scale check,
-    expected)."""
+    """As api.conclude without distortion. Returns (status, refusal, obs, cat, R, residuals,
+    rms, sigma boresight / roll arcsec, p_false, focal and its sigma, focal fitted by the scale
+    check, expected)."""
     vectors = sky[0]
     radius = radii.max()
-    bearings = _bearings(xy, focal, cx, cy)
-    field_rad = _field_radius(bearings, radius)
     work = np.empty(len(vectors), dtype=np.int64)
-    ok, obs, cat, fit, n_cone = _converge(
-        obs, cat, R, bearings, xy, sky, focal, cx, cy, radius, sigma_px, field_rad, work
+    fail = (DEFER, 0, obs, cat, R, np.zeros((0, 2)), 0.0, 0.0, 0.0, 1.0, focal, 0.0, 0.0, 0)
+    ok, obs, cat, fit, n_cone, field = _converge(
+        obs, cat, R, xy, sky, focal, cx, cy, fit_focal, radius, sigma_px, work
     )
     if not ok:
-        return DEFER, 0, obs, cat, R, fit[2], 0.0, 0.0, 0.0, 1.0, 0.0, 0
+        return fail
+    bearings = _bearings(xy, fit[9], cx, cy)
     wide_obs, wide_cat, _, _, deferred = _match(
         bearings, fit[1], sky, 3.0 * radius, fit[3], False, _field_radius(bearings, 3.0 * radius),
         work,
     )  # fmt: skip
     if deferred:
-        return DEFER, 0, obs, cat, R, fit[2], 0.0, 0.0, 0.0, 1.0, 0.0, 0
+        return fail
     if len(wide_obs) > len(obs):
-        ok2, obs2, cat2, fit2, n_cone2 = _converge(
-            wide_obs, wide_cat, fit[1], bearings, xy, sky, focal, cx, cy, radius, sigma_px,
-            field_rad, work,
-        )  # fmt: skip
+        ok2, obs2, cat2, fit2, n_cone2, field2 = _converge(
+            wide_obs, wide_cat, fit[1], xy, sky, focal, cx, cy, fit_focal, radius, sigma_px, work
+        )
         if not ok2:
-            return DEFER, 0, obs, cat, R, fit[2], 0.0, 0.0, 0.0, 1.0, 0.0, 0
+            return fail
         rms_a, rms_b = _shared_rms(obs, cat, fit[2], obs2, cat2, fit2[2])
         if len(obs2) > len(obs) and rms_b <= 1.5 * rms_a + 0.1 * sigma_px:
-            obs, cat, fit, n_cone = obs2, cat2, fit2, n_cone2
-    R = fit[1]
+            obs, cat, fit, n_cone, field = obs2, cat2, fit2, n_cone2, field2
+    R, f_fit = fit[1], fit[9]
+    bearings = _bearings(xy, f_fit, cx, cy)
     dist = np.empty(len(obs))
     for s in range(len(obs)):
         row = cat[s]
@@ -881,18 +898,21 @@ def _conclude(obs, cat, R, xy, sky, focal, cx, cy, width, height, half_diagonal,
             ck = R[k, 0] * v0 + R[k, 1] * v1 + R[k, 2] * v2
             d2 += (bearings[obs[s], k] - ck) ** 2
         dist[s] = math.sqrt(d2)
-    area = 1.0 - math.cos(field_rad)
+    area = 1.0 - math.cos(field)
     p_false = _false_match_radii(dist, n_cone, area, len(xy), 3, hypotheses, radii)
     refusal = ACCEPTED
     f_scale = 0.0
-    if len(obs) >= _MIN_STARS_SCALE_CHECK:
+    if not fit_focal and len(obs) >= _MIN_STARS_SCALE_CHECK:
         f_scale, sigma = _free_focal_step(R, vectors[cat], xy[obs], focal, cx, cy)
         df = f_scale - focal
         if abs(df) > 5.0 * sigma and abs(df) > _SCALE_TOLERANCE * focal:
             refusal = WRONG_SCALE
     if refusal == ACCEPTED and p_false > max_p:
         refusal = UNCONVINCING
-    # catalog stars inside the image (as simulate.project_catalog)
+    # catalog stars inside the image (as simulate.project_catalog with the fitted camera)
+    half_diagonal = math.atan(
+        math.hypot(max(cx, width - cx), max(cy, height - cy)) / f_fit
+    )  # as Camera.half_diagonal_rad
     n_front = _cone(R[2], _chord(half_diagonal + 0.01) ** 2, sky, work)
     inside = 0
     limit = math.cos(half_diagonal + 0.01)
@@ -903,14 +923,14 @@ def _conclude(obs, cat, R, xy, sky, focal, cx, cy, width, height, half_diagonal,
         c1 = R[1, 0] * v0 + R[1, 1] * v1 + R[1, 2] * v2
         c2 = R[2, 0] * v0 + R[2, 1] * v1 + R[2, 2] * v2
         if c2 > 0.0 and c2 > limit:
-            x, y = cx + focal * c0 / c2, cy + focal * c1 / c2
+            x, y = cx + f_fit * c0 / c2, cy + f_fit * c1 / c2
             if 0.0 <= x <= width and 0.0 <= y <= height:
                 inside += 1
     expected = min(len(xy), inside)
     if refusal == ACCEPTED and len(obs) < min_matched_fraction * expected:
         refusal = TOO_FEW
-    return (FOUND, refusal, obs, cat, R, fit[2], fit[6], fit[7], fit[8], p_false, f_scale,
-            expected)  # fmt: skip
+    return (FOUND, refusal, obs, cat, R, fit[2], fit[6], fit[7], fit[8], p_false, f_fit,
+            fit[10], f_scale, expected)  # fmt: skip
 
 
 # ---------------------------------------------------------------------------- Python side
@@ -1033,8 +1053,9 @@ def _not_found_reason(
 class Concluded:
     """The fit of an identification (see api.conclude): matched ``obs`` / ``cat`` rows, the
     attitude, residuals (n, 2, px), rms (px), 1-sigma boresight / roll (arcsec), the final
-    false-match probability, and the refusal (``ACCEPTED`` or a code) with the focal length
-    the scale check found and the number of stars expected."""
+    false-match probability, the focal length (fitted or given, px) and its 1-sigma, and the
+    refusal (``ACCEPTED`` or a code) with the focal length the scale check found and the
+    number of stars expected."""
 
     obs: np.ndarray
     cat: np.ndarray
@@ -1044,6 +1065,8 @@ class Concluded:
     sigma_boresight_arcsec: float
     sigma_roll_arcsec: float
     false_match_probability: float
+    focal_px: float
+    sigma_focal_px: float
     refusal: int
     scale_focal_px: float
     expected: int
@@ -1058,9 +1081,10 @@ def conclude(
     *,
     sigma_px: float,
     min_matched_fraction: float,
+    fit_focal: bool = False,
 ) -> Concluded | None:
-    """The attitude fit and refusals of ``api.conclude`` for a pinhole camera with the focal
-    length held; None when the numpy path must decide."""
+    """The attitude fit and refusals of ``api.conclude`` for a camera without distortion
+    (the focal length fitted with ``fit_focal``); None when the numpy path must decide."""
     with _first_use("conclude"):
         out = _conclude(
             np.ascontiguousarray(found.obs_index, dtype=np.int64),
@@ -1073,7 +1097,7 @@ def conclude(
             float(camera.cy),
             float(camera.width),
             float(camera.height),
-            camera.half_diagonal_rad,
+            bool(fit_focal),
             np.asarray(settings.match_radii_rad, dtype=np.float64),
             float(sigma_px),
             int(found.hypotheses),
@@ -1082,4 +1106,4 @@ def conclude(
         )
     if out[0] == DEFER:
         return None
-    return Concluded(*out[2:10], out[1], *out[10:])
+    return Concluded(*out[2:12], out[1], *out[12:])

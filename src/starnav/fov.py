@@ -203,6 +203,7 @@ def solve_fov(
     max_false_match_probability: float = DEFAULT_MAX_FALSE_MATCH_PROBABILITY,
     min_matched_fraction: float = DEFAULT_MIN_MATCHED_FRACTION,
     pattern_stars: int = 15,
+    compiled: bool = True,
 ) -> SolveResult:
     """Identify stars at ``xy`` (n, 2, px) in an image ``width`` x ``height`` px whose field
     of view is unknown: searched within ``fov_range_deg`` (horizontal, degrees), or within
@@ -264,6 +265,7 @@ def solve_fov(
             fit_distortion=fit_distortion,
             algorithm="fov-search",
             min_matched_fraction=min_matched_fraction,
+            compiled=compiled,
         )
 
     # a verified identification that the fit then refuses (too few of the stars it predicts
