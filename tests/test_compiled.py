@@ -166,6 +166,24 @@ def test_same_refusals(hip6):
     ]
     assert answers[0].solution is None and "focal length" in answers[0].reason
     assert answers[0].reason == answers[1].reason
+    # false stars and missing ones, and every point required to agree
+    f = simulate_frame(
+        hip6, CAMERA, ra_deg=83.8, dec_deg=-5.4, false_stars=3, missing_frac=0.2, seed=5
+    )
+    answers = [
+        starnav.solve_verbose(
+            f.xy,
+            width=512,
+            fov_deg=12.0,
+            brightness=f.brightness,
+            catalog=hip6,
+            min_matched_fraction=0.99,
+            compiled=flag,
+        )
+        for flag in (True, False)
+    ]
+    assert answers[0].solution is None and "stars agree" in answers[0].reason
+    assert answers[0].reason == answers[1].reason
 
 
 def test_cone_search_equals_the_kd_tree(hip6):

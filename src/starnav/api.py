@@ -319,13 +319,12 @@ def conclude(
         )
         if done is not None:
             if done.refusal != fast.ACCEPTED:
-                reason = {
-                    fast.WRONG_SCALE: lambda: _wrong_scale(done.scale_focal_px, camera),
-                    fast.UNCONVINCING: lambda: _unconvincing(done.false_match_probability),
-                    fast.TOO_FEW: lambda: _too_few(
-                        len(done.obs), done.expected, min_matched_fraction
-                    ),
-                }[done.refusal]()
+                if done.refusal == fast.WRONG_SCALE:
+                    reason = _wrong_scale(done.scale_focal_px, camera)
+                elif done.refusal == fast.UNCONVINCING:
+                    reason = _unconvincing(done.false_match_probability)
+                else:
+                    reason = _too_few(len(done.obs), done.expected, min_matched_fraction)
                 ms = (time.perf_counter() - t0) * 1e3
                 return SolveResult(None, reason, ms, found.hypotheses, database)
             return _report(
