@@ -1023,7 +1023,7 @@ def identify(
             hypotheses,
         )
     if status == NOT_FOUND:
-        reason = _not_found_reason(hypotheses, proposed, best_p, settings, R_prior is not None)
+        reason = _not_found_reason(hypotheses, proposed, best_p, settings)
         return IdentifyOutcome(None, reason, hypotheses)
     if len(used) < len(bearings):
         obs = used[obs]
@@ -1032,7 +1032,7 @@ def identify(
 
 
 def _not_found_reason(
-    hypotheses: int, proposed: int, best_p: float, settings: MatchSettings, tracking: bool
+    hypotheses: int, proposed: int, best_p: float, settings: MatchSettings
 ) -> str:
     """As HypothesisTester.outcome."""
     if hypotheses >= settings.max_hypotheses:
