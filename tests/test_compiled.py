@@ -24,12 +24,13 @@ def hip6():
     return load_catalog(None, mag_limit=6.0)
 
 
-def _both(frame, catalog, sigma_px, **kwargs):
+def _both(frame, catalog, sigma_px=1.0, fov_deg=CAMERA.fov_deg, **kwargs):
+    """The compiled and the numpy path's answers for ``frame`` (``fov_deg`` told)."""
     return [
         starnav.solve_verbose(
             frame.xy,
             width=CAMERA.width,
-            fov_deg=CAMERA.fov_deg,
+            fov_deg=fov_deg,
             brightness=frame.brightness,
             catalog=catalog,
             sigma_px=sigma_px,
@@ -110,19 +111,7 @@ def test_same_answers_with_the_focal_length_fitted(hip6):
         f = simulate_frame(hip6, CAMERA, parity=1 if k % 2 else -1, noise_px=0.3, seed=rng)
         if len(f.xy) < 3:
             continue
-        fast, slow = [
-            starnav.solve_verbose(
-                f.xy,
-                width=512,
-                fov_deg=12.1,
-                brightness=f.brightness,
-                catalog=hip6,
-                sigma_px=0.3,
-                fit_focal=True,
-                compiled=flag,
-            )
-            for flag in (True, False)
-        ]
+        fast, slow = _both(f, hip6, 0.3, fov_deg=12.1, fit_focal=True)
         _assert_same(fast, slow)
         if fast.solution is not None:
             fitted += 1
@@ -158,30 +147,14 @@ def test_same_answers_with_the_field_of_view_searched(hip6):
 def test_same_refusals(hip6):
     # a field of view 2 % off: both refuse with the same focal length in the message
     f = simulate_frame(hip6, CAMERA, ra_deg=83.8, dec_deg=-5.4, roll_deg=30, noise_px=0.1)
-    answers = [
-        starnav.solve_verbose(
-            f.xy, width=512, fov_deg=12.24, brightness=f.brightness, catalog=hip6, compiled=flag
-        )
-        for flag in (True, False)
-    ]
+    answers = _both(f, hip6, fov_deg=12.24)
     assert answers[0].solution is None and "focal length" in answers[0].reason
     assert answers[0].reason == answers[1].reason
     # false stars and missing ones, and every point required to agree
     f = simulate_frame(
         hip6, CAMERA, ra_deg=83.8, dec_deg=-5.4, false_stars=3, missing_frac=0.2, seed=5
     )
-    answers = [
-        starnav.solve_verbose(
-            f.xy,
-            width=512,
-            fov_deg=12.0,
-            brightness=f.brightness,
-            catalog=hip6,
-            min_matched_fraction=0.99,
-            compiled=flag,
-        )
-        for flag in (True, False)
-    ]
+    answers = _both(f, hip6, min_matched_fraction=0.99)
     assert answers[0].solution is None and "stars agree" in answers[0].reason
     assert answers[0].reason == answers[1].reason
 

@@ -45,6 +45,8 @@ from starnav.attitude.refine import _MAX_STEPS, _STEP_TOL_RAD
 from starnav.geometry import ARCSEC_PER_RAD
 from starnav.identify.base import Identification, IdentifyOutcome, MatchSettings
 from starnav.identify.database import PairDatabase
+from starnav.identify.pyramid import NO_TRIANGLE
+from starnav.identify.verify import not_found_reason
 
 GRID_STEP_DEG = 1.0
 _MAX_GROUP_EDGES = 12  # candidate pairs of one group resolved here (2^12 subsets)
@@ -1023,30 +1025,12 @@ def identify(
             hypotheses,
         )
     if status == NOT_FOUND:
-        reason = _not_found_reason(hypotheses, proposed, best_p, settings)
+        reason = not_found_reason(hypotheses, proposed, best_p, settings, NO_TRIANGLE)
         return IdentifyOutcome(None, reason, hypotheses)
     if len(used) < len(bearings):
         obs = used[obs]
     found = Identification(obs.astype(np.intp), cat.astype(np.intp), R, int(par), p, hypotheses)
     return IdentifyOutcome(found, "", hypotheses)
-
-
-def _not_found_reason(
-    hypotheses: int, proposed: int, best_p: float, settings: MatchSettings
-) -> str:
-    """As HypothesisTester.outcome."""
-    if hypotheses >= settings.max_hypotheses:
-        return f"gave up after {hypotheses} hypotheses"
-    if hypotheses == 0:
-        return "no star triangle matches the catalog"
-    if proposed == 0:
-        return "no hypothesis had enough agreeing stars to be worth verifying"
-    if best_p < 1.0:
-        return (
-            f"best hypothesis not convincing (false-match probability {best_p:.2g} > "
-            f"{settings.max_false_match_probability:g})"
-        )
-    return "no hypothesis agreed with enough stars to be convincing"
 
 
 @dataclass(frozen=True, eq=False)

@@ -25,6 +25,7 @@ from starnav.identify.verify import (
     field_radius_rad,
 )
 
+NO_TRIANGLE = "no star triangle matches the catalog"  # the reason when nothing matched
 _SCREEN_CHUNK = 2000  # hypotheses screened per batch (bounds memory on wide fields)
 
 
@@ -175,7 +176,7 @@ def match_triangles(
                 return outcome
         if tester.exhausted:
             break
-    return tester.outcome("no star triangle matches the catalog")
+    return tester.outcome(NO_TRIANGLE)
 
 
 class Pyramid:

@@ -191,18 +191,31 @@ class HypothesisTester:
         self, nothing_matched: str = "no star pattern matches the catalog"
     ) -> IdentifyOutcome:
         """The outcome when no hypothesis was accepted."""
-        s = self.settings
-        if self.exhausted:
-            reason = f"gave up after {self.hypotheses} hypotheses"
-        elif self.hypotheses == 0:
-            reason = nothing_matched
-        elif self.proposed == 0:
-            reason = "no hypothesis had enough agreeing stars to be worth verifying"
-        elif self.best_p < 1.0:
-            reason = (
-                f"best hypothesis not convincing (false-match probability {self.best_p:.2g} > "
-                f"{s.max_false_match_probability:g})"
-            )
-        else:
-            reason = "no hypothesis agreed with enough stars to be convincing"
+        reason = not_found_reason(
+            self.hypotheses, self.proposed, self.best_p, self.settings, nothing_matched
+        )
         return IdentifyOutcome(None, reason, self.hypotheses)
+
+
+def not_found_reason(
+    hypotheses: int,
+    proposed: int,
+    best_p: float,
+    settings: MatchSettings,
+    nothing_matched: str,
+) -> str:
+    """Why no hypothesis was accepted, from the count of ``hypotheses`` generated, of those
+    ``proposed`` for verification and the best false-match probability ``best_p`` seen;
+    ``nothing_matched`` when no hypothesis was generated."""
+    if hypotheses >= settings.max_hypotheses:
+        return f"gave up after {hypotheses} hypotheses"
+    if hypotheses == 0:
+        return nothing_matched
+    if proposed == 0:
+        return "no hypothesis had enough agreeing stars to be worth verifying"
+    if best_p < 1.0:
+        return (
+            f"best hypothesis not convincing (false-match probability {best_p:.2g} > "
+            f"{settings.max_false_match_probability:g})"
+        )
+    return "no hypothesis agreed with enough stars to be convincing"
