@@ -7,7 +7,7 @@ import os
 import time
 from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import ProcessPoolExecutor
-from dataclasses import asdict, dataclass, replace
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -30,6 +30,7 @@ from starnav.identify.database import database_angle_deg
 from starnav.identify.tracking import Tracking
 from starnav.identify.verify import match_catalog
 from starnav.pointing import Pointing, best_triple, three_star
+from starnav.results import Solution, SolveResult, StarMatch
 from starnav.simulate import project_catalog
 from starnav.starlist import StarList, check_star_list
 
@@ -42,73 +43,6 @@ _MIN_FIT_STARS = 4  # outliers are only looked for when a fit keeps at least thi
 _OUTLIER_ALPHA = 1e-3  # chance of dropping a right pair somewhere in a frame
 _MIN_STARS_SCALE_CHECK = 6
 _SCALE_TOLERANCE = 0.005  # relative focal-length error tolerated without --fit-focal
-
-
-@dataclass(frozen=True)
-class StarMatch:
-    """One input point: its ``label``, position (px), the ``catalog_id`` it was identified as
-    (None: no catalog star) and the length of its residual after the fit (px, None if unmatched).
-    """
-
-    label: str
-    x: float
-    y: float
-    catalog_id: int | None
-    residual_px: float | None
-
-
-@dataclass(frozen=True, eq=False)
-class Solution:
-    """A verified attitude.
-
-    Angles in degrees: boresight ``ra_deg``/``dec_deg`` (ICRS, catalog epoch), ``roll_deg``
-    (position angle of image up from North through East), ``fov_deg`` (horizontal).
-    ``parity``: +1 the sky as seen, -1 mirrored. ``R_cam_from_icrs``: rows are the camera axes
-    in ICRS (determinant = parity). ``rms_px``: residual rms of matched stars;
-    ``sigma_*_arcsec``: 1-sigma from the fit (``sigma_focal_px`` 0 unless the focal length
-    was fitted); ``k1``, ``k2``: radial distortion of the camera (fitted or given, see
-    ``starnav.camera``); ``time_ms``: identification and fit, without
-    loading the catalog or database.
-    """
-
-    ra_deg: float
-    dec_deg: float
-    roll_deg: float
-    parity: int
-    focal_px: float
-    fov_deg: float
-    rms_px: float
-    sigma_boresight_arcsec: float
-    sigma_roll_arcsec: float
-    sigma_focal_px: float
-    false_match_probability: float
-    time_ms: float
-    R_cam_from_icrs: np.ndarray
-    stars: tuple[StarMatch, ...]
-    n_matched: int
-    algorithm: str
-    catalog: str
-    k1: float = 0.0
-    k2: float = 0.0
-
-    def to_dict(self) -> dict:
-        """JSON-ready dict of every field (the matrix as nested lists)."""
-        out = {k: v for k, v in self.__dict__.items() if k not in ("stars", "R_cam_from_icrs")}
-        out["solved"] = True
-        out["R_cam_from_icrs"] = self.R_cam_from_icrs.tolist()
-        out["stars"] = [asdict(s) for s in self.stars]
-        return out
-
-
-@dataclass(frozen=True, eq=False)
-class SolveResult:
-    """The outcome of one solve: the ``solution`` or None with the ``reason``."""
-
-    solution: Solution | None
-    reason: str
-    time_ms: float
-    hypotheses: int
-    database: PairDatabase
 
 
 _DATABASES: dict[tuple[str, float], PairDatabase] = {}  # in-memory, per process

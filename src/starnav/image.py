@@ -14,13 +14,13 @@ from pathlib import Path
 
 import numpy as np
 
-from starnav.api import Solution
 from starnav.camera import Camera, load_camera
 from starnav.catalog import Catalog
 from starnav.detect.read import read_image
 from starnav.detect.stars import Detections, detect_stars
 from starnav.errors import CameraError, ImageError
 from starnav.fov import DEFAULT_FOV_RANGE_DEG, search_range, solve_fov
+from starnav.results import Solution
 
 DEFAULT_MAX_STARS = 50
 

@@ -6,10 +6,10 @@ from pathlib import Path
 
 import numpy as np
 
-from starnav.api import Solution
 from starnav.camera import Camera
 from starnav.catalog import Catalog
 from starnav.errors import StarnavError
+from starnav.results import Solution
 from starnav.simulate import project_catalog
 
 
