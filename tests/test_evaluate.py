@@ -71,7 +71,8 @@ def test_scorer_counts_right_and_wrong_attitudes(monkeypatch):
     assert r.outcome == "correct" and r.boresight_error_arcsec < 60.0
     assert r.n_identified >= 3 and r.n_wrong_ids == 0
 
-    real = runner.solve_verbose
+    solver = runner.config_solver(config)
+    real = solver.solve
 
     def turned(*args, **kwargs):
         result = real(*args, **kwargs)
@@ -81,7 +82,7 @@ def test_scorer_counts_right_and_wrong_attitudes(monkeypatch):
         )
         return replace(result, solution=replace(result.solution, R_cam_from_icrs=R))
 
-    monkeypatch.setattr(runner, "solve_verbose", turned)
+    monkeypatch.setattr(solver, "solve", turned)
     wrong = solve_frame(config, b, 0)
     assert wrong.outcome == "wrong" and 0.1 < wrong.boresight_error_arcsec / 3600 < 0.3
 

@@ -1,7 +1,7 @@
 """Solving a star list whose field of view is unknown (or known only roughly).
 
 The FOV range is searched with 4-star patterns matched up to a scale
-(``starnav.identify.fov_search``); the identification then goes through the same attitude
+(``starnav.fov_search``); the identification then goes through the same attitude
 fit and refusals as every solve, with the focal length (and, on request, the radial
 distortion) fitted. Bands sit on one fixed grid of the diagonal field of view, 40° x
 sqrt(2)^k, so every range and image shape shares the same cached tables.
@@ -16,20 +16,23 @@ from pathlib import Path
 
 import numpy as np
 
-from starnav.api import (
-    DEFAULT_MAX_FALSE_MATCH_PROBABILITY,
-    DEFAULT_MIN_MATCHED_FRACTION,
-    SolveResult,
-    check_solve_options,
-    conclude,
-)
 from starnav.camera import Camera, focal_px_from_fov
 from starnav.catalog import Catalog, load_catalog
 from starnav.errors import CatalogError, StarnavError
+from starnav.fov_search import BAND_FACTOR, Band, search_fov
 from starnav.identify.base import MatchSettings
 from starnav.identify.database import PairDatabase, catalog_only
-from starnav.identify.fov_search import BAND_FACTOR, Band, FovMatch, search_fov
 from starnav.identify.pattern4 import FIELD_RADIUS_FRACTION, build_pattern_table
+from starnav.pipeline.conclude import elapsed_ms
+from starnav.pipeline.solver import (
+    DEFAULT_MAX_FALSE_MATCH_PROBABILITY,
+    DEFAULT_MIN_MATCHED_FRACTION,
+    SolveSettings,
+    brightness_order,
+    first_use,
+    fit_identification,
+)
+from starnav.results import SolveResult
 from starnav.starlist import check_star_list
 
 DEFAULT_FOV_RANGE_DEG = (5.0, 40.0)
@@ -203,7 +206,6 @@ def solve_fov(
     max_false_match_probability: float = DEFAULT_MAX_FALSE_MATCH_PROBABILITY,
     min_matched_fraction: float = DEFAULT_MIN_MATCHED_FRACTION,
     pattern_stars: int = 15,
-    compiled: bool = True,
 ) -> SolveResult:
     """Identify stars at ``xy`` (n, 2, px) in an image ``width`` x ``height`` px whose field
     of view is unknown: searched within ``fov_range_deg`` (horizontal, degrees), or within
@@ -221,76 +223,69 @@ def solve_fov(
     stars = check_star_list(
         xy, width=base.width, height=base.height, brightness=brightness, labels=labels
     )
-    check_solve_options(sigma_px, parity, max_false_match_probability, min_matched_fraction)
-    bands = load_bands(lo, hi, base.width, base.height, catalog, epoch_year)
-
-    t0 = time.perf_counter()
-    order = (
-        np.argsort(-stars.brightness, kind="stable")
-        if stars.brightness is not None
-        else np.arange(len(stars.xy))
+    settings = SolveSettings(
+        sigma_px=sigma_px,
+        parity=parity,
+        fit_focal=True,
+        fit_distortion=fit_distortion,
+        max_false_match_probability=max_false_match_probability,
+        min_matched_fraction=min_matched_fraction,
     )
+    bands = load_bands(lo, hi, base.width, base.height, catalog, epoch_year)
+    with first_use("solve"):
+        return _search_and_fit(stars, base, bands, settings, (lo, hi), pattern_stars)
+
+
+def _search_and_fit(stars, base: Camera, bands, settings: SolveSettings, fov_range, pattern_stars):
+    """The FOV search's identifications, each fitted by the solver until one is accepted."""
+    lo, hi = fov_range
+    t0 = time.perf_counter()
+    order = brightness_order(stars)
     xy_sorted = stars.xy[order]
-    if base.k1 or base.k2:  # take the known distortion out: the search assumes a pinhole
-        b = base.pixels_to_bearings(xy_sorted)
-        xy_sorted = np.column_stack(
-            [
-                base.cx + base.focal_px * b[:, 0] / b[:, 2],
-                base.cy + base.focal_px * b[:, 1] / b[:, 2],
-            ]
-        )
-
-    def finish(found: FovMatch) -> SolveResult:
-        """The attitude fit and refusals of a verified identification."""
-        ident = replace(found.identification, obs_index=order[found.identification.obs_index])
-        camera_fit = Camera(
-            base.width, base.height, found.focal_px, base.cx, base.cy, base.k1, base.k2
-        )
-        settings = MatchSettings.for_focal(
-            sigma_px,
-            found.focal_px,
-            max_false_match_probability=max_false_match_probability,
-            parity=parity,
-        )
-        return conclude(
-            ident,
-            stars,
-            camera_fit,
-            found.band.catalog,
-            found.band.database,
-            settings,
-            t0=t0,
-            sigma_px=sigma_px,
-            fit_focal=True,
-            fit_distortion=fit_distortion,
-            algorithm="fov-search",
-            min_matched_fraction=min_matched_fraction,
-            compiled=compiled,
-        )
-
-    # a verified identification that the fit then refuses (too few of the stars it predicts
-    # agree, ...) does not end the search: the next hypothesis may be the right one
-    results: list[SolveResult] = []
-
-    def accept(found: FovMatch) -> bool:
-        results.append(finish(found))
-        return results[-1].solution is not None
-
-    found = search_fov(
+    if base.distorted:  # take the known distortion out: the search assumes a pinhole
+        pinhole = Camera(base.width, base.height, base.focal_px, base.cx, base.cy)
+        xy_sorted = pinhole.bearings_to_pixels(base.pixels_to_bearings(xy_sorted))
+    candidates = search_fov(
         xy_sorted[: MatchSettings.max_screen_stars],
         bands,
         width=base.width,
         height=base.height,
         cx=base.cx,
         cy=base.cy,
-        sigma_px=sigma_px,
+        sigma_px=settings.sigma_px,
         focal_range_px=(focal_px_from_fov(hi, base.width), focal_px_from_fov(lo, base.width)),
-        parity=parity,
-        max_false_match_probability=max_false_match_probability,
+        parity=settings.parity,
+        max_false_match_probability=settings.max_false_match_probability,
         pattern_stars=pattern_stars,
-        accept=accept,
     )
-    if results and (results[-1].solution is not None or found.identification is not None):
-        return replace(results[-1], time_ms=(time.perf_counter() - t0) * 1e3)
-    ms = (time.perf_counter() - t0) * 1e3
-    return SolveResult(None, found.reason, ms, found.hypotheses, bands[0].database)
+    # a verified identification that the fit then refuses (too few of the stars it predicts
+    # agree, ...) does not end the search: the next hypothesis may be the right one
+    refused: SolveResult | None = None
+    t_search = time.perf_counter()
+    for found in candidates:
+        if found.final:
+            stages = {"search": elapsed_ms(t_search)}
+            if refused is not None and not found.ambiguous:
+                return replace(refused, time_ms=elapsed_ms(t0))
+            database = bands[0].database
+            return SolveResult(
+                None, found.reason, elapsed_ms(t0), found.hypotheses, database, stages
+            )
+        ident = replace(found.identification, obs_index=order[found.identification.obs_index])
+        camera = base.with_focal(found.focal_px)
+        result = fit_identification(
+            ident,
+            stars,
+            camera,
+            found.band.database,
+            settings,
+            settings.match_settings(found.focal_px),
+            t0=t0,
+            t_fit=time.perf_counter(),
+            algorithm="fov-search",
+            stages={"search": elapsed_ms(t_search)},
+        )
+        if result.solution is not None:
+            return result
+        refused = result
+    return refused or SolveResult(None, "nothing searched", elapsed_ms(t0), 0, bands[0].database)

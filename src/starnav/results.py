@@ -3,7 +3,7 @@
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
@@ -68,10 +68,13 @@ class Solution:
 
 @dataclass(frozen=True, eq=False)
 class SolveResult:
-    """The outcome of one solve: the ``solution`` or None with the ``reason``."""
+    """The outcome of one solve: the ``solution`` or None with the ``reason``; ``time_ms``
+    in all and ``stage_ms`` per stage (``bearings``, ``identify``, ``fit``; the FOV search
+    has ``search`` for its identification)."""
 
     solution: Solution | None
     reason: str
     time_ms: float
     hypotheses: int
     database: PairDatabase
+    stage_ms: dict[str, float] = field(default_factory=dict)

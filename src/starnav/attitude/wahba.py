@@ -4,8 +4,6 @@ from __future__ import annotations
 
 import numpy as np
 
-_MIRROR = np.diag([1.0, -1.0, 1.0])
-
 
 def wahba(
     cam_vectors: np.ndarray,
@@ -17,15 +15,12 @@ def wahba(
     """``R_cam_from_icrs`` minimising sum w |b - R r|^2 for pairs of unit vectors (n, 3).
 
     With ``parity=-1`` the camera is mirrored (y flipped on the sky): the result then has
-    determinant -1 and still maps ICRS vectors to camera vectors.
+    determinant -1 and still maps ICRS vectors to camera vectors. The arithmetic is the
+    kernel ``attitude._kernels.wahba`` the identification uses.
     """
-    b = np.asarray(cam_vectors, dtype=float)
-    r = np.asarray(icrs_vectors, dtype=float)
-    if parity < 0:
-        b = b @ _MIRROR
-    w = np.ones(len(b)) if weights is None else np.asarray(weights, dtype=float)
-    B = (b * w[:, None]).T @ r
-    U, _, Vt = np.linalg.svd(B)
-    guard = np.diag([1.0, 1.0, np.linalg.det(U) * np.linalg.det(Vt)])
-    R = U @ guard @ Vt
-    return _MIRROR @ R if parity < 0 else R
+    from starnav.attitude import _kernels  # numba: loaded on first use
+
+    b = np.ascontiguousarray(cam_vectors, dtype=np.float64).reshape(-1, 3)
+    r = np.ascontiguousarray(icrs_vectors, dtype=np.float64).reshape(-1, 3)
+    w = np.ones(len(b)) if weights is None else np.ascontiguousarray(weights, dtype=np.float64)
+    return _kernels.wahba(b, r, w, -1 if parity < 0 else 1)

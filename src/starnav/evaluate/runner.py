@@ -19,18 +19,20 @@ from dataclasses import asdict, dataclass
 import numpy as np
 from tqdm import tqdm
 
-from starnav.api import (
-    DEFAULT_MAX_FALSE_MATCH_PROBABILITY,
-    get_database,
-    make_camera,
-    solve_verbose,
-)
+from starnav.camera import Camera
 from starnav.catalog import load_catalog
 from starnav.errors import StarnavError
 from starnav.evaluate.sampling import Boresights, frame_rng
 from starnav.geometry import angle_between, attitude_difference_deg
 from starnav.identify import cli_options, make_identifier
+from starnav.pipeline import (
+    DEFAULT_MAX_FALSE_MATCH_PROBABILITY,
+    Solver,
+    SolveSettings,
+    get_database,
+)
 from starnav.simulate import FALSE_STAR_ID, simulate_frame
+from starnav.starlist import check_star_list
 
 CORRECT_BORESIGHT_DEG = 0.05  # a solution is correct within this and ...
 CORRECT_ROLL_DEG = 0.5  # ... this of the truth,
@@ -71,7 +73,7 @@ class EvalConfig:
 
     def check(self) -> None:
         """Raise ``StarnavError`` naming the first bad value."""
-        make_camera(width=self.width, height=self.height, fov_deg=self.fov_deg)
+        Camera.from_fov(self.fov_deg, self.width, self.height)
         make_identifier(self.algorithm, **self.identifier_options)
         if not (np.isfinite(self.mag_limit) and -2.0 <= self.mag_limit <= 12.0):
             raise StarnavError(f"mag limit must be between -2 and 12, got {self.mag_limit!r}")
@@ -80,7 +82,7 @@ class EvalConfig:
         # the simulator checks noise, false stars and the missing fraction
         simulate_frame(
             load_catalog(None, mag_limit=self.mag_limit),
-            make_camera(width=self.width, height=self.height, fov_deg=self.fov_deg),
+            Camera.from_fov(self.fov_deg, self.width, self.height),
             noise_px=self.noise_px,
             false_stars=self.false_stars,
             missing_frac=self.missing_frac,
@@ -120,10 +122,30 @@ class FrameResult:
     reason: str
 
 
+_SOLVERS: dict[EvalConfig, Solver] = {}  # per process
+
+
+def config_solver(config: EvalConfig) -> Solver:
+    """The prepared solver of a configuration (one per process)."""
+    solver = _SOLVERS.get(config)
+    if solver is None:
+        solver = _SOLVERS[config] = Solver(
+            Camera.from_fov(config.fov_deg, config.width, config.height),
+            load_catalog(None, mag_limit=config.mag_limit),
+            config.algorithm,
+            SolveSettings(
+                sigma_px=config.solver_sigma_px,
+                max_false_match_probability=config.max_false_match_probability,
+            ),
+            algorithm_options=config.identifier_options,
+        )
+    return solver
+
+
 def solve_frame(config: EvalConfig, boresights: Boresights, index: int) -> FrameResult:
     """Simulate frame ``index`` of ``boresights`` and score the solver's answer."""
-    catalog = load_catalog(None, mag_limit=config.mag_limit)
-    camera = make_camera(width=config.width, height=config.height, fov_deg=config.fov_deg)
+    solver = config_solver(config)
+    catalog, camera = solver.catalog, solver.camera
     ra, dec, roll = (
         float(boresights.ra_deg[index]),
         float(boresights.dec_deg[index]),
@@ -163,18 +185,10 @@ def solve_frame(config: EvalConfig, boresights: Boresights, index: int) -> Frame
             beyond_tolerance=False,
             reason=f"{len(frame.xy)} points in the image (3 needed)",
         )
-    result = solve_verbose(
-        frame.xy,
-        width=config.width,
-        height=config.height,
-        fov_deg=config.fov_deg,
-        brightness=frame.brightness,
-        catalog=catalog,
-        sigma_px=config.solver_sigma_px,
-        max_false_match_probability=config.max_false_match_probability,
-        algorithm=config.algorithm,
-        algorithm_options=config.identifier_options,
+    stars = check_star_list(
+        frame.xy, width=camera.width, height=camera.height, brightness=frame.brightness
     )
+    result = solver.solve(stars)
     s = result.solution
     if s is None:
         return FrameResult(
@@ -235,7 +249,7 @@ def solve_chunk(
     config: EvalConfig, boresights: Boresights, indices: Sequence[int]
 ) -> list[FrameResult]:
     """``solve_frame`` for each of ``indices`` (one task of a worker). The first task of a
-    process solves its first frame once beforehand, untimed: that loads the compiled code,
+    process solves its first frame once beforehand, untimed: that loads the machine code,
     which is no frame's time."""
     global _WARMED_UP
     if not _WARMED_UP and len(indices):
@@ -249,7 +263,7 @@ def prepare(config: EvalConfig) -> int:
     find them in the disk cache; returns their size in bytes."""
     config.check()
     catalog = load_catalog(None, mag_limit=config.mag_limit)
-    camera = make_camera(width=config.width, height=config.height, fov_deg=config.fov_deg)
+    camera = Camera.from_fov(config.fov_deg, config.width, config.height)
     database = get_database(catalog, camera)
     return make_identifier(config.algorithm, **config.identifier_options).database_nbytes(database)
 

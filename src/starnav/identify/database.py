@@ -8,7 +8,9 @@ load: it takes a few milliseconds.
 
 from __future__ import annotations
 
+import functools
 import hashlib
+import math
 import os
 import tempfile
 import time
@@ -22,6 +24,7 @@ from starnav.catalog import Catalog
 from starnav.geometry import angle_between, chord_from_angle
 
 _FORMAT_VERSION = 2
+GRID_STEP_DEG = 1.0  # cells of the RA / Dec grid the cone searches of the kernels use
 _ANGLE_STEP_DEG = 0.5  # databases are built for max angles rounded up to this step
 
 
@@ -67,6 +70,17 @@ class PairDatabase:
         data = 0 if shared else self.tree.data.nbytes
         return int(self.catalog.vectors.nbytes + data + self.tree.indices.nbytes)
 
+    @functools.cached_property
+    def sky(self) -> tuple:
+        """The RA / Dec grid of the catalog the kernels search (``sky_grid``; ~2 ms for
+        5000 stars, built on first use)."""
+        return sky_grid(self.catalog.vectors)
+
+    @functools.cached_property
+    def everything(self) -> np.ndarray:
+        """A mask allowing every catalog row (the ``allowed`` of unrestricted searches)."""
+        return np.ones(len(self.catalog), dtype=np.bool_)
+
     def pairs_within(self, angle_rad: float, tol_rad: float) -> tuple[np.ndarray, np.ndarray]:
         """Catalog pairs (a, b) whose separation is within ``tol_rad`` of ``angle_rad``."""
         lo, hi = np.searchsorted(self.pair_angle_rad, [angle_rad - tol_rad, angle_rad + tol_rad])
@@ -74,9 +88,34 @@ class PairDatabase:
 
     def cone(self, axis: np.ndarray, radius_rad: float) -> np.ndarray:
         """Catalog row indices within ``radius_rad`` of the unit vector ``axis``."""
-        return np.asarray(
-            self.tree.query_ball_point(axis, chord_from_angle(radius_rad)), dtype=np.intp
+        from starnav.identify import _kernels  # numba: loaded on first use
+
+        work = np.empty(len(self.catalog), dtype=np.int64)
+        n = _kernels.cone(
+            np.ascontiguousarray(axis, dtype=np.float64),
+            chord_from_angle(radius_rad) ** 2,
+            self.sky,
+            self.everything,
+            work,
         )
+        return np.sort(work[:n]).astype(np.intp)
+
+
+def sky_grid(vectors: np.ndarray, step_deg: float = GRID_STEP_DEG) -> tuple:
+    """The RA / Dec grid of unit ``vectors`` (n, 3) with cells of ``step_deg``:
+    ``(vectors, start, rows, n_dec, n_ra, step_rad)``, cell ``i * n_ra + j`` (Dec band i
+    from the south pole, RA column j) holding rows ``rows[start[c]:start[c + 1]]``."""
+    vectors = np.ascontiguousarray(vectors, dtype=np.float64)
+    step = math.radians(step_deg)
+    n_dec, n_ra = round(180.0 / step_deg), round(360.0 / step_deg)
+    dec = np.arcsin(np.clip(vectors[:, 2], -1.0, 1.0))
+    ra = np.arctan2(vectors[:, 1], vectors[:, 0]) % (2.0 * np.pi)
+    i = np.clip(np.floor((dec + 0.5 * np.pi) / step).astype(np.int64), 0, n_dec - 1)
+    j = np.clip(np.floor(ra / step).astype(np.int64), 0, n_ra - 1)
+    cell = i * n_ra + j
+    rows = np.argsort(cell, kind="stable").astype(np.int64)
+    start = np.searchsorted(cell[rows], np.arange(n_dec * n_ra + 1)).astype(np.int64)
+    return (vectors, start, rows, n_dec, n_ra, step)
 
 
 def catalog_only(catalog: Catalog, max_angle_rad: float) -> PairDatabase:

@@ -24,7 +24,6 @@ vertex opposite its longest side (the base) from that side, 2 * area / s3 = s2 *
 
 from __future__ import annotations
 
-from collections.abc import Iterator
 from functools import lru_cache
 
 import numpy as np
@@ -186,8 +185,8 @@ class Triangle:
 
     def triangles(
         self, bearings: np.ndarray, order: np.ndarray, settings: MatchSettings
-    ) -> Iterator[np.ndarray]:
-        """Rows of ``bearings`` (3,) of each measured triangle, in the order they are tried:
+    ) -> np.ndarray:
+        """Rows of ``bearings`` of each measured triangle (m, 3), in the order they are tried:
         the first ``settings.max_stars`` of ``order`` make them."""
         order = np.asarray(order)[: settings.max_stars]
         # without a pixel scale, the thresholds count in units of the pair tolerance (>= 1 px)
@@ -201,8 +200,7 @@ class Triangle:
         )
         if self.max_triangles is not None:
             triples = triples[: self.max_triangles]
-        for t in triples:
-            yield order[t]
+        return order[triples.reshape(-1, 3)]
 
     @screen_stars_only
     def identify(

@@ -22,7 +22,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from starnav.api import solve_verbose
 from starnav.attitude.wahba import wahba
 from starnav.camera import Camera
 from starnav.catalog import Catalog, load_catalog
@@ -35,6 +34,8 @@ from starnav.navigation.frames import (
     radii_of_curvature_m,
 )
 from starnav.navigation.observation import Observation
+from starnav.pipeline import Solver, SolveSettings
+from starnav.starlist import check_star_list
 
 _MAX_ITERATIONS = 8
 _CONVERGED_RAD = 1e-10  # about 0.6 mm on the ground
@@ -196,21 +197,17 @@ def locate(
         if len(view.xy) < 3:
             reports.append(CameraReport(view.name, len(view.xy), 0, "fewer than 3 stars"))
             continue
-        result = solve_verbose(
-            view.xy,
-            width=view.width,
-            height=view.height,
-            fov_deg=view.fov_deg,
-            catalog=cat,
-            sigma_px=sigma_px,
-        )
+        view_camera = Camera.from_fov(view.fov_deg, view.width, view.height)
+        stars = check_star_list(view.xy, width=view_camera.width, height=view_camera.height)
+        result = Solver(view_camera, cat, settings=SolveSettings(sigma_px=sigma_px)).solve(stars)
         s = result.solution
         if s is None:
             reports.append(CameraReport(view.name, len(view.xy), 0, result.reason))
             continue
         matched = [m for m in s.stars if m.catalog_id is not None]
-        camera = Camera(view.width, view.height, s.focal_px)
-        c = camera.pixels_to_bearings(np.array([[m.x, m.y] for m in matched]))
+        c = view_camera.with_focal(s.focal_px).pixels_to_bearings(
+            np.array([[m.x, m.y] for m in matched])
+        )
         body.append(c @ view.R_cam_from_body)  # b = R^T c, row-wise
         rows.append(cat_fix.rows([m.catalog_id for m in matched]))
         reports.append(CameraReport(view.name, len(view.xy), len(matched), "", s.ra_deg, s.dec_deg))

@@ -10,7 +10,7 @@ a cell is narrow enough for that distortion to stay within a loose ratio slack (
 cells of a band are looked up together. Every catalog pattern found that way gets its own
 focal length, fitted to its six edges; only patterns whose edges then agree within the
 measurement tolerance become hypotheses, verified on the whole field at that focal length by
-the shared ``HypothesisTester`` (one tester over every band and cell, so the false-match
+the shared ``HypothesisTester`` (one tally over every band and cell, so the false-match
 probability counts every hypothesis tried; a pattern found by two neighbouring cells counts
 once).
 
@@ -22,7 +22,7 @@ first few patterns, whatever their field of view.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Iterator
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -38,7 +38,7 @@ from starnav.identify.pattern4 import (
     match_patterns,
     pattern_edges,
 )
-from starnav.identify.verify import HypothesisTester
+from starnav.identify.verify import AMBIGUOUS_PARITY, HypothesisTester, Tally
 
 BAND_FACTOR = math.sqrt(2.0)
 _LOOKUP_REL_TOL = 0.005  # ratio slack of the loose look-up (projection distortion of a cell)
@@ -74,6 +74,17 @@ class FovMatch:
     hypotheses: int
     focal_px: float
     band: Band | None
+
+    @property
+    def final(self) -> bool:
+        """Whether this ends the search with no identification (nothing left to try, or an
+        ambiguous parity)."""
+        return self.identification is None
+
+    @property
+    def ambiguous(self) -> bool:
+        """Whether the search ended on an identification whose parity is ambiguous."""
+        return self.reason == AMBIGUOUS_PARITY
 
 
 def pinhole_bearings(xy: np.ndarray, cx: float, cy: float, focal: np.ndarray) -> np.ndarray:
@@ -145,26 +156,28 @@ def search_fov(
     max_false_match_probability: float = 1e-4,
     pattern_stars: int = 15,
     max_hypotheses: int = 20000,
-    accept: Callable[[FovMatch], bool] | None = None,
-) -> FovMatch:
+) -> Iterator[FovMatch]:
     """Identify the stars at ``xy`` (n, 2, px, distortion removed, brightest first) with the
-    focal length unknown within ``focal_range_px`` (px), searching ``bands``. ``accept``:
-    a last say on a verified identification (e.g. the attitude fit's refusals); when it
-    returns False the search goes on. Returns the accepted match, or the last refused one
-    when nothing else verifies."""
+    focal length unknown within ``focal_range_px`` (px), searching ``bands``. Yields every
+    verified identification as it is found (the caller fits it and stops, or asks for the
+    next); the last match yielded has no identification (``final``) and says why the search
+    ended."""
     n = len(xy)
     if n < 4:
-        return FovMatch(None, "fewer than 4 stars", 0, float("nan"), None)
+        yield FovMatch(None, "fewer than 4 stars", 0, float("nan"), None)
+        return
     half_diag = math.hypot(max(cx, width - cx), max(cy, height - cy))
     plans = [(band, _cells(band, width, half_diag, focal_range_px)) for band in bands]
     plans = [(band, cells) for band, cells in plans if cells]
     if not plans:
-        return FovMatch(None, "the FOV range holds no field of view", 0, float("nan"), None)
+        yield FovMatch(None, "the FOV range holds no field of view", 0, float("nan"), None)
+        return
     stars = min(n, pattern_stars)
     combos = breadth_first_combinations(stars)
     ends = [math.comb(m, 4) for m in range(5, stars, 2)] + [len(combos)]
+    tally = Tally()
     tester: HypothesisTester | None = None
-    refused: FovMatch | None = None
+    work = {id(band): np.empty(len(band.catalog), dtype=np.int64) for band, _ in plans}
     start = 0
     for end in ends:
         if end <= start:
@@ -217,42 +230,42 @@ def search_fov(
             good = np.flatnonzero(good)
             if len(good) == 0:
                 continue
-            if tester is None:
-                tester = HypothesisTester(bearings[0], band.database, settings)
-            tester.count(len(good))  # every hypothesis of the batch, before testing
+            tally.hypotheses += len(good)  # every hypothesis of the batch, before testing
             for h in good:
                 f = float(f_fit[h])
-                tester.bearings = pinhole_bearings(xy, cx, cy, f)
-                tester.database = band.database
-                tester.settings = replace(
-                    MatchSettings.for_focal(
-                        sigma_px,
-                        f,
-                        max_false_match_probability=max_false_match_probability,
-                        parity=parity,
+                # each focal length its own bearings and tolerances, one tally for all
+                tester = HypothesisTester(
+                    pinhole_bearings(xy, cx, cy, f),
+                    band.database,
+                    replace(
+                        MatchSettings.for_focal(
+                            sigma_px,
+                            f,
+                            max_false_match_probability=max_false_match_probability,
+                            parity=parity,
+                        ),
+                        max_hypotheses=max_hypotheses,
                     ),
-                    max_hypotheses=max_hypotheses,
+                    tally,
+                    work=work[id(band)],
                 )
                 outcome = tester.test(obs_rows[h], hyp.cat_rows[h], int(hyp.parity[h]))
                 if outcome is not None:
-                    found = FovMatch(
-                        outcome.identification, outcome.reason, tester.hypotheses, f, band
+                    yield FovMatch(
+                        outcome.identification, outcome.reason, tally.hypotheses, f, band
                     )
-                    if accept is None or outcome.identification is None or accept(found):
-                        return found
-                    refused = found
+                    if outcome.identification is None:  # ambiguous: the search ends
+                        return
                 if tester.exhausted:
-                    return refused or FovMatch(
-                        None, tester.outcome().reason, tester.hypotheses, float("nan"), None
-                    )
-    if refused is not None:
-        return refused
+                    yield FovMatch(None, tester.outcome().reason, tally.hypotheses, math.nan, None)
+                    return
     if tester is None:
-        return FovMatch(
+        yield FovMatch(
             None,
             "no 4-star pattern matches the catalog at any field of view in the range",
             0,
             float("nan"),
             None,
         )
-    return FovMatch(None, tester.outcome().reason, tester.hypotheses, float("nan"), None)
+        return
+    yield FovMatch(None, tester.outcome().reason, tally.hypotheses, float("nan"), None)

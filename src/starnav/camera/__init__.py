@@ -1,0 +1,17 @@
+"""Camera models: pixels <-> bearing vectors in the camera frame, and the camera file."""
+
+from starnav.camera.model import MODELS, CameraModel, camera_from_dict, load_camera, save_camera
+from starnav.camera.pinhole import PINHOLE_KEYS, Camera, focal_px_from_fov
+
+CAMERA_FILE_KEYS = PINHOLE_KEYS
+
+__all__ = [
+    "CAMERA_FILE_KEYS",
+    "MODELS",
+    "Camera",
+    "CameraModel",
+    "camera_from_dict",
+    "focal_px_from_fov",
+    "load_camera",
+    "save_camera",
+]

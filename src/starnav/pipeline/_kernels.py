@@ -1,0 +1,174 @@
+"""The fit policy of a solve as one kernel (numba; plain Python under ``NUMBA_DISABLE_JIT=1``):
+from an identification to the reported attitude or the refusal.
+
+Least squares on the image (``attitude._kernels.fit``), outliers dropped by their studentized
+residuals, the stars the better attitude brings within range taken in (gated by the attitude's
+uncertainty), until the matches stop changing; then a wide search from the result; the final
+false-match probability and the refusals. Each rule is written here once, with its constant.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import namedtuple
+
+import numpy as np
+from numba import njit
+
+from starnav.attitude._kernels import fit, free_focal_step, studentized
+from starnav.camera._kernels import field_cos, pixels_to_bearings, sees
+from starnav.identify._kernels import chord, cone, false_match_radii, pair_catalog
+
+MAX_REMATCH = 5  # fit / rematch rounds
+MIN_FIT_STARS = 4  # outliers are only looked for when a fit keeps at least this many stars
+OUTLIER_ALPHA = 1e-3  # chance of dropping a right pair somewhere in a frame
+WIDE_FACTOR = 3.0  # the wide search from the converged fit, in match radii
+# the wide set wins when it explains more stars and its rms on the shared pairs is at most
+# WIDE_RMS_FACTOR x the other's + WIDE_RMS_SIGMA x sigma (a point pulled in from far bends the
+# fit away from the shared stars instead)
+WIDE_RMS_FACTOR = 1.5
+WIDE_RMS_SIGMA = 0.1
+MIN_STARS_SCALE_CHECK = 6  # the focal length given is tested from this many matched stars on
+SCALE_SIGMAS = 5.0  # a focal length this many sigma off ...
+SCALE_TOLERANCE = 0.005  # ... and more than this (relative) is refused without --fit-focal
+N_USED = 3  # stars a hypothesis is built from (they agree by construction)
+# refusals
+ACCEPTED, WRONG_SCALE, UNCONVINCING, TOO_FEW = 0, 1, 2, 3
+
+Converged = namedtuple("Converged", "obs cat fit n_cone field_area")
+Concluded = namedtuple(
+    "Concluded",
+    "refusal obs cat fit false_match_probability scale_focal_px expected",
+)
+
+
+@njit(cache=True)
+def _drop_outliers(obs, cat, f, xy, vectors, model, p0, fit_focal, fit_distortion, sigma_px):
+    """Drop, one at a time, the pair whose studentized residual is beyond what the told sigma
+    allows (chi-square, 2 degrees of freedom, ``OUTLIER_ALPHA`` over all pairs), refitting
+    each time. A wide gate can let in a false star near a real one; the fit then bends towards
+    it and its plain residual looks small, its studentized residual does not."""
+    while len(obs) > MIN_FIT_STARS:
+        t = studentized(f.residuals, f.leverage, sigma_px)
+        worst = np.argmax(t)
+        if t[worst] <= 2.0 * math.log(len(obs) / OUTLIER_ALPHA):  # P(chi2_2 > x) = e^(-x/2)
+            break
+        keep = np.arange(len(obs)) != worst
+        obs, cat = obs[keep], cat[keep]
+        f = fit(f.R, vectors[cat], xy[obs], model, p0, fit_focal, fit_distortion)
+    return obs, cat, f
+
+
+@njit(cache=True)
+def converge(obs, cat, R, xy, sky, allowed, model, p0, width, height, fit_focal, fit_distortion,
+             radius, sigma_px, work):  # fmt: skip
+    """Fit, drop outliers, rematch (gated: each catalog star's radius grows with its position
+    error under the attitude's covariance, at least the told sigma's) until the pairs stop
+    changing. Every fit starts from the camera given (``p0``); every match takes the points'
+    bearings through the fitted camera."""
+    vectors = sky[0]
+    f = fit(R, vectors[cat], xy[obs], model, p0, fit_focal, fit_distortion)
+    obs, cat, f = _drop_outliers(obs, cat, f, xy, vectors, model, p0, fit_focal, fit_distortion,
+                                 sigma_px)  # fmt: skip
+    n_cone, area = 0, 0.0
+    for _ in range(MAX_REMATCH):
+        scale = max(1.0, sigma_px**2 / f.variance_px2) if f.variance_px2 > 0 else 1.0
+        bearings = pixels_to_bearings(model, f.params, xy)
+        v = pair_catalog(bearings, f.R, sky, allowed, radius, f.rotation_cov * scale, True, work)
+        n_cone, area = v.n_cone, v.field_area
+        same = len(v.obs) == len(obs) and np.all(v.obs == obs) and np.all(v.cat == cat)
+        if same or len(v.obs) < len(obs):
+            break
+        f = fit(f.R, vectors[v.cat], xy[v.obs], model, p0, fit_focal, fit_distortion)
+        obs, cat, f = _drop_outliers(v.obs, v.cat, f, xy, vectors, model, p0, fit_focal,
+                                     fit_distortion, sigma_px)  # fmt: skip
+    return Converged(obs, cat, f, n_cone, area)
+
+
+@njit(cache=True)
+def shared_rms(obs_a, cat_a, res_a, obs_b, cat_b, res_b):
+    """Residual rms (px) of the pairs two fits share, under each (inf when none)."""
+    sa, sb, n = 0.0, 0.0, 0
+    for i in range(len(obs_a)):
+        for j in range(len(obs_b)):
+            if obs_a[i] == obs_b[j] and cat_a[i] == cat_b[j]:
+                sa += res_a[i, 0] ** 2 + res_a[i, 1] ** 2
+                sb += res_b[j, 0] ** 2 + res_b[j, 1] ** 2
+                n += 1
+    if n == 0:
+        return np.inf, np.inf
+    return math.sqrt(sa / n), math.sqrt(sb / n)
+
+
+@njit(cache=True)
+def expected_stars(R, sky, model, p, width, height, work):
+    """Catalog stars inside the image at attitude ``R`` through the camera ``p``: the stars
+    the solution says should be measurable."""
+    vectors = sky[0]
+    everything = np.ones(len(vectors), dtype=np.bool_)
+    limit = field_cos(model, p, width, height)
+    n_front = cone(R[2], chord(math.acos(limit)) ** 2, sky, everything, work)
+    J_c = np.empty((2, 3))
+    J_p = np.empty((2, 3))
+    inside = 0
+    for m in range(n_front):
+        row = work[m]
+        v0, v1, v2 = vectors[row, 0], vectors[row, 1], vectors[row, 2]
+        c0 = R[0, 0] * v0 + R[0, 1] * v1 + R[0, 2] * v2
+        c1 = R[1, 0] * v0 + R[1, 1] * v1 + R[1, 2] * v2
+        c2 = R[2, 0] * v0 + R[2, 1] * v1 + R[2, 2] * v2
+        inside += sees(model, p, width, height, limit, c0, c1, c2, J_c, J_p)
+    return inside
+
+
+@njit(cache=True)
+def conclude(obs, cat, R, xy, sky, allowed, model, p0, width, height, fit_focal,
+             fit_distortion, radii, sigma_px, hypotheses, max_p, min_matched_fraction):  # fmt: skip
+    """From an identification (pairs ``obs`` / ``cat``, attitude ``R``) to the fitted
+    solution and its refusal code (``ACCEPTED`` or why not)."""
+    vectors = sky[0]
+    radius = radii.max()
+    work = np.empty(len(vectors), dtype=np.int64)
+    a = converge(obs, cat, R, xy, sky, allowed, model, p0, width, height, fit_focal,
+                 fit_distortion, radius, sigma_px, work)  # fmt: skip
+    # a wrong star of a close pair in the first match can bend the fit so that the far stars
+    # fall just outside the radius; a wide search from the result finds them
+    bearings = pixels_to_bearings(model, a.fit.params, xy)
+    wide = pair_catalog(bearings, a.fit.R, sky, allowed, WIDE_FACTOR * radius, a.fit.rotation_cov,
+                        False, work)  # fmt: skip
+    if len(wide.obs) > len(a.obs):
+        b = converge(wide.obs, wide.cat, a.fit.R, xy, sky, allowed, model, p0, width, height,
+                     fit_focal, fit_distortion, radius, sigma_px, work)  # fmt: skip
+        rms_a, rms_b = shared_rms(a.obs, a.cat, a.fit.residuals, b.obs, b.cat, b.fit.residuals)
+        if len(b.obs) > len(a.obs) and rms_b <= WIDE_RMS_FACTOR * rms_a + WIDE_RMS_SIGMA * sigma_px:
+            a = b
+    f = a.fit
+    # score the final pairs (the last verification may hold a slightly different set)
+    bearings = pixels_to_bearings(model, f.params, xy)
+    dist = np.empty(len(a.obs))
+    for s in range(len(a.obs)):
+        row = a.cat[s]
+        d2 = 0.0
+        for k in range(3):
+            ck = (
+                f.R[k, 0] * vectors[row, 0]
+                + f.R[k, 1] * vectors[row, 1]
+                + f.R[k, 2] * vectors[row, 2]
+            )
+            d2 += (bearings[a.obs[s], k] - ck) ** 2
+        dist[s] = math.sqrt(d2)
+    p_false = false_match_radii(dist, a.n_cone, a.field_area, len(xy), N_USED, hypotheses, radii)
+    refusal = ACCEPTED
+    f_scale = 0.0
+    if not fit_focal and len(a.obs) >= MIN_STARS_SCALE_CHECK:
+        # a wrong focal length biases the attitude beyond its error bars: test the scale
+        f_scale, sigma = free_focal_step(f.R, vectors[a.cat], xy[a.obs], model, p0)
+        df = f_scale - p0[0]
+        if abs(df) > SCALE_SIGMAS * sigma and abs(df) > SCALE_TOLERANCE * p0[0]:
+            refusal = WRONG_SCALE
+    if refusal == ACCEPTED and p_false > max_p:
+        refusal = UNCONVINCING
+    expected = min(len(xy), expected_stars(f.R, sky, model, f.params, width, height, work))
+    if refusal == ACCEPTED and len(a.obs) < min_matched_fraction * expected:
+        refusal = TOO_FEW
+    return Concluded(refusal, a.obs, a.cat, f, p_false, f_scale, expected)

@@ -1,0 +1,145 @@
+"""From an identification to the reported solution or the refusal, with its reason.
+
+The policy (fit, outliers, rematch, wide search, final false-match probability, refusals) is
+the kernel ``pipeline._kernels.conclude``; this module gives its answer a form: the
+``Solution`` of the matched stars, or the sentence that says why there is none.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from starnav.attitude.refine import refinement
+from starnav.camera import CameraModel
+from starnav.catalog import Catalog
+from starnav.geometry import radec_roll_from_attitude
+from starnav.identify.base import Identification, MatchSettings
+from starnav.identify.database import PairDatabase
+from starnav.results import Solution, StarMatch
+from starnav.starlist import StarList
+
+
+def kernels():
+    """The fit-policy kernels (imported on first use: numba takes ~0.2 s to load)."""
+    from starnav.pipeline import _kernels
+
+    return _kernels
+
+
+def conclude(
+    found: Identification,
+    stars: StarList,
+    camera: CameraModel,
+    cat: Catalog,
+    database: PairDatabase,
+    settings: MatchSettings,
+    *,
+    sigma_px: float,
+    fit_focal: bool,
+    min_matched_fraction: float,
+    fit_distortion: bool = False,
+) -> tuple[Solution | None, str]:
+    """The fitted solution of an identification, or None and the reason it is refused.
+    ``database`` holds ``cat`` (its catalog); ``camera`` the model the identification used;
+    ``settings`` its tolerances."""
+    k = kernels()
+    xy = np.ascontiguousarray(stars.xy, dtype=np.float64)
+    done = k.conclude(
+        np.ascontiguousarray(found.obs_index, dtype=np.int64),
+        np.ascontiguousarray(found.cat_index, dtype=np.int64),
+        np.ascontiguousarray(found.R_cam_from_icrs, dtype=np.float64),
+        xy,
+        database.sky,
+        database.everything,
+        camera.model_code,
+        camera.params,
+        float(camera.width),
+        float(camera.height),
+        bool(fit_focal),
+        bool(fit_distortion),
+        np.asarray(settings.match_radii_rad, dtype=np.float64),
+        float(sigma_px),
+        int(found.hypotheses),
+        settings.max_false_match_probability,
+        float(min_matched_fraction),
+    )
+    if done.refusal == k.WRONG_SCALE:
+        return None, wrong_scale(done.scale_focal_px, camera)
+    if done.refusal == k.UNCONVINCING:
+        return None, unconvincing(done.false_match_probability)
+    if done.refusal == k.TOO_FEW:
+        return None, too_few(len(done.obs), done.expected, min_matched_fraction)
+    fit = refinement(done.fit, camera)
+    return solution_of(stars, done.obs, done.cat, cat, fit, done.false_match_probability), ""
+
+
+def solution_of(
+    stars: StarList, obs: np.ndarray, cat_rows: np.ndarray, cat: Catalog, fit, p_false: float
+) -> Solution:
+    """The ``Solution`` of matched ``obs`` rows of ``stars`` and ``cat_rows`` of ``cat`` with
+    the ``Refinement`` ``fit`` (its camera, attitude and residuals); ``time_ms`` is set by the
+    caller."""
+    residual = np.sqrt(np.sum(fit.residuals_px**2, axis=1)).tolist()
+    matched_id = cat.ids[cat_rows].tolist()
+    catalog_id: list[int | None] = [None] * len(stars.xy)
+    residual_px: list[float | None] = [None] * len(stars.xy)
+    for k, n in enumerate(obs.tolist()):
+        catalog_id[n], residual_px[n] = matched_id[k], residual[k]
+    xy = stars.xy.tolist()
+    star_matches = tuple(
+        StarMatch(stars.labels[n], xy[n][0], xy[n][1], catalog_id[n], residual_px[n])
+        for n in range(len(xy))
+    )
+    R = fit.R_cam_from_icrs
+    ra, dec, roll, par = radec_roll_from_attitude(R)
+    camera = fit.camera
+    return Solution(
+        ra_deg=ra,
+        dec_deg=dec,
+        roll_deg=roll,
+        parity=par,
+        focal_px=camera.focal_px,
+        fov_deg=camera.fov_deg,
+        rms_px=fit.rms_px,
+        sigma_boresight_arcsec=fit.sigma_boresight_arcsec,
+        sigma_roll_arcsec=fit.sigma_roll_arcsec,
+        sigma_focal_px=fit.sigma_focal_px,
+        false_match_probability=float(p_false),
+        time_ms=0.0,
+        R_cam_from_icrs=R,
+        stars=star_matches,
+        n_matched=len(obs),
+        algorithm="",
+        catalog=cat.name,
+        k1=camera.k1,
+        k2=camera.k2,
+    )
+
+
+def wrong_scale(focal: float, camera: CameraModel) -> str:
+    """The refusal of a fit whose stars want another focal length than the one given."""
+    return (
+        f"the stars fit a focal length of {focal:.1f} px (FOV "
+        f"{camera.with_focal(focal).fov_deg:.3f}°), not the {camera.focal_px:.1f} px "
+        f"given: correct the field of view or fit the focal length"
+    )
+
+
+def unconvincing(p_false: float) -> str:
+    """The refusal of a fit whose false-match probability is too high."""
+    return f"false-match probability {p_false:.2g} after the fit"
+
+
+def too_few(n_matched: int, expected: int, min_matched_fraction: float) -> str:
+    """The refusal of a fit that explains too few of the stars it predicts."""
+    return (
+        f"only {n_matched} of {expected} stars agree with the best attitude (need "
+        f"{min_matched_fraction:.0%}): is the field of view right?"
+    )
+
+
+def elapsed_ms(t0: float) -> float:
+    """Milliseconds since ``time.perf_counter()`` was ``t0``."""
+    return (time.perf_counter() - t0) * 1e3

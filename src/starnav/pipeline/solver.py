@@ -1,0 +1,276 @@
+"""The solver object: bearings -> identify -> fit -> refuse, timed per stage.
+
+``Solver(camera, catalog, identifier, settings)`` holds what a solve needs prepared (the
+pair database, the tolerances, the identifier); ``solve(stars)`` takes the data. Every way
+of solving (``api.solve`` and friends, images, batches, the evaluation, positioning,
+calibration) goes through it; the FOV search yields identifications that ``conclude`` fits
+the same way.
+"""
+
+from __future__ import annotations
+
+import sys
+import threading
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from starnav.camera import CameraModel
+from starnav.catalog import Catalog
+from starnav.errors import CatalogError, StarnavError
+from starnav.identify import DEFAULT_ALGORITHM, MatchSettings, PairDatabase, make_identifier
+from starnav.identify.base import Identification, Identifier, IdentifyOutcome
+from starnav.identify.database import build_database, database_angle_deg
+from starnav.identify.tracking import Tracking
+from starnav.pipeline.conclude import conclude, elapsed_ms
+from starnav.results import SolveResult
+from starnav.starlist import StarList
+
+DEFAULT_SIGMA_PX = 1.0
+DEFAULT_MAX_FALSE_MATCH_PROBABILITY = 1e-4
+DEFAULT_MIN_MATCHED_FRACTION = 0.5
+MAX_PAIRS = 3e7  # largest pair database built (about 0.5 GB)
+_DATABASES: dict[tuple[str, float], PairDatabase] = {}  # in-memory, per process
+_LOADED: set[str] = set()  # what this process has run once (its machine code is loaded)
+
+
+@dataclass(frozen=True)
+class SolveSettings:
+    """Options of a solve. ``sigma_px``: 1-sigma centroid error (px; sets the tolerances);
+    ``parity``: +1 / -1 when known; ``fit_focal``: fit the focal length with the attitude;
+    ``fit_distortion``: and the distortion coefficients (from 12 matched stars on);
+    ``max_false_match_probability``: refuse less certain identifications;
+    ``min_matched_fraction``: refuse when fewer of the stars that should be seen agree."""
+
+    sigma_px: float = DEFAULT_SIGMA_PX
+    parity: int | None = None
+    fit_focal: bool = False
+    fit_distortion: bool = False
+    max_false_match_probability: float = DEFAULT_MAX_FALSE_MATCH_PROBABILITY
+    min_matched_fraction: float = DEFAULT_MIN_MATCHED_FRACTION
+
+    def __post_init__(self) -> None:
+        s = self.sigma_px
+        if not (np.isfinite(s) and s > 0):
+            raise StarnavError(f"sigma_px must be a positive number of pixels, got {s!r}")
+        if self.parity not in (None, 1, -1):
+            raise StarnavError(f"parity must be +1, -1 or None, got {self.parity!r}")
+        if not 0.0 <= self.min_matched_fraction <= 1.0:
+            raise StarnavError(
+                f"min_matched_fraction must be in [0, 1], got {self.min_matched_fraction!r}"
+            )
+        p = self.max_false_match_probability
+        if not 0.0 < p < 1.0:
+            raise StarnavError(f"max_false_match_probability must be in (0, 1), got {p!r}")
+
+    def match_settings(self, focal_px: float) -> MatchSettings:
+        """The identification's tolerances at a focal length of ``focal_px``."""
+        return MatchSettings.for_focal(
+            self.sigma_px,
+            focal_px,
+            max_false_match_probability=self.max_false_match_probability,
+            parity=self.parity,
+        )
+
+
+def get_database(catalog: Catalog, camera: CameraModel) -> PairDatabase:
+    """The pair database for this catalog and field (memory, then disk cache, then built)."""
+    max_angle_deg = float(np.degrees(2.0 * camera.half_diagonal_rad))
+    # pairs expected for n stars spread over the sky: n^2 (1 - cos angle) / 4
+    expected_pairs = len(catalog) ** 2 * (1.0 - np.cos(np.radians(max_angle_deg))) / 4.0
+    if expected_pairs > MAX_PAIRS:
+        raise CatalogError(
+            f"{len(catalog)} catalog stars in a {camera.fov_deg:.3g}° field make about "
+            f"{expected_pairs:.2g} star pairs (limit {MAX_PAIRS:.0e}): use a brighter "
+            "magnitude limit"
+        )
+    key = (catalog.fingerprint, database_angle_deg(max_angle_deg))
+    if key not in _DATABASES:
+        _DATABASES[key] = build_database(catalog, max_angle_deg)
+    return _DATABASES[key]
+
+
+def check_prior(prior: np.ndarray, prior_sigma_deg: float) -> np.ndarray:
+    """The prior attitude as a 3x3 rotation, or a one-line error."""
+    R = np.asarray(prior, dtype=float)
+    if R.shape != (3, 3) or not np.allclose(R @ R.T, np.eye(3), atol=1e-6):
+        raise StarnavError("prior must be a Solution or a 3x3 rotation (R_cam_from_icrs)")
+    if not (np.isfinite(prior_sigma_deg) and 0.0 < prior_sigma_deg <= 30.0):
+        raise StarnavError(f"prior_sigma_deg must be in (0, 30] degrees, got {prior_sigma_deg!r}")
+    return R
+
+
+def _say_compiling() -> None:
+    if "notice" not in _LOADED:  # once per process
+        _LOADED.add("notice")
+        print(
+            "starnav: compiling the solver's machine code (once per installation, ~60 s)",
+            file=sys.stderr,
+            flush=True,
+        )
+
+
+@contextmanager
+def first_use(what: str) -> Iterator[None]:
+    """Around the first run of ``what`` in a process: it loads the cached machine code
+    (~0.1-0.3 s), or compiles it, the first time after installing. When the wait passes a
+    second, say why on stderr."""
+    if what in _LOADED:
+        yield
+        return
+    notice = threading.Timer(1.0, _say_compiling)
+    notice.daemon = True
+    notice.start()
+    try:
+        yield
+    finally:
+        notice.cancel()
+        _LOADED.add(what)
+
+
+def steady_malloc() -> None:
+    """Free one 16 MiB block once per process. glibc's malloc serves blocks above its mmap
+    threshold (128 KiB) with a fresh mmap, page faults and all, until the process frees one
+    large block, which raises the threshold to that size; numpy temporaries of the searches
+    are often larger (the voting search ran 2x slower in a process that had never freed a
+    large block), so timings would depend on the process's history."""
+    if "malloc" not in _LOADED:
+        _LOADED.add("malloc")
+        np.empty(16 << 20, dtype=np.uint8)
+
+
+def brightness_order(stars: StarList) -> np.ndarray:
+    """Rows of ``stars`` brightest first (as given when there is no brightness)."""
+    if stars.brightness is None:
+        return np.arange(len(stars.xy))
+    return np.argsort(-stars.brightness, kind="stable")
+
+
+class Solver:
+    """Star lists of one camera to verified attitudes.
+
+    ``camera``: the camera model; ``catalog``: the stars to identify against; ``identifier``:
+    an identification algorithm (default Pyramid) or its name; ``settings``: ``SolveSettings``.
+    The pair database is loaded (or built) here, once.
+    """
+
+    def __init__(
+        self,
+        camera: CameraModel,
+        catalog: Catalog,
+        identifier: Identifier | str = DEFAULT_ALGORITHM,
+        settings: SolveSettings | None = None,
+        *,
+        algorithm_options: dict | None = None,
+    ) -> None:
+        if isinstance(identifier, str):
+            try:
+                identifier = make_identifier(identifier, **dict(algorithm_options or {}))
+            except TypeError as exc:  # an option the algorithm does not have
+                raise StarnavError(f"algorithm {identifier!r}: {exc}") from None
+        steady_malloc()
+        self.camera = camera
+        self.catalog = catalog
+        self.identifier = identifier
+        self.settings = settings or SolveSettings()
+        self.database = get_database(catalog, camera)
+        self.match_settings = self.settings.match_settings(camera.focal_px)
+
+    def solve(
+        self,
+        stars: StarList,
+        *,
+        prior: np.ndarray | None = None,
+        prior_sigma_deg: float = 1.0,
+    ) -> SolveResult:
+        """Identify checked ``stars`` and fit the attitude. ``prior``: the previous attitude
+        (``R_cam_from_icrs``), good to ``prior_sigma_deg`` (1-sigma): tracking mode matches
+        the catalog stars near it only, and falls back to lost in space when that fails
+        (``Solution.algorithm`` says which answered)."""
+        with first_use("solve"):
+            t0 = time.perf_counter()
+            bearings = self.camera.pixels_to_bearings(stars.xy)
+            order = brightness_order(stars)
+            t1 = time.perf_counter()
+            outcome, algorithm = self._identify(bearings, order, prior, prior_sigma_deg)
+            t2 = time.perf_counter()
+            stages = {"bearings": (t1 - t0) * 1e3, "identify": (t2 - t1) * 1e3}
+            found = outcome.identification
+            if found is None:
+                return SolveResult(
+                    None, outcome.reason, elapsed_ms(t0), outcome.hypotheses, self.database, stages
+                )
+            return self.fit(found, stars, t0=t0, t_fit=t2, algorithm=algorithm, stages=stages)
+
+    def _identify(
+        self, bearings: np.ndarray, order: np.ndarray, prior, prior_sigma_deg: float
+    ) -> tuple[IdentifyOutcome, str]:
+        if prior is not None:
+            tracker = Tracking(R_prior=prior, sigma_deg=prior_sigma_deg)
+            outcome = tracker.identify(bearings, order, self.database, self.match_settings)
+            if outcome.identification is not None:
+                return outcome, Tracking.name
+        outcome = self.identifier.identify(bearings, order, self.database, self.match_settings)
+        return outcome, self.identifier.name
+
+    def fit(
+        self,
+        found: Identification,
+        stars: StarList,
+        *,
+        t0: float,
+        t_fit: float,
+        algorithm: str,
+        stages: dict[str, float],
+    ) -> SolveResult:
+        """Fit an identification of ``stars`` and decide (``fit_identification``)."""
+        return fit_identification(
+            found,
+            stars,
+            self.camera,
+            self.database,
+            self.settings,
+            self.match_settings,
+            t0=t0,
+            t_fit=t_fit,
+            algorithm=algorithm,
+            stages=stages,
+        )
+
+
+def fit_identification(
+    found: Identification,
+    stars: StarList,
+    camera: CameraModel,
+    database: PairDatabase,
+    settings: SolveSettings,
+    match_settings: MatchSettings,
+    *,
+    t0: float,
+    t_fit: float,
+    algorithm: str,
+    stages: dict[str, float],
+) -> SolveResult:
+    """The ``SolveResult`` of an identification made with ``camera`` on ``database``: fitted
+    and decided by ``pipeline.conclude``, timed from ``t0`` (the fit from ``t_fit``;
+    ``time.perf_counter()`` values), ``stages`` the times so far."""
+    solution, reason = conclude(
+        found,
+        stars,
+        camera,
+        database.catalog,
+        database,
+        match_settings,
+        sigma_px=settings.sigma_px,
+        fit_focal=settings.fit_focal,
+        fit_distortion=settings.fit_distortion,
+        min_matched_fraction=settings.min_matched_fraction,
+    )
+    stages = {**stages, "fit": elapsed_ms(t_fit)}
+    ms = elapsed_ms(t0)
+    if solution is not None:
+        solution = replace(solution, time_ms=ms, algorithm=algorithm)
+    return SolveResult(solution, reason, ms, found.hypotheses, database, stages)
