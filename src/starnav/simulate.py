@@ -49,10 +49,8 @@ def project_catalog(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Catalog rows inside the image and their exact pixel positions (no noise)."""
     c = catalog.vectors @ np.asarray(R_cam_from_icrs).T
-    front = np.flatnonzero((c[:, 2] > 0.0) & (c[:, 2] > np.cos(camera.half_diagonal_rad + 0.01)))
-    xy = camera.bearings_to_pixels(c[front])
-    inside = camera.contains(xy)
-    return front[inside], xy[inside]
+    rows = np.flatnonzero(camera.sees(c))
+    return rows, camera.bearings_to_pixels(c[rows])
 
 
 def simulate_frame(

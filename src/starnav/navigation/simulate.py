@@ -101,10 +101,8 @@ def simulate_observation(
         R_cam = mount_from_azimuth_elevation(az, el)
         camera = Camera.from_fov(fov_deg, width)
         c = body_all @ R_cam.T
-        front = np.flatnonzero(c[:, 2] > np.cos(camera.half_diagonal_rad + 0.01))
-        xy = camera.bearings_to_pixels(c[front])
-        inside = camera.contains(xy)
-        keep = front[inside][np.argsort(cat.mag[above[front[inside]]], kind="stable")]
+        seen = np.flatnonzero(camera.sees(c))
+        keep = seen[np.argsort(cat.mag[above[seen]], kind="stable")]
         xy = camera.bearings_to_pixels(c[keep])
         if noise_px:
             xy = xy + rng.normal(0.0, noise_px, xy.shape)
