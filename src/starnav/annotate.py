@@ -165,10 +165,7 @@ def annotation_figure(
         handles.append(_residuals_and_ids(ax, match, residual_scale))
     _name_labels(ax, ids, xy, names)
     if handles:
-        legend = ax.legend(handles=handles, loc="lower left", fontsize=8, framealpha=0.6)
-        legend.get_frame().set_facecolor("black")
-        for text in legend.get_texts():
-            text.set_color("white")
+        _legend(ax, handles)
     fig.text(
         0.5,
         1.0 - (TITLE_PAD_PX / 2) / fig_h,
@@ -298,6 +295,14 @@ def _name_labels(ax: Axes, ids: np.ndarray, xy: np.ndarray, names: Mapping[int, 
                 path_effects=_OUTLINE,
                 zorder=6,
             )
+
+
+def _legend(ax: Axes, handles: list) -> None:
+    """The legend of ``handles``, white on translucent black, at the lower left."""
+    legend = ax.legend(handles=handles, loc="lower left", fontsize=8, framealpha=0.6)
+    legend.get_frame().set_facecolor("black")
+    for text in legend.get_texts():
+        text.set_color("white")
 
 
 def annotate_image(

@@ -409,23 +409,11 @@ def match_patterns(
     cand_pat, cand_row = _table_candidates(table, lo, hi, n_prefix)
     if len(cand_pat) == 0:
         return _no_matches()
-    # the stored largest edge (within half a step) is a quick first test; the same test on
-    # the exact edges, recomputed from the catalog vectors, follows
-    step = table.edge_step_rad
-    near = table.largest_edge_steps[cand_row] * step
-    ok = _largest_agrees(near, largest[cand_pat], tol_rad, step, scale_range, rel_tol)
-    cand_pat, cand_row = cand_pat[ok], cand_row[ok]
-    cat_stars = table.stars(cand_row)
-    cat_vec = vectors.take(cat_stars, axis=0)
-    cat_edges = pattern_edges(cat_vec)
-    # the largest of six columns: faster than ``max(axis=1)``, which loops over short rows
-    cat_largest = functools.reduce(np.maximum, cat_edges.T)
-    ok = _largest_agrees(cat_largest, largest[cand_pat], tol_rad, 0.0, scale_range, rel_tol)
-    if not ok.all():  # only those within half a step of a limit are left out here
-        if not ok.any():
-            return _no_matches()
-        cand_pat, cat_stars, cat_vec = cand_pat[ok], cat_stars[ok], cat_vec[ok]
-        cat_edges, cat_largest = cat_edges[ok], cat_largest[ok]
+    cand_pat, cat_stars, cat_vec, cat_edges, cat_largest = _largest_edge_candidates(
+        table, vectors, cand_pat, cand_row, largest, tol_rad, scale_range, rel_tol
+    )
+    if len(cand_pat) == 0:
+        return _no_matches()
     # observed edges are multiplied by this to compare with the catalog's
     scale = np.ones(len(cand_pat)) if scale_range is None else cat_largest / largest[cand_pat]
     canon, c, k, err = _star_orders(obs, largest, cand_pat, cat_edges, scale, tol_rad, rel_tol)
@@ -497,6 +485,37 @@ def _table_candidates(
         np.arange(n_cand) - np.repeat(np.cumsum(count) - count, count)
     )
     return cand_pat, cand_row
+
+
+def _largest_edge_candidates(
+    table: PatternTable,
+    vectors: np.ndarray,
+    cand_pat: np.ndarray,
+    cand_row: np.ndarray,
+    largest: np.ndarray,
+    tol_rad: float,
+    scale_range: tuple[float, float] | None,
+    rel_tol: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The candidates (observed pattern ``cand_pat``, table row ``cand_row``) whose largest
+    edge agrees with the observed one (``_largest_agrees``): their observed pattern, catalog
+    stars (m, 4), star vectors (m, 4, 3), edges (m, 6) and largest edge (m,)."""
+    # the stored largest edge (within half a step) is a quick first test; the same test on
+    # the exact edges, recomputed from the catalog vectors, follows
+    step = table.edge_step_rad
+    near = table.largest_edge_steps[cand_row] * step
+    ok = _largest_agrees(near, largest[cand_pat], tol_rad, step, scale_range, rel_tol)
+    cand_pat, cand_row = cand_pat[ok], cand_row[ok]
+    cat_stars = table.stars(cand_row)
+    cat_vec = vectors.take(cat_stars, axis=0)
+    cat_edges = pattern_edges(cat_vec)
+    # the largest of six columns: faster than ``max(axis=1)``, which loops over short rows
+    cat_largest = functools.reduce(np.maximum, cat_edges.T)
+    ok = _largest_agrees(cat_largest, largest[cand_pat], tol_rad, 0.0, scale_range, rel_tol)
+    if not ok.all():  # only those within half a step of a limit are left out here
+        cand_pat, cat_stars, cat_vec = cand_pat[ok], cat_stars[ok], cat_vec[ok]
+        cat_edges, cat_largest = cat_edges[ok], cat_largest[ok]
+    return cand_pat, cat_stars, cat_vec, cat_edges, cat_largest
 
 
 def _largest_agrees(
