@@ -15,6 +15,7 @@ import numpy as np
 from astropy.stats import sigma_clipped_stats
 from astropy.visualization import AsinhStretch, ImageNormalize
 from matplotlib import patheffects
+from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.path import Path as MarkerPath
@@ -141,13 +142,52 @@ def annotation_figure(
     if names is None:
         # the names are keyed by HIP number: other catalogs' ids mean other stars
         names = star_names() if catalog.name.startswith("Hipparcos") else {}
-    width, height = camera.width, camera.height
 
     lines = _title_lines(R, camera, title, f"{len(detected)} detected, {len(match)} matched")
-    fig_w, fig_h = figure_size_px(width, height, title_lines=len(lines))
+    fig_w, fig_h = figure_size_px(camera.width, camera.height, title_lines=len(lines))
+    fig, ax = _image_figure(gray, camera, fig_w, fig_h, len(lines))
+    rows, xy = project_catalog(catalog, R, camera)
+    ids = catalog.ids[rows]
+    handles = _catalog_markers(ax, xy, ids, match, catalog, R, camera)
+    if len(detected):
+        handles.append(
+            ax.scatter(
+                *detected.T,
+                marker="o",
+                s=40,
+                facecolors="none",
+                edgecolors="cyan",
+                linewidths=0.9,
+                label="detected",
+            )
+        )
+    if len(match):
+        handles.append(_residuals_and_ids(ax, match, residual_scale))
+    _name_labels(ax, ids, xy, names)
+    if handles:
+        _legend(ax, handles)
+    fig.text(
+        0.5,
+        1.0 - (TITLE_PAD_PX / 2) / fig_h,
+        "\n".join(lines),
+        ha="center",
+        va="top",
+        fontsize=10,
+        linespacing=1.3,
+    )
+    return fig
+
+
+def _image_figure(
+    gray: np.ndarray, camera: Camera, fig_w: int, fig_h: int, title_lines: int
+) -> tuple[Figure, Axes]:
+    """A ``fig_w`` x ``fig_h`` px figure with the stretched image drawn in starnav's pixel
+    convention below a strip for ``title_lines`` lines of title; the figure and the image
+    axes."""
+    width, height = camera.width, camera.height
     # 0.01 px of slack: matplotlib truncates figsize * dpi to whole pixels
     fig = Figure(figsize=((fig_w + 0.01) / DPI, (fig_h + 0.01) / DPI), dpi=DPI, facecolor="white")
-    image_h = fig_h - (TITLE_PAD_PX + TITLE_LINE_PX * len(lines))
+    image_h = fig_h - (TITLE_PAD_PX + TITLE_LINE_PX * title_lines)
     ax = fig.add_axes((0.0, 0.0, 1.0, image_h / fig_h))
     ax.set_axis_off()
     ax.imshow(
@@ -155,11 +195,21 @@ def annotation_figure(
     )
     ax.set_xlim(0, width)
     ax.set_ylim(height, 0)
+    return fig, ax
 
-    rows, xy = project_catalog(catalog, R, camera)
-    ids = catalog.ids[rows]
-    matched_ids = {int(i) for i in match[:, 2]}
-    is_matched = np.isin(ids, list(matched_ids))
+
+def _catalog_markers(
+    ax: Axes,
+    xy: np.ndarray,
+    ids: np.ndarray,
+    match: np.ndarray,
+    catalog: Catalog,
+    R: np.ndarray,
+    camera: Camera,
+) -> list:
+    """Draw the catalog stars in view (``ids`` at ``xy``): orange crosses for those not in
+    ``match``, green squares where the matched ones project; their legend handles."""
+    is_matched = np.isin(ids, list({int(i) for i in match[:, 2]}))
     handles = []
     if (~is_matched).any():
         handles.append(
@@ -188,53 +238,49 @@ def annotation_figure(
                 label="catalog star, matched",
             )
         )
-    if len(detected):
-        handles.append(
-            ax.scatter(
-                *detected.T,
-                marker="o",
-                s=40,
-                facecolors="none",
-                edgecolors="cyan",
-                linewidths=0.9,
-                label="detected",
-            )
+    return handles
+
+
+def _residuals_and_ids(ax: Axes, match: np.ndarray, residual_scale: float) -> Line2D:
+    """Draw the residual arrows of the matched points, magnified ``residual_scale`` times,
+    and their catalog ids; the legend handle of the arrows."""
+    ax.quiver(
+        match[:, 0],
+        match[:, 1],
+        residual_scale * match[:, 3],
+        residual_scale * match[:, 4],
+        angles="xy",
+        scale_units="xy",
+        scale=1.0,
+        color="red",
+        width=0.002,
+        zorder=4,
+    )
+    handle = Line2D(
+        [],
+        [],
+        color="red",
+        marker=r"$\rightarrow$",
+        markersize=12,
+        linestyle="none",
+        label=f"residual (catalog - measured) x{residual_scale:g}",
+    )
+    for x, y, cid in match[:, :3]:
+        ax.annotate(
+            str(int(cid)),
+            (x, y),
+            xytext=(7, -9),
+            textcoords="offset points",
+            color="lime",
+            fontsize=7,
+            path_effects=_OUTLINE,
+            zorder=5,
         )
-    if len(match):
-        ax.quiver(
-            match[:, 0],
-            match[:, 1],
-            residual_scale * match[:, 3],
-            residual_scale * match[:, 4],
-            angles="xy",
-            scale_units="xy",
-            scale=1.0,
-            color="red",
-            width=0.002,
-            zorder=4,
-        )
-        handles.append(
-            Line2D(
-                [],
-                [],
-                color="red",
-                marker=r"$\rightarrow$",
-                markersize=12,
-                linestyle="none",
-                label=f"residual (catalog - measured) x{residual_scale:g}",
-            )
-        )
-        for x, y, cid in match[:, :3]:
-            ax.annotate(
-                str(int(cid)),
-                (x, y),
-                xytext=(7, -9),
-                textcoords="offset points",
-                color="lime",
-                fontsize=7,
-                path_effects=_OUTLINE,
-                zorder=5,
-            )
+    return handle
+
+
+def _name_labels(ax: Axes, ids: np.ndarray, xy: np.ndarray, names: Mapping[int, str]) -> None:
+    """Label the catalog stars in view that have a name."""
     for star_id, (x, y) in zip(ids.tolist(), xy, strict=True):
         name = names.get(int(star_id))
         if name is not None:
@@ -249,21 +295,14 @@ def annotation_figure(
                 path_effects=_OUTLINE,
                 zorder=6,
             )
-    if handles:
-        legend = ax.legend(handles=handles, loc="lower left", fontsize=8, framealpha=0.6)
-        legend.get_frame().set_facecolor("black")
-        for text in legend.get_texts():
-            text.set_color("white")
-    fig.text(
-        0.5,
-        1.0 - (TITLE_PAD_PX / 2) / fig_h,
-        "\n".join(lines),
-        ha="center",
-        va="top",
-        fontsize=10,
-        linespacing=1.3,
-    )
-    return fig
+
+
+def _legend(ax: Axes, handles: list) -> None:
+    """The legend of ``handles``, white on translucent black, at the lower left."""
+    legend = ax.legend(handles=handles, loc="lower left", fontsize=8, framealpha=0.6)
+    legend.get_frame().set_facecolor("black")
+    for text in legend.get_texts():
+        text.set_color("white")
 
 
 def annotate_image(

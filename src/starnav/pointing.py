@@ -262,54 +262,91 @@ def three_star(
     if parity not in (None, 1, -1):
         raise PointingError(f"parity must be +1, -1 or None, got {parity!r}")
     misfit_tol = 3.0 if sigma_px is None else max(5.0 * sigma_px, 2.0)
-
-    def solution(f: float, focal_free: bool) -> Pointing:
-        d = linear_boresight(U, a, f)
-        norm = float(np.linalg.norm(d))
-        d_hat = d / norm
-        ra, dec = unit_to_radec(d_hat)
-        roll, par, misfit = None, parity, None
-        if offsets is not None:
-            roll, par = _roll_parity(d_hat, U, offsets, f, parity)
-            misfit = _angle_misfit_px(U, offsets, f)
-        return Pointing(
-            ra_deg=float(np.degrees(ra)),
-            dec_deg=float(np.degrees(dec)),
-            roll_deg=roll,
-            focal_px=float(f),
-            consistency=norm - 1.0,
-            sigma_boresight_arcsec=None
-            if sigma_px is None
-            else sigma_boresight_arcsec(U, a, f, sigma_px, focal_free=focal_free),
-            sigma_focal_px=None
-            if sigma_px is None or not focal_free
-            else sigma_focal_px(U, a, f, sigma_px),
-            boresight=d_hat,
-            parity=par,
-            fit_rms_px=misfit,
-        )
-
-    def misfit_error(p: Pointing) -> PointingError:
-        return PointingError(
-            f"the pixel positions do not match the star separations: rms angle misfit "
-            f"{p.fit_rms_px:.1f} px at focal length {p.focal_px:.1f} px (tolerance "
-            f"{misfit_tol:g} px); check the identification and the focal length"
-        )
-
     if focal_px is not None:
         lo, hi = FOCAL_RANGE_PX
         if not (np.isfinite(focal_px) and lo <= focal_px <= hi):
             raise PointingError(f"focal_px must be between {lo:g} and {hi:g}, got {focal_px!r}")
-        known = solution(float(focal_px), False)
-        if abs(known.consistency) > MAX_INCONSISTENCY:
-            raise PointingError(
-                f"the distances do not fit these stars at focal length {focal_px:g} px: the "
-                f"boresight equations give |d| = {1 + known.consistency:.3f} (cosines beyond "
-                "what the star separations allow); check the identification and focal length"
-            )
-        if known.fit_rms_px is not None and known.fit_rms_px > misfit_tol:
-            raise misfit_error(known)
-        return known
+        return _with_known_focal(U, a, offsets, float(focal_px), sigma_px, parity, misfit_tol)
+    return _with_focal_solved(U, a, offsets, sigma_px, parity, misfit_tol)
+
+
+def _solution(
+    U: np.ndarray,
+    a: np.ndarray,
+    offsets: np.ndarray | None,
+    f: float,
+    focal_free: bool,
+    sigma_px: float | None,
+    parity: int | None,
+) -> Pointing:
+    """The pointing of stars ``U`` at distances ``a`` (and ``offsets`` from the principal
+    point, or None) at focal length ``f`` (``focal_free``: solved from the same data)."""
+    d = linear_boresight(U, a, f)
+    norm = float(np.linalg.norm(d))
+    d_hat = d / norm
+    ra, dec = unit_to_radec(d_hat)
+    roll, par, misfit = None, parity, None
+    if offsets is not None:
+        roll, par = _roll_parity(d_hat, U, offsets, f, parity)
+        misfit = _angle_misfit_px(U, offsets, f)
+    return Pointing(
+        ra_deg=float(np.degrees(ra)),
+        dec_deg=float(np.degrees(dec)),
+        roll_deg=roll,
+        focal_px=float(f),
+        consistency=norm - 1.0,
+        sigma_boresight_arcsec=None
+        if sigma_px is None
+        else sigma_boresight_arcsec(U, a, f, sigma_px, focal_free=focal_free),
+        sigma_focal_px=None
+        if sigma_px is None or not focal_free
+        else sigma_focal_px(U, a, f, sigma_px),
+        boresight=d_hat,
+        parity=par,
+        fit_rms_px=misfit,
+    )
+
+
+def _misfit_error(p: Pointing, misfit_tol: float) -> PointingError:
+    return PointingError(
+        f"the pixel positions do not match the star separations: rms angle misfit "
+        f"{p.fit_rms_px:.1f} px at focal length {p.focal_px:.1f} px (tolerance "
+        f"{misfit_tol:g} px); check the identification and the focal length"
+    )
+
+
+def _with_known_focal(
+    U: np.ndarray,
+    a: np.ndarray,
+    offsets: np.ndarray | None,
+    focal_px: float,
+    sigma_px: float | None,
+    parity: int | None,
+    misfit_tol: float,
+) -> Pointing:
+    """The pointing at a given focal length; ``PointingError`` when the data do not fit it."""
+    known = _solution(U, a, offsets, focal_px, False, sigma_px, parity)
+    if abs(known.consistency) > MAX_INCONSISTENCY:
+        raise PointingError(
+            f"the distances do not fit these stars at focal length {focal_px:g} px: the "
+            f"boresight equations give |d| = {1 + known.consistency:.3f} (cosines beyond "
+            "what the star separations allow); check the identification and focal length"
+        )
+    if known.fit_rms_px is not None and known.fit_rms_px > misfit_tol:
+        raise _misfit_error(known, misfit_tol)
+    return known
+
+
+def _with_focal_solved(
+    U: np.ndarray,
+    a: np.ndarray,
+    offsets: np.ndarray | None,
+    sigma_px: float | None,
+    parity: int | None,
+    misfit_tol: float,
+) -> Pointing:
+    """The best pointing over every focal length that fits, the others as its alternatives,
+    with notes on ambiguity and on how poorly the geometry fixes the focal length."""
     f_min = a.max() / np.tan(np.radians(MAX_OFF_AXIS_DEG))
     roots = [f for f in focal_solutions(U, a) if f >= f_min]
     if not roots:
@@ -317,13 +354,13 @@ def three_star(
             "no focal length makes these three stars consistent (|d(f)| never reaches 1): "
             "check the identification and the positions"
         )
-    sols = [solution(f, True) for f in roots]
+    sols = [_solution(U, a, offsets, f, True, sigma_px, parity) for f in roots]
     notes = []
     if offsets is not None:
         # the inter-star angles depend on f too: keep the solutions that reproduce them
         sols.sort(key=lambda p: p.fit_rms_px)
         if sols[0].fit_rms_px > misfit_tol:
-            raise misfit_error(sols[0])
+            raise _misfit_error(sols[0], misfit_tol)
         sols = [p for p in sols if p.fit_rms_px <= misfit_tol]
         if len(sols) > 1:
             notes.append(f"{len(sols)} focal lengths fit these stars; best fit first")

@@ -323,15 +323,55 @@ def run_study(
     points per axis of the placement map."""
     camera = Camera.from_fov(fov_deg, width)
     R = attitude_from_radec_roll(*ATTITUDE_RADEC_ROLL_DEG)
-    f = camera.focal_px
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    per_sigma_f = sigma_px / f * ARCSEC_PER_RAD  # arcsec per unit of geometric factor
 
-    arrangements = classic_arrangements(width)
+    rows = arrangement_results(camera, width, R, sigma_px, trials, seed, progress)
+    # placement map: equilateral triangle of fixed size, centroid over the image
+    r_place = PLACEMENT_CIRCUMRADIUS * width
+    centres = np.linspace(0.0, width, placement_grid)
+    grid = placement_map(camera, R, sigma_px, centres, r_place)
+    iy, ix = np.unravel_index(np.nanargmin(grid), grid.shape)
+    placement_min_offset = float(np.hypot(centres[ix] - camera.cx, centres[iy] - camera.cy))
+    sizes = size_results(camera, width, R, sigma_px, trials, seed, progress)
+    law = volume_law(camera, width, R, sigma_px, seed, n_random)
+
+    return StudyResult(
+        rows=tuple(rows),
+        figures=write_figures(out_dir, camera, sigma_px, rows, grid, centres, r_place, sizes, law),
+        fov_deg=fov_deg,
+        width=width,
+        focal_px=camera.focal_px,
+        sigma_px=sigma_px,
+        trials=trials,
+        seed=seed,
+        volume_slope=float(law.slope),
+        volume_r2=float(law.r2),
+        volume_slope_inside=float(law.slope_inside),
+        n_random=int(n_random),
+        n_random_inside=int(law.inside.sum()),
+        placement_min_arcsec=float(np.nanmin(grid)),
+        placement_min_offset_px=placement_min_offset,
+        placement_max_arcsec=float(np.nanmax(grid)),
+        sizes=tuple(sizes),
+        closed_form_max_rel_diff=law.closed_form_max_rel_diff,
+    )
+
+
+def arrangement_results(
+    camera: Camera,
+    width: int,
+    R: np.ndarray,
+    sigma_px: float,
+    trials: int,
+    seed: int,
+    progress: bool,
+) -> list[ArrangementResult]:
+    """The classic arrangements (``classic_arrangements(width)``) with their analytic and
+    Monte Carlo errors (``trials`` draws each, seeded by (``seed``, row number))."""
     rows = []
     bar = tqdm(
-        arrangements.items(),
+        classic_arrangements(width).items(),
         desc="arrangements (Monte Carlo)",
         file=sys.stderr,
         disable=not progress,
@@ -348,20 +388,35 @@ def run_study(
             xy, camera, R, sigma_px, trials, np.random.default_rng([seed, k])
         )
         rows.append(ArrangementResult(name, xy, analytic, mc, volume, geometric_factor(xy, camera)))
+    return rows
 
-    # placement map: equilateral triangle of fixed size, centroid over the image
-    r_place = PLACEMENT_CIRCUMRADIUS * width
-    centres = np.linspace(0.0, width, placement_grid)
-    grid = np.full((placement_grid, placement_grid), np.nan)
+
+def placement_map(
+    camera: Camera, R: np.ndarray, sigma_px: float, centres: np.ndarray, circumradius: float
+) -> np.ndarray:
+    """Analytic error (arcsec) of the equilateral triangle of ``circumradius`` px centred at
+    each (``centres[ix]``, ``centres[iy]``), as grid[iy, ix]; NaN where it leaves the image."""
+    grid = np.full((len(centres), len(centres)), np.nan)
     for iy, cy in enumerate(centres):
         for ix, cx in enumerate(centres):
-            xy = equilateral(cx, cy, r_place)
+            xy = equilateral(cx, cy, circumradius)
             if camera.contains(xy).all():
                 grid[iy, ix] = analytic_sigma_arcsec(xy, camera, R, sigma_px)
-    iy, ix = np.unravel_index(np.nanargmin(grid), grid.shape)
-    placement_min_offset = float(np.hypot(centres[ix] - camera.cx, centres[iy] - camera.cy))
+    return grid
 
-    # size panel: circumradius against error, centred and off centre
+
+def size_results(
+    camera: Camera,
+    width: int,
+    R: np.ndarray,
+    sigma_px: float,
+    trials: int,
+    seed: int,
+    progress: bool,
+) -> list[SizeResult]:
+    """The size panel: equilateral triangles of 40 circumradii at each of ``SIZE_OFFSETS``
+    (analytic only), then the centred ones of ``SIZE_MC_RADII`` with a Monte Carlo check;
+    radii and offsets are fractions of ``width``."""
     sizes = []
     radii = np.geomspace(0.005, 0.5, 40)
     for offset in SIZE_OFFSETS:
@@ -391,8 +446,34 @@ def run_study(
                 tetrahedron_volume(star_vectors(xy, camera, R)),
             )
         )
+    return sizes
 
-    # volume law over random triangles (vertices uniform in the image)
+
+@dataclass(frozen=True, eq=False)
+class VolumeLaw:
+    """The analytic error (arcsec) of ``n_random`` random triangles against their tetrahedron
+    volume: per triangle ``volumes``, ``errors`` and whether it holds the principal point
+    (``inside``); the fit log10(error) = ``slope`` log10(volume) + ``intercept`` with its
+    coefficient of determination ``r2``, the slope of the triangles inside, and the largest
+    relative difference of the closed form (``geometric_factor``) from the errors."""
+
+    volumes: np.ndarray
+    errors: np.ndarray
+    inside: np.ndarray
+    slope: float
+    intercept: float
+    r2: float
+    slope_inside: float
+    closed_form_max_rel_diff: float
+
+
+def volume_law(
+    camera: Camera, width: int, R: np.ndarray, sigma_px: float, seed: int, n_random: int
+) -> VolumeLaw:
+    """The volume law over ``n_random`` random triangles (vertices uniform in 0..``width``,
+    too flat ones skipped), drawn with the seed (``seed``, 2000)."""
+    f = camera.focal_px
+    per_sigma_f = sigma_px / f * ARCSEC_PER_RAD  # arcsec per unit of geometric factor
     rng = np.random.default_rng([seed, 2000])
     volumes, errors, inside, closed_form = [], [], [], []
     while len(volumes) < n_random:
@@ -410,42 +491,36 @@ def run_study(
     resid = np.log10(errors) - (slope * np.log10(volumes) + intercept)
     r2 = 1.0 - np.var(resid) / np.var(np.log10(errors))
     slope_inside = np.polyfit(np.log10(volumes[inside]), np.log10(errors[inside]), 1)[0]
+    return VolumeLaw(volumes, errors, inside, slope, intercept, r2, slope_inside, closed_form_rel)
 
-    figures = (
+
+def write_figures(
+    out_dir: Path,
+    camera: Camera,
+    sigma_px: float,
+    rows: list[ArrangementResult],
+    grid: np.ndarray,
+    centres: np.ndarray,
+    r_place: float,
+    sizes: list[SizeResult],
+    law: VolumeLaw,
+) -> tuple[Path, ...]:
+    """Write the study's three PNGs into ``out_dir``; their paths."""
+    return (
         _plot_arrangements(rows, camera, sigma_px, out_dir / "pointing_arrangements.png"),
         _plot_placement(
             grid, centres, sizes, camera, r_place, sigma_px, out_dir / "pointing_placement_map.png"
         ),
         _plot_volume(
-            volumes,
-            errors,
-            inside,
-            slope,
-            intercept,
+            law.volumes,
+            law.errors,
+            law.inside,
+            law.slope,
+            law.intercept,
             sizes,
             camera,
             out_dir / "pointing_volume.png",
         ),
-    )
-    return StudyResult(
-        rows=tuple(rows),
-        figures=figures,
-        fov_deg=fov_deg,
-        width=width,
-        focal_px=f,
-        sigma_px=sigma_px,
-        trials=trials,
-        seed=seed,
-        volume_slope=float(slope),
-        volume_r2=float(r2),
-        volume_slope_inside=float(slope_inside),
-        n_random=int(n_random),
-        n_random_inside=int(inside.sum()),
-        placement_min_arcsec=float(np.nanmin(grid)),
-        placement_min_offset_px=placement_min_offset,
-        placement_max_arcsec=float(np.nanmax(grid)),
-        sizes=tuple(sizes),
-        closed_form_max_rel_diff=closed_form_rel,
     )
 
 

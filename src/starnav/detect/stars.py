@@ -103,6 +103,71 @@ def detect_stars(
     keep (flagged) or drop saturated stars. A blank or constant image gives no stars.
     """
     _check_options(threshold_sigma, max_stars, min_area_px, saturation, psf_sigma_px)
+    data, mask, dtype = _float_image(image)
+    height, width = data.shape
+    if mask is not None and mask.all():
+        return _empty(width, height, psf_sigma_px)
+    low, high = _finite_range(data, mask)
+    if not high > low:
+        return _empty(width, height, psf_sigma_px, float(low))
+    if saturation is None:
+        saturation = _infer_saturation(data, dtype, high)
+
+    step, back, level, rms = _background(data, mask)
+    if not rms > 0:  # a noise-free image: an rms relative to its range
+        rms = _NOISE_FREE_RMS * (high - level)
+    _subtract(data, back, step)
+    n_hot = _clean_hot_pixels(data, threshold_sigma * rms) if reject_hot_pixels else 0
+    objects = _extract(data, mask, rms, threshold_sigma, min_area_px, psf_sigma_px)
+    if len(objects) == 0:
+        return _empty(width, height, psf_sigma_px, level, rms, n_hot)
+
+    saturated = _saturated(objects, data, back, step, saturation)
+    n_saturated = int(saturated.sum())
+    if not keep_saturated:
+        objects, saturated = objects[~saturated], saturated[~saturated]
+        if len(objects) == 0:
+            return _empty(width, height, psf_sigma_px, level, rms, n_hot, n_saturated)
+    sigma = psf_sigma_px
+    if sigma is None:
+        sigma = _measure_psf_sigma(data, objects[~saturated], mask)
+    if max_stars is not None and len(objects) > 2 * max_stars + 10:
+        # centroid only the likely brightest (the aperture flux below decides the order)
+        rough = np.lexsort((-objects["flux"], ~saturated))[: 2 * max_stars + 10]
+        objects, saturated = objects[rough], saturated[rough]
+    stars = _measured(data, mask, objects, saturated, sigma, rms, max_stars)
+    return Detections(
+        *stars, float(level), float(rms), float(sigma), n_saturated, n_hot, width, height
+    )
+
+
+def _measured(
+    data: np.ndarray,
+    mask: np.ndarray | None,
+    objects: np.ndarray,
+    saturated: np.ndarray,
+    sigma: float,
+    rms: float,
+    max_stars: int | None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Centroids (our pixel convention), aperture flux, peak, SNR and saturation flag of
+    the sources, saturated first then by flux, the first ``max_stars`` (None: all)."""
+    x, y = _centroids(data, objects, sigma, mask)
+    radius = max(2.0, _APERTURE_SIGMAS * sigma)
+    flux, _, _ = sep.sum_circle(data, x, y, radius, mask=mask, subpix=1)
+    snr = flux / (rms * math.sqrt(4.0 * math.pi) * sigma)
+    order = np.lexsort((-flux, ~saturated))
+    if max_stars is not None:
+        order = order[:max_stars]
+    xy = np.column_stack([x[order], y[order]]) + 0.5
+    peak = objects["peak"][order].astype(float)
+    return xy, flux[order], peak, snr[order], saturated[order]
+
+
+def _float_image(image: np.ndarray) -> tuple[np.ndarray, np.ndarray | None, np.dtype]:
+    """The image as a C-ordered float32 copy in native byte order (for sep), with its
+    non-finite pixels set to 0 and masked (mask None when every pixel is finite), and the
+    dtype it came in; ``ImageError`` for what is not a 2-D image of at least 3 x 3 numbers."""
     raw = np.asarray(image)
     if raw.ndim != 2 or raw.size == 0:
         raise ImageError(f"an image must be a 2-D array, not empty; got shape {raw.shape}")
@@ -118,24 +183,23 @@ def detect_stars(
         if not finite.all():
             mask = ~finite
             data[mask] = 0.0
-            if mask.all():
-                return _empty(width, height, psf_sigma_px)
-    low, high = _finite_range(data, mask)
-    if not high > low:
-        return _empty(width, height, psf_sigma_px, float(low))
-    if saturation is None:
-        saturation = _infer_saturation(data, raw.dtype, high)
+    return data, mask, raw.dtype
 
-    step, back, level, rms = _background(data, mask)
-    if not rms > 0:  # a noise-free image: an rms relative to its range
-        rms = _NOISE_FREE_RMS * (high - level)
-    _subtract(data, back, step)
-    n_hot = _clean_hot_pixels(data, threshold_sigma * rms) if reject_hot_pixels else 0
 
+def _extract(
+    data: np.ndarray,
+    mask: np.ndarray | None,
+    rms: float,
+    threshold_sigma: float,
+    min_area_px: int,
+    psf_sigma_px: float | None,
+) -> np.ndarray:
+    """sep's sources of the background-subtracted ``data``: matched filter (the PSF Gaussian
+    or sep's 3x3 kernel), ``threshold_sigma`` counted in the filtered image's noise."""
     kernel = _DEFAULT_KERNEL if psf_sigma_px is None else _gaussian_kernel(psf_sigma_px)
     filtered_rms = rms * float(np.sqrt((kernel**2).sum()) / kernel.sum())
     try:
-        objects = sep.extract(
+        return sep.extract(
             data,
             threshold_sigma * filtered_rms,
             mask=mask,
@@ -151,29 +215,25 @@ def detect_stars(
             f"star detection failed ({' '.join(str(exc).split())}); "
             "raise threshold_sigma or check the image"
         ) from None
-    if len(objects) == 0:
-        return _empty(width, height, psf_sigma_px, level, rms, n_hot)
 
+
+def _saturated(
+    objects: np.ndarray, data: np.ndarray, back: np.ndarray, step: int, saturation: float | None
+) -> np.ndarray:
+    """Whether each source's peak pixel, background added back, reaches ``saturation``."""
+    if saturation is None:
+        return np.zeros(len(objects), dtype=bool)
     xpeak = objects["xpeak"].astype(np.intp)
     ypeak = objects["ypeak"].astype(np.intp)
-    if saturation is None:
-        saturated = np.zeros(len(objects), dtype=bool)
-    else:
-        raw_peak = data[ypeak, xpeak] + _background_at(back, step, xpeak, ypeak)
-        saturated = raw_peak >= np.float32(saturation)
-    n_saturated = int(saturated.sum())
-    if not keep_saturated:
-        objects, saturated = objects[~saturated], saturated[~saturated]
-        if len(objects) == 0:
-            return _empty(width, height, psf_sigma_px, level, rms, n_hot, n_saturated)
+    raw_peak = data[ypeak, xpeak] + _background_at(back, step, xpeak, ypeak)
+    return raw_peak >= np.float32(saturation)
 
-    sigma = psf_sigma_px
-    if sigma is None:
-        sigma = _measure_psf_sigma(data, objects[~saturated], mask)
-    if max_stars is not None and len(objects) > 2 * max_stars + 10:
-        # centroid only the likely brightest (the aperture flux below decides the order)
-        rough = np.lexsort((-objects["flux"], ~saturated))[: 2 * max_stars + 10]
-        objects, saturated = objects[rough], saturated[rough]
+
+def _centroids(
+    data: np.ndarray, objects: np.ndarray, sigma: float, mask: np.ndarray | None
+) -> tuple[np.ndarray, np.ndarray]:
+    """Windowed centroids (sep's pixel convention) of the sources, Gaussian window of sigma
+    sqrt(``sigma``² + 1 px²)."""
     window = np.full(len(objects), math.sqrt(sigma**2 + 1.0))
     # subpix=1: the window is a Gaussian, so finer sampling of its edge changes nothing
     x, y, _ = sep.winpos(data, objects["x"], objects["y"], window, mask=mask, subpix=1)
@@ -181,28 +241,7 @@ def detect_stars(
     # sep's isophotal barycentre (of its own pixels) when the window wanders off (< 1 %)
     wandered = ~(np.hypot(x - objects["x"], y - objects["y"]) <= window)
     x[wandered], y[wandered] = objects["x"][wandered], objects["y"][wandered]
-    radius = max(2.0, _APERTURE_SIGMAS * sigma)
-    flux, _, _ = sep.sum_circle(data, x, y, radius, mask=mask, subpix=1)
-    snr = flux / (rms * math.sqrt(4.0 * math.pi) * sigma)
-
-    order = np.lexsort((-flux, ~saturated))
-    if max_stars is not None:
-        order = order[:max_stars]
-    xy = np.column_stack([x[order], y[order]]) + 0.5
-    return Detections(
-        xy,
-        flux[order],
-        objects["peak"][order].astype(float),
-        snr[order],
-        saturated[order],
-        float(level),
-        float(rms),
-        float(sigma),
-        n_saturated,
-        n_hot,
-        width,
-        height,
-    )
+    return x, y
 
 
 def _check_options(threshold_sigma, max_stars, min_area_px, saturation, psf_sigma_px) -> None:

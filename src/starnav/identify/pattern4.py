@@ -395,18 +395,9 @@ def match_patterns(
     p = len(obs)
     edges = pattern_edges(obs)
     largest = edges.max(axis=1)
-    lo_scale, hi_scale = scale_range if scale_range is not None else (1.0, 1.0)
-    usable = (edges.min(axis=1) >= 2.0 * tol_rad) & (largest * lo_scale <= max_angle_rad + tol_rad)
-    # the ratio e / L of edges measured within tol: off by at most tol (1 + e/L) / (L - tol)
-    ratios = np.sort(edges, axis=1)[:, :5] / largest[:, None]
-    slack = tol_rad * (1.0 + ratios) / np.maximum(largest - tol_rad, tol_rad)[:, None]
-    slack = slack + 2.0 * rel_tol
-    B = table.bins
-    lo = np.clip(np.floor((ratios - slack) * B), 0, B - 1).astype(np.int64)
-    hi = np.clip(np.floor((ratios + slack) * B), 0, B - 1).astype(np.int64)
-    span = hi - lo + 1
-    # the bins of the first four ratios are enumerated; the fifth is a contiguous key range
-    n_prefix = np.where(usable, np.prod(span[:, :4], axis=1), 0)
+    lo, hi, n_prefix = _probe_bins(
+        edges, largest, table.bins, tol_rad, max_angle_rad, scale_range, rel_tol
+    )
     if n_prefix.sum() > _MAX_PROBES and p > 1:
         half = p // 2
         scaled = {"scale_range": scale_range, "rel_tol": rel_tol}
@@ -415,10 +406,65 @@ def match_patterns(
             for sub in (slice(None, half), slice(half, None))
         ]
         return _concat(parts, [0, half])
-    total = int(n_prefix.sum())
-    if total == 0:
+    cand_pat, cand_row = _table_candidates(table, lo, hi, n_prefix)
+    if len(cand_pat) == 0:
         return _no_matches()
-    pat = np.repeat(np.arange(p), n_prefix)
+    cand_pat, cat_stars, cat_vec, cat_edges, cat_largest = _largest_edge_candidates(
+        table, vectors, cand_pat, cand_row, largest, tol_rad, scale_range, rel_tol
+    )
+    if len(cand_pat) == 0:
+        return _no_matches()
+    # observed edges are multiplied by this to compare with the catalog's
+    scale = np.ones(len(cand_pat)) if scale_range is None else cat_largest / largest[cand_pat]
+    canon, c, k, err = _star_orders(obs, largest, cand_pat, cat_edges, scale, tol_rad, rel_tol)
+    if len(c) == 0:
+        return _no_matches()
+    pat_h = cand_pat[c]
+    obs_local = canon[pat_h[:, None], _PERMS[k]]  # observed star paired with catalog star k
+    return _with_parity(
+        obs, largest, pat_h, obs_local, cat_stars[c], cat_vec[c], err, tol_rad, parity
+    )
+
+
+def _probe_bins(
+    edges: np.ndarray,
+    largest: np.ndarray,
+    bins: int,
+    tol_rad: float,
+    max_angle_rad: float,
+    scale_range: tuple[float, float] | None,
+    rel_tol: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The bins the five edge ratios of each observed pattern may fall in, lowest and
+    highest (p, 5), and the number of key prefixes (bins of the first four ratios) to look
+    up per pattern (0 for a pattern that cannot match: an edge too short to measure, or the
+    largest too long for the table)."""
+    lo_scale = scale_range[0] if scale_range is not None else 1.0
+    usable = (edges.min(axis=1) >= 2.0 * tol_rad) & (largest * lo_scale <= max_angle_rad + tol_rad)
+    # the ratio e / L of edges measured within tol: off by at most tol (1 + e/L) / (L - tol)
+    ratios = np.sort(edges, axis=1)[:, :5] / largest[:, None]
+    slack = tol_rad * (1.0 + ratios) / np.maximum(largest - tol_rad, tol_rad)[:, None]
+    slack = slack + 2.0 * rel_tol
+    lo = np.clip(np.floor((ratios - slack) * bins), 0, bins - 1).astype(np.int64)
+    hi = np.clip(np.floor((ratios + slack) * bins), 0, bins - 1).astype(np.int64)
+    span = hi - lo + 1
+    # the bins of the first four ratios are enumerated; the fifth is a contiguous key range
+    n_prefix = np.where(usable, np.prod(span[:, :4], axis=1), 0)
+    return lo, hi, n_prefix
+
+
+def _table_candidates(
+    table: PatternTable, lo: np.ndarray, hi: np.ndarray, n_prefix: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Every (observed pattern, table row) whose key lies in the pattern's bins: each of its
+    ``n_prefix`` prefixes, then the key range of the fifth ratio's bins."""
+    total = int(n_prefix.sum())
+    empty = np.empty(0, dtype=np.intp)
+    if total == 0:
+        return empty, empty
+    B = table.bins
+    span = hi - lo + 1
+    pat = np.repeat(np.arange(len(n_prefix)), n_prefix)
     rest = np.arange(total) - np.repeat(np.cumsum(n_prefix) - n_prefix, n_prefix)
     prefix = np.zeros(total, dtype=np.int64)
     place = np.ones(total, dtype=np.int64)
@@ -433,43 +479,76 @@ def match_patterns(
     count = np.searchsorted(table.keys, key_hi, side="right") - start
     n_cand = int(count.sum())
     if n_cand == 0:
-        return _no_matches()
+        return empty, empty
     cand_pat = np.repeat(pat, count)
     cand_row = np.repeat(start, count) + (
         np.arange(n_cand) - np.repeat(np.cumsum(count) - count, count)
     )
+    return cand_pat, cand_row
+
+
+def _largest_edge_candidates(
+    table: PatternTable,
+    vectors: np.ndarray,
+    cand_pat: np.ndarray,
+    cand_row: np.ndarray,
+    largest: np.ndarray,
+    tol_rad: float,
+    scale_range: tuple[float, float] | None,
+    rel_tol: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The candidates (observed pattern ``cand_pat``, table row ``cand_row``) whose largest
+    edge agrees with the observed one (``_largest_agrees``): their observed pattern, catalog
+    stars (m, 4), star vectors (m, 4, 3), edges (m, 6) and largest edge (m,)."""
     # the stored largest edge (within half a step) is a quick first test; the same test on
     # the exact edges, recomputed from the catalog vectors, follows
     step = table.edge_step_rad
     near = table.largest_edge_steps[cand_row] * step
-    obs_largest = largest[cand_pat]
-    if scale_range is None:
-        ok = np.abs(near - obs_largest) <= tol_rad + step
-    else:
-        ok = (near + step >= lo_scale * (obs_largest - tol_rad) * (1.0 - rel_tol)) & (
-            near - step <= hi_scale * (obs_largest + tol_rad) * (1.0 + rel_tol)
-        )
+    ok = _largest_agrees(near, largest[cand_pat], tol_rad, step, scale_range, rel_tol)
     cand_pat, cand_row = cand_pat[ok], cand_row[ok]
     cat_stars = table.stars(cand_row)
     cat_vec = vectors.take(cat_stars, axis=0)
     cat_edges = pattern_edges(cat_vec)
     # the largest of six columns: faster than ``max(axis=1)``, which loops over short rows
     cat_largest = functools.reduce(np.maximum, cat_edges.T)
-    obs_largest = largest[cand_pat]
-    if scale_range is None:
-        ok = np.abs(cat_largest - obs_largest) <= tol_rad
-    else:
-        ok = (cat_largest >= lo_scale * (obs_largest - tol_rad) * (1.0 - rel_tol)) & (
-            cat_largest <= hi_scale * (obs_largest + tol_rad) * (1.0 + rel_tol)
-        )
+    ok = _largest_agrees(cat_largest, largest[cand_pat], tol_rad, 0.0, scale_range, rel_tol)
     if not ok.all():  # only those within half a step of a limit are left out here
-        if not ok.any():
-            return _no_matches()
         cand_pat, cat_stars, cat_vec = cand_pat[ok], cat_stars[ok], cat_vec[ok]
         cat_edges, cat_largest = cat_edges[ok], cat_largest[ok]
-    # observed edges are multiplied by this to compare with the catalog's
-    scale = np.ones(len(cand_pat)) if scale_range is None else cat_largest / largest[cand_pat]
+    return cand_pat, cat_stars, cat_vec, cat_edges, cat_largest
 
+
+def _largest_agrees(
+    cat_largest: np.ndarray,
+    obs_largest: np.ndarray,
+    tol_rad: float,
+    margin_rad: float,
+    scale_range: tuple[float, float] | None,
+    rel_tol: float,
+) -> np.ndarray:
+    """Whether catalog largest edges, known within ``margin_rad``, agree with the observed
+    ones: within ``tol_rad``, or with ``scale_range``, lo..hi times them (with ``rel_tol``)."""
+    if scale_range is None:
+        return np.abs(cat_largest - obs_largest) <= tol_rad + margin_rad
+    lo_scale, hi_scale = scale_range
+    return (cat_largest + margin_rad >= lo_scale * (obs_largest - tol_rad) * (1.0 - rel_tol)) & (
+        cat_largest - margin_rad <= hi_scale * (obs_largest + tol_rad) * (1.0 + rel_tol)
+    )
+
+
+def _star_orders(
+    obs: np.ndarray,
+    largest: np.ndarray,
+    cand_pat: np.ndarray,
+    cat_edges: np.ndarray,
+    scale: np.ndarray,
+    tol_rad: float,
+    rel_tol: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The pairings of observed with catalog stars whose six edges agree: the observed stars
+    in canonical order ``canon`` (p, 4) and, for each agreeing pairing, its candidate ``c``,
+    the row ``k`` of ``_PERMS`` that reorders ``canon`` to the catalog pattern, and its
+    largest edge error ``err`` (radians)."""
     # the observed stars in canonical order; where centroid distances are closer than their
     # error allows to tell apart, every order consistent with them is tried
     dist = centroid_distances(obs)
@@ -480,7 +559,7 @@ def match_patterns(
     # centroid's), each below tol / sqrt(2): a difference of two by 2 sqrt(2) tol
     tie_rad = 3.0 * tol_rad + 2.0 * rel_tol * largest[:, None]
     d_perm = dist_sorted[:, _PERMS]  # (p, 24, 4)
-    consistent = np.ones((p, len(_PERMS)), dtype=bool)
+    consistent = np.ones((len(obs), len(_PERMS)), dtype=bool)
     for i, j in _PAIRS:
         consistent &= d_perm[:, :, i] <= d_perm[:, :, j] + tie_rad
     hyp_cand, hyp_perm, hyp_err = [], [], []
@@ -495,21 +574,31 @@ def match_patterns(
         hyp_perm.append(np.full(int(good.sum()), k))
         hyp_err.append(err[good])
     if not hyp_cand:
-        return _no_matches()
-    c = np.concatenate(hyp_cand)
-    k = np.concatenate(hyp_perm)
-    err = np.concatenate(hyp_err)
-    if len(c) == 0:
-        return _no_matches()
-    pat_h = cand_pat[c]
-    obs_local = canon[pat_h[:, None], _PERMS[k]]  # observed star paired with catalog star k
-    cat_rows = cat_stars[c]
-    # parity from the orientation of the pattern's best-spread triangle
+        empty = np.empty(0, dtype=np.intp)
+        return canon, empty, empty, np.empty(0)
+    return canon, np.concatenate(hyp_cand), np.concatenate(hyp_perm), np.concatenate(hyp_err)
+
+
+def _with_parity(
+    obs: np.ndarray,
+    largest: np.ndarray,
+    pat_h: np.ndarray,
+    obs_local: np.ndarray,
+    cat_rows: np.ndarray,
+    cat_vec: np.ndarray,
+    err: np.ndarray,
+    tol_rad: float,
+    parity: int | None,
+) -> PatternMatches:
+    """The matches with their parity, from the orientation of each pattern's best-spread
+    triangle (both parities where it is too flat to tell), those of another ``parity`` left
+    out, grouped by observed pattern with the closest edge agreement first."""
+    n = len(pat_h)
     det_obs = _triple_products(obs[pat_h[:, None], obs_local])
-    det_cat = _triple_products(cat_vec[c])
+    det_cat = _triple_products(cat_vec)
     best = np.argmax(np.abs(det_obs), axis=1)
-    d_obs = det_obs[np.arange(len(c)), best]
-    par = np.where(np.sign(d_obs) == np.sign(det_cat[np.arange(len(c)), best]), 1, -1)
+    d_obs = det_obs[np.arange(n), best]
+    par = np.where(np.sign(d_obs) == np.sign(det_cat[np.arange(n), best]), 1, -1)
     flat = np.abs(d_obs) < 3.0 * tol_rad * largest[pat_h]
     if flat.any():  # too flat to tell the orientation: both
         f = np.flatnonzero(flat)
