@@ -2,7 +2,7 @@
 
 Each test compares a public function with a separate computation of the same thing: brute
 force over the catalog, scipy's assignment, binomial, rotation-fit and least-squares
-routines, or a formula written out here. The primitives are being rewritten as compiled
+routines, or a formula written out here. The primitives are compiled
 kernels; these tests pin what the results must be, whatever computes them. Nothing here
 imports a private name or relies on the order of an unordered result.
 """

@@ -4,7 +4,7 @@ pixel residuals, through the camera model's projection and Jacobians.
 The attitude is perturbed by a small rotation ``omega`` about the camera axes,
 ``R = exp([omega]) R0``; residuals are projected catalog star minus measured centroid, in px.
 The 1-sigma uncertainties come from the Jacobian at the solution, scaled by the a-posteriori
-variance of the residuals. The arithmetic is the kernel ``attitude._kernels.fit``.
+variance of the residuals. The arithmetic is the kernel ``attitude.kernels.fit``.
 """
 
 from __future__ import annotations
@@ -18,9 +18,9 @@ from starnav.camera import CameraModel
 
 def kernels():
     """The attitude kernels (imported on first use: numba takes ~0.2 s to load)."""
-    from starnav.attitude import _kernels
+    from starnav.attitude import kernels
 
-    return _kernels
+    return kernels
 
 
 @dataclass(frozen=True, eq=False)
@@ -76,7 +76,7 @@ def refine_attitude(
 
     ``icrs_vectors`` (n, 3) are the catalog stars of the centroids ``xy`` (n, 2, px), n >= 2.
     The focal length is only freed with at least 4 stars, the distortion with at least
-    ``attitude._kernels.MIN_DISTORTION_STARS``. The covariance comes from the derivatives at
+    ``attitude.kernels.MIN_DISTORTION_STARS``. The covariance comes from the derivatives at
     the solution.
     """
     f = kernels().fit(

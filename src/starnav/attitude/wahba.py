@@ -16,11 +16,11 @@ def wahba(
 
     With ``parity=-1`` the camera is mirrored (y flipped on the sky): the result then has
     determinant -1 and still maps ICRS vectors to camera vectors. The arithmetic is the
-    kernel ``attitude._kernels.wahba`` the identification uses.
+    kernel ``attitude.rotation.wahba`` the identification uses.
     """
-    from starnav.attitude import _kernels  # numba: loaded on first use
+    from starnav.attitude import rotation  # numba: loaded on first use
 
     b = np.ascontiguousarray(cam_vectors, dtype=np.float64).reshape(-1, 3)
     r = np.ascontiguousarray(icrs_vectors, dtype=np.float64).reshape(-1, 3)
     w = np.ones(len(b)) if weights is None else np.ascontiguousarray(weights, dtype=np.float64)
-    return _kernels.wahba(b, r, w, -1 if parity < 0 else 1)
+    return rotation.wahba(b, r, w, -1 if parity < 0 else 1)

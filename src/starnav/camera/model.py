@@ -1,7 +1,7 @@
 """The camera-model seam: what every lens model provides, and the camera file.
 
 A lens model is one file: a frozen dataclass with the methods of ``CameraModel`` whose
-arithmetic is a branch of ``camera._kernels.project`` / ``unproject``, registered in
+arithmetic is a branch of ``camera.kernels.project`` / ``unproject``, registered in
 ``MODELS`` by its file name. The attitude fit and the verification use only this interface
 (and the kernels by model code), so no other module writes a projection.
 """

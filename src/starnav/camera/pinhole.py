@@ -6,7 +6,7 @@ centre is (0.5, 0.5)). Camera frame: x right, y down, z along the boresight.
 Parity is not a camera property here: a mirrored image is described by an attitude matrix with
 determinant -1 (see ``starnav.geometry``), so the projection is the same for both. Radial
 distortion: (u, v) -> (u, v) (1 + k1 r^2 + k2 r^4) on the normalised radius r. The arithmetic
-is in ``camera._kernels`` (shared with the attitude fit and the verification).
+is in ``camera.kernels`` (shared with the attitude fit and the verification).
 """
 
 from __future__ import annotations
@@ -25,10 +25,10 @@ def focal_px_from_fov(fov_deg: float, width: int) -> float:
     return 0.5 * width / np.tan(0.5 * np.radians(fov_deg))
 
 
-def _kernels():
-    from starnav.camera import _kernels  # numba: loaded when a projection is first needed
+def kernels():
+    from starnav.camera import kernels  # numba: loaded when a projection is first needed
 
-    return _kernels
+    return kernels
 
 
 @dataclass(frozen=True)
@@ -48,7 +48,7 @@ class Camera:
     k2: float = 0.0
 
     model = "pinhole"
-    model_code = 0  # camera._kernels.PINHOLE
+    model_code = 0  # camera.kernels.PINHOLE
     coefficients = ("k1", "k2")  # the model's coefficients, in the order of ``params``
 
     def __post_init__(self) -> None:
@@ -100,7 +100,7 @@ class Camera:
     def half_diagonal_rad(self) -> float:
         """Largest angle (radians) between the boresight and a corner of the image."""
         return float(
-            _kernels().half_diagonal(
+            kernels().half_diagonal(
                 self.model_code, self.params, float(self.width), float(self.height)
             )
         )
@@ -109,9 +109,7 @@ class Camera:
     def field_cos(self) -> float:
         """Cosine of the cone (about the boresight) outside which nothing is in the image."""
         return float(
-            _kernels().field_cos(
-                self.model_code, self.params, float(self.width), float(self.height)
-            )
+            kernels().field_cos(self.model_code, self.params, float(self.width), float(self.height))
         )
 
     def with_focal(self, focal_px: float) -> Camera:
@@ -121,17 +119,17 @@ class Camera:
     def pixels_to_bearings(self, xy: np.ndarray) -> np.ndarray:
         """Unit bearing vectors (n, 3) in the camera frame for pixel positions (n, 2)."""
         xy = np.ascontiguousarray(np.asarray(xy, dtype=np.float64).reshape(-1, 2))
-        return _kernels().pixels_to_bearings(self.model_code, self.params, xy)
+        return kernels().pixels_to_bearings(self.model_code, self.params, xy)
 
     def bearings_to_pixels(self, c: np.ndarray) -> np.ndarray:
         """Pixel positions (n, 2) of camera-frame vectors (n, 3) with positive z."""
         c = np.ascontiguousarray(np.asarray(c, dtype=np.float64).reshape(-1, 3))
-        return _kernels().bearings_to_pixels(self.model_code, self.params, c)
+        return kernels().bearings_to_pixels(self.model_code, self.params, c)
 
     def sees(self, c: np.ndarray) -> np.ndarray:
         """Boolean mask of camera-frame directions (n, 3) that land inside the image."""
         c = np.ascontiguousarray(np.asarray(c, dtype=np.float64).reshape(-1, 3))
-        return _kernels().sees_all(
+        return kernels().sees_all(
             self.model_code, self.params, float(self.width), float(self.height), self.field_cos, c
         )
 

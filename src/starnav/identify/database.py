@@ -88,10 +88,10 @@ class PairDatabase:
 
     def cone(self, axis: np.ndarray, radius_rad: float) -> np.ndarray:
         """Catalog row indices within ``radius_rad`` of the unit vector ``axis``."""
-        from starnav.identify import _kernels  # numba: loaded on first use
+        from starnav.identify import kernels  # numba: loaded on first use
 
         work = np.empty(len(self.catalog), dtype=np.int64)
-        n = _kernels.cone(
+        n = kernels.cone(
             np.ascontiguousarray(axis, dtype=np.float64),
             chord_from_angle(radius_rad) ** 2,
             self.sky,

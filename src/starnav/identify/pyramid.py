@@ -8,7 +8,7 @@ whole field: the hypothesis's attitude reprojects the catalog, the agreeing star
 and the answer is accepted only when the chance of a wrong hypothesis agreeing as well is below
 the threshold. Parity comes from the orientation of the triangle (the sign of the triple
 product) and is tested both ways when the triangle is too flat to tell. The loop is the kernel
-``identify._kernels.triangle_search``, shared with Liebe's triangle method and tracking, which
+``identify.kernels.triangle_search``, shared with Liebe's triangle method and tracking, which
 differ only in the triangles they give it (and tracking in the catalog stars it allows).
 """
 

@@ -9,7 +9,7 @@ count is multiplied by the number of hypotheses tried (a Bonferroni bound). It i
 at a few match radii (1, 2 and 3.5 sigma): close agreement of few stars and loose agreement of
 many both count, and the best is multiplied by the number of radii (Bonferroni again).
 
-The arithmetic and the accept / mirror decision are the kernels of ``identify._kernels``
+The arithmetic and the accept / mirror decision are the kernels of ``identify.kernels``
 (``pair_catalog``, ``false_match_radii``, ``test_hypothesis``); this module is their Python
 face for the algorithms that propose hypotheses one at a time.
 """
@@ -30,9 +30,9 @@ AMBIGUOUS_PARITY = (
 
 def kernels():
     """The identification kernels (imported on first use: numba takes ~0.2 s to load)."""
-    from starnav.identify import _kernels
+    from starnav.identify import kernels
 
-    return _kernels
+    return kernels
 
 
 @dataclass(frozen=True)
@@ -134,7 +134,7 @@ class HypothesisTester:
     """The verification step every identification algorithm shares.
 
     An algorithm proposes hypotheses (measured rows paired with catalog rows, and a parity);
-    ``test`` runs the one hypothesis test (``identify._kernels.test_hypothesis``): the
+    ``test`` runs the one hypothesis test (``identify.kernels.test_hypothesis``): the
     attitude (Wahba), the whole field reprojected, accepted when its false-match probability,
     corrected for every hypothesis counted so far, is below the threshold and its mirror image
     does not verify too. ``outcome`` gives the reason when nothing was accepted. Count

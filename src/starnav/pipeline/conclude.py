@@ -1,7 +1,7 @@
 """From an identification to the reported solution or the refusal, with its reason.
 
 The policy (fit, outliers, rematch, wide search, final false-match probability, refusals) is
-the kernel ``pipeline._kernels.conclude``; this module gives its answer a form: the
+the kernel ``pipeline.kernels.conclude``; this module gives its answer a form: the
 ``Solution`` of the matched stars, or the sentence that says why there is none.
 """
 
@@ -23,9 +23,9 @@ from starnav.starlist import StarList
 
 def kernels():
     """The fit-policy kernels (imported on first use: numba takes ~0.2 s to load)."""
-    from starnav.pipeline import _kernels
+    from starnav.pipeline import kernels
 
-    return _kernels
+    return kernels
 
 
 def conclude(

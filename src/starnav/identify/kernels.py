@@ -21,7 +21,7 @@ from collections import namedtuple
 import numpy as np
 from numba import njit
 
-from starnav.attitude._kernels import det3, wahba
+from starnav.attitude.rotation import det3, wahba
 
 # outcomes of a hypothesis test and of a search
 REJECTED, FOUND, AMBIGUOUS, NOT_FOUND = 0, 1, 2, 3

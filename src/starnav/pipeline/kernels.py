@@ -1,7 +1,7 @@
 """The fit policy of a solve as one kernel (numba; plain Python under ``NUMBA_DISABLE_JIT=1``):
 from an identification to the reported attitude or the refusal.
 
-Least squares on the image (``attitude._kernels.fit``), outliers dropped by their studentized
+Least squares on the image (``attitude.kernels.fit``), outliers dropped by their studentized
 residuals, the stars the better attitude brings within range taken in (gated by the attitude's
 uncertainty), until the matches stop changing; then a wide search from the result; the final
 false-match probability and the refusals. Each rule is written here once, with its constant.
@@ -15,9 +15,9 @@ from collections import namedtuple
 import numpy as np
 from numba import njit
 
-from starnav.attitude._kernels import fit, free_focal_step, studentized
-from starnav.camera._kernels import field_cos, pixels_to_bearings, sees
-from starnav.identify._kernels import chord, cone, false_match_radii, pair_catalog
+from starnav.attitude.kernels import fit, free_focal_step, studentized
+from starnav.camera.kernels import field_cos, pixels_to_bearings, sees
+from starnav.identify.kernels import chord, cone, false_match_radii, pair_catalog
 
 MAX_REMATCH = 5  # fit / rematch rounds
 MIN_FIT_STARS = 4  # outliers are only looked for when a fit keeps at least this many stars
