@@ -87,18 +87,46 @@ def calibrate(
     if not names:
         raise StarnavError("calibration needs at least one image")
     cat = load_catalog(catalog, mag_limit=_CATALOG_MAG, epoch_year=options.get("epoch_year"))
+    solved, failed = _solve_each(
+        names, images, progress, fov_deg=fov_deg, fov_range_deg=fov_range_deg,
+        catalog=catalog, **options,
+    )  # fmt: skip
+    camera, fit = _joint_fit(solved, cat)
+    n = len(solved)
+    res = fit.fun
+    dof = max(len(res) - len(fit.x), 1)
+    s2 = float(res @ res) / dof
+    try:
+        cov = s2 * np.linalg.inv(fit.jac.T @ fit.jac)
+        sd = np.sqrt(np.maximum(np.diag(cov)[3 * n :], 0.0))
+    except np.linalg.LinAlgError:
+        sd = np.full(5, np.inf)
+    sigma = {
+        "focal_px": float(camera.focal_px * sd[0]),
+        "cx": float(sd[1]),
+        "cy": float(sd[2]),
+        "k1": float(sd[3]),
+        "k2": float(sd[4]),
+    }
+    r = res.reshape(-1, 2)
+    return Calibration(
+        camera=camera,
+        sigma=sigma,
+        rms_px=float(np.sqrt(np.mean(np.sum(r**2, axis=1)))),
+        n_stars=len(r),
+        frames=tuple(name for name, _ in solved),
+        failed=tuple(failed),
+    )
+
+
+def _solve_each(names, images, progress, **options):
+    """Each image solved with the FOV searched and the distortion fitted: the solved ones
+    of the first solved image's size (name, result) and the others (name, reason)."""
     solved: list[tuple[str, ImageSolveResult]] = []
     failed = []
     shape = None
     for name, image in zip(names, images, strict=True):
-        res = solve_image(
-            image,
-            fov_deg=fov_deg,
-            fov_range_deg=fov_range_deg,
-            fit_distortion=True,
-            catalog=catalog,
-            **options,
-        )
+        res = solve_image(image, fit_distortion=True, **options)
         if progress is not None:
             progress()
         size = (res.detections.width, res.detections.height)
@@ -111,8 +139,14 @@ def calibrate(
             solved.append((name, res))
     if not solved:
         raise StarnavError("no image could be solved: " + "; ".join(f"{n}: {r}" for n, r in failed))
-    width, height = shape
-    # start from the median of the frames' own fits
+    return solved, failed
+
+
+def _joint_fit(solved, cat):
+    """One camera and an attitude per image, fitted to all their matched stars (matched
+    again after each round); from the median of the images' own fits. Returns the camera
+    and scipy's last fit."""
+    width, height = solved[0][1].detections.width, solved[0][1].detections.height
     cams = [r.camera for _, r in solved]
     camera = Camera(
         width,
@@ -145,27 +179,4 @@ def calibrate(
             width, height, float(np.exp(log_f)), float(cx), float(cy), float(k1), float(k2)
         )
         attitudes = [rotate_by(fit.x[3 * i : 3 * i + 3], R) for i, R in enumerate(attitudes)]
-    res = fit.fun
-    dof = max(len(res) - len(fit.x), 1)
-    s2 = float(res @ res) / dof
-    try:
-        cov = s2 * np.linalg.inv(fit.jac.T @ fit.jac)
-        sd = np.sqrt(np.maximum(np.diag(cov)[3 * n :], 0.0))
-    except np.linalg.LinAlgError:
-        sd = np.full(5, np.inf)
-    sigma = {
-        "focal_px": float(camera.focal_px * sd[0]),
-        "cx": float(sd[1]),
-        "cy": float(sd[2]),
-        "k1": float(sd[3]),
-        "k2": float(sd[4]),
-    }
-    r = res.reshape(-1, 2)
-    return Calibration(
-        camera=camera,
-        sigma=sigma,
-        rms_px=float(np.sqrt(np.mean(np.sum(r**2, axis=1)))),
-        n_stars=len(r),
-        frames=tuple(name for name, _ in solved),
-        failed=tuple(failed),
-    )
+    return camera, fit

@@ -185,53 +185,11 @@ def search_fov(
         rows = combos[start:end]
         start = end
         for band, cells in plans:
-            # every cell of the band in one look-up: the observed patterns with the bearings
-            # of each guessed focal length, stacked
-            f_cells = np.array([f for f, _, _ in cells])
-            delta, rel_tol = cells[0][1], cells[0][2]
-            settings = MatchSettings.for_focal(sigma_px, float(f_cells.min()), parity=parity)
-            bearings = pinhole_bearings(xy[None], cx, cy, f_cells[:, None])  # (cells, n, 3)
-            hyp = match_patterns(
-                bearings[:, rows].reshape(-1, 4, 3),
-                band.table,
-                band.catalog.vectors,
-                settings.pair_tol_rad,
-                band.database.max_angle_rad,
-                parity,
-                scale_range=(1.0 / (1.0 + 1.2 * delta), 1.0 / (1.0 - 1.2 * delta)),
-                rel_tol=rel_tol,
+            obs_rows, cat_rows, parities, f_fit = _band_hypotheses(
+                xy, rows, band, cells, sigma_px, parity, focal_range_px, (cx, cy)
             )
-            if len(hyp.pattern) == 0:
-                continue
-            cell, pattern = np.divmod(hyp.pattern, len(rows))
-            # neighbouring cells overlap: the same pairing found twice is one hypothesis
-            key = np.column_stack([pattern[:, None], hyp.obs_local, hyp.cat_rows, hyp.parity])
-            _, first = np.unique(key, axis=0, return_index=True)
-            first = np.sort(first)
-            cell, pattern = cell[first], pattern[first]
-            hyp = replace(
-                hyp,
-                pattern=hyp.pattern[first],
-                obs_local=hyp.obs_local[first],
-                cat_rows=hyp.cat_rows[first],
-                parity=hyp.parity[first],
-            )
-            obs_rows = rows[pattern[:, None], hyp.obs_local]  # (h, 4) rows of xy
-            cat_edges = pattern_edges(band.catalog.vectors[hyp.cat_rows])
-            obs_edges = pattern_edges(bearings[cell[:, None], obs_rows])
-            f0 = f_cells[cell] * obs_edges.max(axis=1) / cat_edges.max(axis=1)
-            f_fit, err = fit_pattern_focal(xy[obs_rows], cat_edges, cx, cy, f0)
-            tol_px = settings.pair_tol_rad * float(f_cells.min())
-            good = (
-                (err * f_fit <= tol_px)
-                & (f_fit >= focal_range_px[0] * 0.99)
-                & (f_fit <= focal_range_px[1] * 1.01)
-            )
-            good = np.flatnonzero(good)
-            if len(good) == 0:
-                continue
-            tally.hypotheses += len(good)  # every hypothesis of the batch, before testing
-            for h in good:
+            tally.hypotheses += len(f_fit)  # every hypothesis of the batch, before testing
+            for h in range(len(f_fit)):
                 f = float(f_fit[h])
                 # each focal length its own bearings and tolerances, one tally for all
                 tester = HypothesisTester(
@@ -249,7 +207,7 @@ def search_fov(
                     tally,
                     work=work[id(band)],
                 )
-                outcome = tester.test(obs_rows[h], hyp.cat_rows[h], int(hyp.parity[h]))
+                outcome = tester.test(obs_rows[h], cat_rows[h], int(parities[h]))
                 if outcome is not None:
                     yield FovMatch(
                         outcome.identification, outcome.reason, tally.hypotheses, f, band
@@ -269,3 +227,48 @@ def search_fov(
         )
         return
     yield FovMatch(None, tester.outcome().reason, tally.hypotheses, float("nan"), None)
+
+
+def _band_hypotheses(xy, rows, band, cells, sigma_px, parity, focal_range_px, principal):
+    """The hypotheses of one band for the observed patterns ``rows`` (4-subsets of ``xy``):
+    every cell of the band in one look-up (the patterns with the bearings of each guessed
+    focal length, stacked), a pairing found by two overlapping cells counted once, each
+    given the focal length its six edges fit, kept when they then agree to the pixel
+    tolerance within the focal range. Returns (rows of xy (h, 4), catalog rows (h, 4),
+    parities (h,), focal lengths (h,), px)."""
+    cx, cy = principal
+    f_cells = np.array([f for f, _, _ in cells])
+    delta, rel_tol = cells[0][1], cells[0][2]
+    settings = MatchSettings.for_focal(sigma_px, float(f_cells.min()), parity=parity)
+    bearings = pinhole_bearings(xy[None], cx, cy, f_cells[:, None])  # (cells, n, 3)
+    hyp = match_patterns(
+        bearings[:, rows].reshape(-1, 4, 3),
+        band.table,
+        band.catalog.vectors,
+        settings.pair_tol_rad,
+        band.database.max_angle_rad,
+        parity,
+        scale_range=(1.0 / (1.0 + 1.2 * delta), 1.0 / (1.0 - 1.2 * delta)),
+        rel_tol=rel_tol,
+    )
+    if len(hyp.pattern) == 0:
+        empty = np.empty((0, 4), dtype=np.intp)
+        return empty, empty, np.empty(0, dtype=np.int64), np.empty(0)
+    cell, pattern = np.divmod(hyp.pattern, len(rows))
+    key = np.column_stack([pattern[:, None], hyp.obs_local, hyp.cat_rows, hyp.parity])
+    _, first = np.unique(key, axis=0, return_index=True)
+    first = np.sort(first)
+    cell, pattern = cell[first], pattern[first]
+    obs_local, cat_rows, parities = hyp.obs_local[first], hyp.cat_rows[first], hyp.parity[first]
+    obs_rows = rows[pattern[:, None], obs_local]  # (h, 4) rows of xy
+    cat_edges = pattern_edges(band.catalog.vectors[cat_rows])
+    obs_edges = pattern_edges(bearings[cell[:, None], obs_rows])
+    f0 = f_cells[cell] * obs_edges.max(axis=1) / cat_edges.max(axis=1)
+    f_fit, err = fit_pattern_focal(xy[obs_rows], cat_edges, cx, cy, f0)
+    tol_px = settings.pair_tol_rad * float(f_cells.min())
+    good = np.flatnonzero(
+        (err * f_fit <= tol_px)
+        & (f_fit >= focal_range_px[0] * 0.99)
+        & (f_fit <= focal_range_px[1] * 1.01)
+    )
+    return obs_rows[good], cat_rows[good], parities[good], f_fit[good]
