@@ -851,7 +851,7 @@ def _cmd_pointing(args) -> int:
 
 
 def _cmd_pointing_study(args) -> int:
-    from starnav.pointing_study import format_table, run_study
+    from starnav.studies.pointing import format_table, run_study
 
     if args.sigma_px <= 0:
         raise StarnavError(f"--sigma-px must be positive, got {args.sigma_px:g}")
@@ -958,7 +958,7 @@ def _cmd_locate(args) -> int:
 
 
 def _cmd_locate_study(args) -> int:
-    from starnav.navigation.study import format_tables, plot_study, run_locate_study
+    from starnav.studies.locate import format_tables, plot_study, run_locate_study
 
     if not 1.0 <= args.fov_deg <= 60.0:
         raise StarnavError(f"--fov-deg must be between 1 and 60, got {args.fov_deg:g}")
