@@ -111,7 +111,7 @@ def _observation(**changes):
                     }
                 ]
             ),
-            "images are not read yet",
+            "takes star lists, not images",
         ),
         (
             _observation(
