@@ -1025,13 +1025,9 @@ def _cmd_solve(args) -> int:
     res = replace(res, read_ms=read_ms)  # read here, so the picture can be annotated
     s = res.solution
     if s is not None and args.wcs:
-        from starnav.wcs import fit_sip, wcs_from_attitude, write_wcs
+        from starnav.wcs import choose_sip_order, wcs_from_attitude, write_wcs
 
-        order = 4  # the lowest SIP order good to 0.01 px (wide fields need more)
-        while (res.camera.k1 or res.camera.k2) and order < 7:
-            if fit_sip(res.camera, order=order).max_error_px <= 0.01:
-                break
-            order += 1
+        order = choose_sip_order(res.camera)
         write_wcs(args.wcs, wcs_from_attitude(s.R_cam_from_icrs, res.camera, sip_order=order))
     if s is not None and args.annotate:
         from starnav.image import annotate_result
