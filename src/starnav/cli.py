@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import csv
 import json
 import math
 import os
@@ -26,14 +25,13 @@ from starnav.catalog import DEFAULT_MAG_LIMIT, load_catalog
 from starnav.errors import PointingError, StarnavError
 from starnav.fov import DEFAULT_FOV_RANGE_DEG
 from starnav.geometry import (
-    attitude_difference_deg,
     attitude_from_radec_roll,
     radec_roll_from_attitude,
 )
 from starnav.identify import ALGORITHMS, DEFAULT_ALGORITHM, cli_options
 from starnav.image import DEFAULT_MAX_STARS
 from starnav.render import PRESETS as RENDER_PRESETS
-from starnav.simulate import FALSE_STAR_ID, SimulatedFrame, simulate_frame
+from starnav.simulate import draw_radec_roll, simulate_frame, write_frame_csv
 from starnav.starlist import read_star_csv
 
 EXIT_OK, EXIT_NOT_SOLVED, EXIT_BAD_INPUT = 0, 1, 2
@@ -608,42 +606,6 @@ def _cmd_identify(args) -> int:
     return EXIT_OK if s else EXIT_NOT_SOLVED
 
 
-def _write_frame(path: str, frame: SimulatedFrame) -> None:
-    try:
-        with Path(path).open("w", newline="") as fh:
-            w = csv.writer(fh)
-            w.writerow(["label", "x", "y", "mag", "true_catalog_id"])
-            for n, ((x, y), mag, cid) in enumerate(
-                zip(frame.xy, frame.mag, frame.true_id, strict=True)
-            ):
-                w.writerow(
-                    [
-                        n + 1,
-                        f"{x:.4f}",
-                        f"{y:.4f}",
-                        f"{mag:.3f}",
-                        "" if cid == FALSE_STAR_ID else int(cid),
-                    ]
-                )
-    except OSError as exc:
-        raise StarnavError(f"cannot write {path!r}: {exc.strerror}") from None
-
-
-def _truth_dict(frame: SimulatedFrame) -> dict:
-    ra, dec, roll, parity = frame.truth
-    return {
-        "ra_deg": ra,
-        "dec_deg": dec,
-        "roll_deg": roll,
-        "parity": parity,
-        "focal_px": frame.camera.focal_px,
-        "R_cam_from_icrs": frame.R_cam_from_icrs.tolist(),
-        "n_points": len(frame.xy),
-        "n_in_view": frame.n_in_view,
-        "n_false": int(np.sum(frame.true_id == FALSE_STAR_ID)),
-    }
-
-
 def _cmd_simulate(args) -> int:
     camera = make_camera(width=args.width, height=args.height, fov_deg=args.fov_deg)
     catalog = load_catalog(args.catalog, mag_limit=args.mag_limit, epoch_year=args.epoch)
@@ -660,8 +622,8 @@ def _cmd_simulate(args) -> int:
         mag_noise=args.mag_noise,
         seed=args.seed,
     )
-    _write_frame(args.output, frame)
-    truth = _truth_dict(frame)
+    write_frame_csv(args.output, frame)
+    truth = frame.to_dict()
     if args.json:
         print(_json({"output": args.output, **truth}))
     else:
@@ -702,18 +664,8 @@ def _cmd_demo(args) -> int:
         sigma_px=max(args.noise_px, 0.1),
     )
     s = result.solution
-    truth = _truth_dict(frame)
-    right = None
-    if s is not None:
-        ids = np.array([-1 if m.catalog_id is None else m.catalog_id for m in s.stars])
-        boresight_deg, roll_deg = attitude_difference_deg(s.R_cam_from_icrs, frame.R_cam_from_icrs)
-        right = {
-            "boresight_error_arcsec": boresight_deg * 3600.0,
-            "roll_error_arcsec": roll_deg * 3600.0,
-            "ids_correct": int(np.sum((ids == frame.true_id) & (ids != -1))),
-            "ids_wrong": int(np.sum((ids != frame.true_id) & (ids != -1))),
-            "false_stars_refused": int(np.sum((ids == -1) & (frame.true_id == FALSE_STAR_ID))),
-        }
+    truth = frame.to_dict()
+    right = frame.compare(s)
     if args.json:
         labels = [str(n + 1) for n in range(len(frame.xy))]
         solution = (
@@ -1054,17 +1006,16 @@ def _cmd_solve(args) -> int:
 
 
 def _cmd_render(args) -> int:
-    from starnav.camera import Camera
-    from starnav.render import preset, render_frame, write_image
+    from starnav.render import adjust_camera, preset, render_frame, write_image, write_truth_csv
 
     camera, settings = preset(args.preset)
-    if args.fov_deg is not None or args.width is not None or args.height is not None:
-        width = args.width or camera.width
-        height = args.height or (width if args.width else camera.height)
-        fov = camera.fov_deg if args.fov_deg is None else args.fov_deg
-        camera = make_camera(width=width, height=height, fov_deg=fov)
-    camera = Camera(
-        camera.width, camera.height, camera.focal_px, camera.cx, camera.cy, args.k1, args.k2
+    camera = adjust_camera(
+        camera,
+        fov_deg=args.fov_deg,
+        width=args.width,
+        height=args.height,
+        k1=args.k1,
+        k2=args.k2,
     )
     changes = {
         k: getattr(args, k)
@@ -1074,39 +1025,15 @@ def _cmd_render(args) -> int:
     settings = replace(settings, **changes)
     rng = np.random.default_rng(args.seed)
     R = attitude_from_radec_roll(
-        rng.uniform(0, 360) if args.ra_deg is None else args.ra_deg,
-        np.degrees(np.arcsin(rng.uniform(-1, 1))) if args.dec_deg is None else args.dec_deg,
-        rng.uniform(0, 360) if args.roll_deg is None else args.roll_deg,
-        args.parity,
+        *draw_radec_roll(rng, args.ra_deg, args.dec_deg, args.roll_deg), args.parity
     )
     faintest = 8.0 if settings.mag_limit is None else settings.mag_limit
     frame = render_frame(load_catalog(None, mag_limit=faintest), camera, R, settings)
     write_image(args.output, frame.image)
     if args.truth:
-        try:
-            with Path(args.truth).open("w", newline="") as fh:
-                w = csv.writer(fh)
-                w.writerow(["x", "y", "catalog_id", "mag"])
-                for (x, y), cid, mag in zip(frame.xy, frame.ids, frame.mag, strict=True):
-                    w.writerow([f"{x:.4f}", f"{y:.4f}", int(cid), f"{mag:.3f}"])
-        except OSError as exc:
-            raise StarnavError(f"cannot write {args.truth!r}: {exc.strerror or exc}") from None
-    ra, dec, roll, parity = radec_roll_from_attitude(R)
-    truth = {
-        "image": args.output,
-        "ra_deg": ra,
-        "dec_deg": dec,
-        "roll_deg": roll,
-        "parity": parity,
-        "fov_deg": camera.fov_deg,
-        "width": camera.width,
-        "height": camera.height,
-        "focal_px": camera.focal_px,
-        "k1": camera.k1,
-        "k2": camera.k2,
-        "n_stars": len(frame.xy),
-        "R_cam_from_icrs": R.tolist(),
-    }
+        write_truth_csv(args.truth, frame)
+    ra, dec, roll, _ = radec_roll_from_attitude(R)
+    truth = {"image": args.output, **frame.to_dict()}
     if args.json:
         print(_json(truth))
     else:
