@@ -31,6 +31,7 @@ from starnav.geometry import (
 from starnav.identify import ALGORITHMS, DEFAULT_ALGORITHM, cli_options
 from starnav.image import DEFAULT_MAX_STARS
 from starnav.render import PRESETS as RENDER_PRESETS
+from starnav.results import solve_dict
 from starnav.simulate import draw_radec_roll, simulate_frame, write_frame_csv
 from starnav.starlist import read_star_csv
 
@@ -42,19 +43,6 @@ _RENDER_NUMBERS = (
     "background_e",
     "read_noise_e",
     "gain_e_per_adu",
-)
-_SOLUTION_KEYS = (
-    "ra_deg",
-    "dec_deg",
-    "roll_deg",
-    "parity",
-    "focal_px",
-    "fov_deg",
-    "rms_px",
-    "sigma_boresight_arcsec",
-    "sigma_roll_arcsec",
-    "sigma_focal_px",
-    "false_match_probability",
 )
 
 
@@ -408,27 +396,6 @@ def _json(obj: dict) -> str:
     return json.dumps(clean(obj), allow_nan=False)
 
 
-def _unsolved_dict(reason: str, time_ms: float, labels, xy) -> dict:
-    out: dict = {"solved": False, "reason": reason}
-    out.update(dict.fromkeys(_SOLUTION_KEYS))
-    out.update(time_ms=time_ms, n_matched=0, algorithm=None, catalog=None, R_cam_from_icrs=None)
-    out["stars"] = [
-        {"label": lab, "x": float(x), "y": float(y), "catalog_id": None, "residual_px": None}
-        for lab, (x, y) in zip(labels, xy, strict=True)
-    ]
-    return out
-
-
-def _solution_dict(s: Solution) -> dict:
-    d = s.to_dict()
-    keys = ("solved", "reason", *_SOLUTION_KEYS, "time_ms", "n_matched", "algorithm", "catalog")
-    out = {k: d.get(k) for k in keys}
-    out["reason"] = None
-    out["R_cam_from_icrs"] = d["R_cam_from_icrs"]
-    out["stars"] = d["stars"]
-    return out
-
-
 def _print_solution(s: Solution, *, file=None) -> None:
     print(
         f"solved: RA {s.ra_deg:.5f}°  Dec {s.dec_deg:+.5f}°  roll {s.roll_deg:.4f}°  "
@@ -522,7 +489,7 @@ def _identify_many(args, paths: list[Path]) -> int:
             s, reason, ms = by_path[path]
             if s is None:
                 worst = max(worst, EXIT_BAD_INPUT if reason.startswith("error:") else 1)
-            line = {"file": str(path), **(_solution_dict(s) if s else {"solved": False})}
+            line = {"file": str(path), **(solve_dict(s) if s else {"solved": False})}
             line.update(reason=None if s else reason, time_ms=ms)
         if args.json:
             print(_json(line))
@@ -593,12 +560,7 @@ def _cmd_identify(args) -> int:
             args.plot,
         )
     if args.json:
-        out = (
-            _solution_dict(s)
-            if s
-            else _unsolved_dict(result.reason, result.time_ms, stars.labels, stars.xy)
-        )
-        print(_json(out))
+        print(_json(result.to_dict(stars.labels, stars.xy)))
     elif s:
         _print_solution(s)
     else:
@@ -667,12 +629,7 @@ def _cmd_demo(args) -> int:
     truth = frame.to_dict()
     right = frame.compare(s)
     if args.json:
-        labels = [str(n + 1) for n in range(len(frame.xy))]
-        solution = (
-            _solution_dict(s)
-            if s
-            else _unsolved_dict(result.reason, result.time_ms, labels, frame.xy)
-        )
+        solution = result.to_dict(None, frame.xy)
         print(
             _json(
                 {
@@ -926,29 +883,6 @@ def _cmd_locate_study(args) -> int:
     return EXIT_OK
 
 
-def _image_solution_dict(res, path: str) -> dict:
-    """The identify JSON of a solved or unsolved image, with the camera and timings."""
-    det = res.detections
-    labels = [str(k + 1) for k in range(len(det.xy))]
-    s = res.solution
-    out = _solution_dict(s) if s else _unsolved_dict(res.reason, res.solve_ms, labels, det.xy)
-    cam = res.camera
-    out.update(
-        file=path,
-        width=det.width,
-        height=det.height,
-        cx=cam.cx if cam else None,
-        cy=cam.cy if cam else None,
-        k1=cam.k1 if cam else None,
-        k2=cam.k2 if cam else None,
-        n_detected=len(det.xy),
-        read_ms=res.read_ms,
-        detect_ms=res.detect_ms,
-        solve_ms=res.solve_ms,
-    )
-    return out
-
-
 def _cmd_solve(args) -> int:
     from starnav.detect.read import read_image
     from starnav.image import solve_image
@@ -988,7 +922,7 @@ def _cmd_solve(args) -> int:
     if s is None and (args.wcs or args.annotate):
         print("starnav solve: not solved, no WCS or picture written", file=sys.stderr)
     if args.json:
-        print(_json(_image_solution_dict(res, args.image)))
+        print(_json(res.to_dict(args.image)))
     elif s:
         _print_solution(s)
         cam = res.camera
