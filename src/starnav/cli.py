@@ -802,7 +802,7 @@ def _cmd_evaluate(args) -> int:
         missing_frac=args.missing_frac,
         mag_noise=args.mag_noise,
         algorithm=args.algorithm,
-        triangle_selection=args.triangle_selection,
+        algorithm_options=cli_options(args.algorithm, args.triangle_selection),
         sigma_px=args.sigma_px,
         seed=args.seed,
     )
