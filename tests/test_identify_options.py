@@ -47,7 +47,7 @@ def test_report_names_the_options_of_any_algorithm():
     assert describe_options({"selection": "optimized", "max_triangles": 2}) == (
         "optimized, max_triangles=2"
     )
-    line = describe(EvalConfig(algorithm="triangle", algorithm_options={"selection": "x"}), "s")
+    line = describe(EvalConfig(algorithm="triangle", algorithm_options=(("selection", "x"),)), "s")
     assert "; triangle (x), sigma_px" in line
     assert "; pyramid, sigma_px" in describe(EvalConfig(), "s")
 

@@ -79,7 +79,7 @@ def run(args: argparse.Namespace) -> int:
         missing_frac=args.missing_frac,
         mag_noise=args.mag_noise,
         algorithm=args.algorithm,
-        algorithm_options=algorithm_options(args),
+        algorithm_options=tuple(algorithm_options(args).items()),
         sigma_px=args.sigma_px,
         seed=args.seed,
     )
@@ -97,7 +97,8 @@ def run(args: argparse.Namespace) -> int:
     if args.sky_map:
         plot_sky_map(results, args.sky_map, title=describe(config, sampling))
     if args.json:
-        print_json({**summary.to_dict(), "config": asdict(config), "sampling": sampling})
+        config_dict = {**asdict(config), "algorithm_options": dict(config.algorithm_options)}
+        print_json({**summary.to_dict(), "config": config_dict, "sampling": sampling})
     else:
         print(markdown(config, sampling, summary))
     return EXIT_OK

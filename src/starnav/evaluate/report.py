@@ -34,7 +34,7 @@ def describe(config: EvalConfig, sampling: str) -> str:
     height = config.height or config.width
     algo = config.algorithm
     if config.algorithm_options:
-        algo += f" ({describe_options(config.algorithm_options)})"
+        algo += f" ({describe_options(dict(config.algorithm_options))})"
     return (
         f"{sampling}; {config.fov_deg:g}° / {config.width}x{height} px, Hipparcos Hp <= "
         f"{config.mag_limit:g}; noise {config.noise_px:g} px, {config.false_stars} false stars, "

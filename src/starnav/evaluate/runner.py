@@ -14,7 +14,7 @@ import sys
 import time
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 
 import numpy as np
 from tqdm import tqdm
@@ -48,7 +48,7 @@ class EvalConfig:
     Camera: ``fov_deg`` (horizontal), ``width``/``height`` (px), Hipparcos ``mag_limit``.
     Errors: ``noise_px`` (1-sigma centroid noise), ``false_stars`` per frame, ``missing_frac``
     of stars dropped, ``mag_noise`` (1-sigma, magnitudes; changes the brightness order).
-    Solver: ``algorithm`` and its ``algorithm_options`` (keywords), ``sigma_px`` told to it,
+    Solver: ``algorithm``, its ``algorithm_options`` ((name, value) pairs), ``sigma_px`` told to it,
     ``max_false_match_probability``. ``seed`` makes every frame reproducible.
     """
 
@@ -61,7 +61,7 @@ class EvalConfig:
     missing_frac: float = 0.1
     mag_noise: float = 0.0
     algorithm: str = "pyramid"
-    algorithm_options: dict = field(default_factory=dict)
+    algorithm_options: tuple[tuple[str, object], ...] = ()  # (name, value): hashable
     sigma_px: float | None = None
     max_false_match_probability: float = DEFAULT_MAX_FALSE_MATCH_PROBABILITY
     seed: int = 0
