@@ -2,7 +2,7 @@
 
     python benchmarks/locate_study.py --trials 200
 
-Monte Carlo on the real fix path; see ``starnav.navigation.study``. Also the time of a whole
+Monte Carlo on the real fix path; see ``starnav.studies.locate``. Also the time of a whole
 ``starnav locate`` (identification of three cameras and the fix) on the committed test
 observations.
 """
@@ -18,7 +18,7 @@ import numpy as np
 from docblock import replace_block
 from lost_in_space import machine
 from starnav.navigation import locate, read_observation
-from starnav.navigation.study import Setup, format_tables, plot_study, run_locate_study
+from starnav.studies.locate import Setup, format_tables, plot_study, run_locate_study
 
 ROOT = Path(__file__).resolve().parents[1]
 DOC = ROOT / "docs" / "locate.md"

@@ -4,6 +4,7 @@ import pytest
 import starnav
 from conftest import CONTEST
 from starnav import StarListError, StarnavError
+from starnav.results import SOLVE_KEYS
 
 
 def test_solution_fields(contest_catalog):
@@ -16,6 +17,21 @@ def test_solution_fields(contest_catalog):
     d = s.to_dict()
     assert d["solved"] and len(d["stars"]) == len(xy) and d["n_matched"] == s.n_matched
     assert s.sigma_boresight_arcsec > 0 and s.sigma_roll_arcsec > s.sigma_boresight_arcsec
+
+
+def test_solved_and_unsolved_json_have_the_same_keys(contest_catalog):
+    xy = np.loadtxt(CONTEST / "images" / "xingtu02.csv", delimiter=",", skiprows=1, usecols=(1, 2))
+    solved = starnav.solve_verbose(xy, width=512, fov_deg=12.0, catalog=contest_catalog)
+    d = solved.to_dict()
+    assert tuple(d) == SOLVE_KEYS and d["solved"] and d["reason"] is None
+    assert d["time_ms"] == solved.solution.time_ms and len(d["stars"]) == len(xy)
+    random_xy = np.random.default_rng(8).uniform(0, 512, (10, 2))
+    unsolved = starnav.solve_verbose(random_xy, width=512, fov_deg=12.0, catalog=contest_catalog)
+    u = unsolved.to_dict(["p"] * 10, random_xy)
+    assert tuple(u) == SOLVE_KEYS and u["solved"] is False and u["reason"] == unsolved.reason
+    assert u["ra_deg"] is None and u["n_matched"] == 0 and u["time_ms"] == unsolved.time_ms
+    assert [m["label"] for m in u["stars"]] == ["p"] * 10 and u["stars"][3]["x"] == random_xy[3, 0]
+    assert [m["label"] for m in unsolved.to_dict(None, random_xy)["stars"]][:2] == ["1", "2"]
 
 
 def test_returns_none_when_unsure(contest_catalog):

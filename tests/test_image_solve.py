@@ -143,6 +143,12 @@ def test_blank_image_is_not_solved(tmp_path, capsys):
     write_image(path, np.full((128, 128), 100, dtype=np.uint16))
     assert main(["solve", str(path)]) == 1
     assert "stars detected" in capsys.readouterr().out
+    assert main(["solve", str(path), "--json"]) == 1
+    out = json.loads(capsys.readouterr().out)
+    assert out == solve_image(np.full((128, 128), 100, dtype=np.uint16)).to_dict(str(path)) | {
+        k: out[k] for k in ("read_ms", "detect_ms", "solve_ms", "time_ms")
+    }
+    assert out["solved"] is False and out["k1"] is None and out["width"] == 128
 
 
 def test_a_refused_identification_does_not_end_the_fov_search(sky):

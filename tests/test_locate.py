@@ -111,7 +111,7 @@ def _observation(**changes):
                     }
                 ]
             ),
-            "images are not read yet",
+            "takes star lists, not images",
         ),
         (
             _observation(
@@ -180,7 +180,7 @@ def test_cli_json_and_text(capsys):
 def test_study_tilt_maps_to_31_m_per_arcsec_and_stars_average_down():
     """1″ of tilt about one axis moves the fix by 1″ of arc on the ground (30.9 m); about each
     of two axes, sqrt(2) times that. More stars, smaller error."""
-    from starnav.navigation.study import run_locate_study
+    from starnav.studies.locate import run_locate_study
 
     tables = run_locate_study(trials=4, fovs_deg=(10.0, 30.0), progress=False)
     for row, tilt in zip(tables["tilt"], (3, 5, 10, 15, 20), strict=True):

@@ -7,7 +7,7 @@ import pytest
 
 from starnav.camera import Camera
 from starnav.geometry import ARCSEC_PER_RAD, attitude_from_radec_roll
-from starnav.pointing_study import (
+from starnav.studies.pointing import (
     ATTITUDE_RADEC_ROLL_DEG,
     analytic_sigma_arcsec,
     classic_arrangements,

@@ -15,6 +15,7 @@ from starnav.geometry import attitude_from_radec_roll
 from starnav.render import (
     PRESETS,
     RenderSettings,
+    adjust_camera,
     flux_e_for_snr,
     preset,
     render_frame,
@@ -22,6 +23,7 @@ from starnav.render import (
     star_electrons,
     star_snr,
     write_image,
+    write_truth_csv,
 )
 from starnav.simulate import project_catalog
 
@@ -160,6 +162,31 @@ def test_render_frame_truth_matches_projection(hip7):
     patch = frame.image[r - 1 : r + 2, c - 1 : c + 2]
     assert patch.max() == frame.image[max(r - 4, 0) : r + 5, max(c - 4, 0) : c + 5].max()
     assert frame.flux_e == pytest.approx(frame.settings.flux_e(frame.mag))
+
+
+def test_truth_dict_and_csv(hip7, tmp_path):
+    camera = Camera(640, 480, 1800.0, k1=-0.08)
+    frame = render_frame(hip7, camera, attitude_from_radec_roll(84.0, -2.0, 30.0, -1))
+    truth = frame.to_dict()
+    assert truth["ra_deg"] == pytest.approx(84.0) and truth["roll_deg"] == pytest.approx(30.0)
+    assert truth["parity"] == -1 and truth["n_stars"] == len(frame.xy) and truth["k1"] == -0.08
+    path = tmp_path / "truth.csv"
+    write_truth_csv(path, frame)
+    lines = path.read_text().splitlines()
+    assert lines[0] == "x,y,catalog_id,mag" and len(lines) == len(frame.xy) + 1
+    assert int(lines[1].split(",")[2]) == frame.ids[0]
+    with pytest.raises(StarnavError, match="cannot write"):
+        write_truth_csv(tmp_path / "no" / "truth.csv", frame)
+
+
+def test_adjusted_preset_camera():
+    camera, _ = preset("seed-1024")
+    assert adjust_camera(camera) == camera
+    wide = adjust_camera(camera, width=512)
+    assert (wide.width, wide.height) == (512, 512) and wide.fov_deg == pytest.approx(camera.fov_deg)
+    tall = adjust_camera(camera, height=300, k1=-0.01)
+    assert (tall.width, tall.height, tall.k1) == (camera.width, 300, -0.01)
+    assert adjust_camera(camera, fov_deg=10.0).fov_deg == pytest.approx(10.0)
 
 
 def test_frame_without_stars(hip7):

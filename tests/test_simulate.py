@@ -4,7 +4,14 @@ import pytest
 from conftest import reference_frames
 from starnav.camera import Camera
 from starnav.errors import StarnavError
-from starnav.simulate import FALSE_STAR_ID, project_catalog, simulate_frame
+from starnav.simulate import (
+    FALSE_STAR_ID,
+    draw_radec_roll,
+    project_catalog,
+    simulate_frame,
+    write_frame_csv,
+)
+from starnav.starlist import read_star_csv
 
 
 @pytest.mark.parametrize(
@@ -60,3 +67,31 @@ def test_same_seed_same_frame(hip_1991):
 def test_bad_simulation_parameters(hip_1991, kwargs):
     with pytest.raises(StarnavError):
         simulate_frame(hip_1991, Camera.from_fov(12.0, 512), **kwargs)
+
+
+def test_random_attitude_is_the_draw_of_draw_radec_roll(hip_1991):
+    cam = Camera.from_fov(12.0, 512)
+    frame = simulate_frame(hip_1991, cam, dec_deg=20.0, parity=-1, seed=5)
+    ra, dec, roll = draw_radec_roll(np.random.default_rng(5), None, 20.0, None)
+    assert frame.truth == pytest.approx((ra, dec, roll, -1))
+    assert draw_radec_roll(np.random.default_rng(0), 1.0, 2.0, 3.0) == (1.0, 2.0, 3.0)
+
+
+def test_truth_dict_comparison_and_csv(hip_1991, tmp_path):
+    cam = Camera.from_fov(12.0, 512)
+    frame = simulate_frame(
+        hip_1991, cam, ra_deg=80, dec_deg=-5, roll_deg=10, false_stars=2, noise_px=0.2, seed=1
+    )
+    truth = frame.to_dict()
+    assert truth["n_false"] == 2 and truth["n_points"] == len(frame.xy)
+    assert truth["ra_deg"] == pytest.approx(80) and truth["parity"] == 1
+    assert frame.compare(None) is None
+    path = tmp_path / "frame.csv"
+    write_frame_csv(path, frame)
+    stars = read_star_csv(path)
+    assert np.allclose(stars.xy, frame.xy, atol=1e-4) and stars.labels[0] == "1"
+    lines = path.read_text().splitlines()
+    assert lines[0] == "label,x,y,mag,true_catalog_id"
+    assert sum(line.endswith(",") for line in lines[1:]) == 2  # false stars: no id
+    with pytest.raises(StarnavError, match="cannot write"):
+        write_frame_csv(tmp_path / "no" / "frame.csv", frame)

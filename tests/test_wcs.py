@@ -12,7 +12,7 @@ from starnav.catalog import load_catalog
 from starnav.errors import CameraError, ImageError, StarnavError
 from starnav.geometry import attitude_from_radec_roll, radec_to_unit, unit_to_radec
 from starnav.simulate import project_catalog
-from starnav.wcs import fit_sip, wcs_from_attitude, write_wcs
+from starnav.wcs import choose_sip_order, fit_sip, wcs_from_attitude, write_wcs
 
 
 @pytest.fixture(scope="module")
@@ -136,6 +136,17 @@ def test_sip_fit_error_is_reported_and_falls_with_order():
         fit_sip(camera, order=1)
     with pytest.raises(CameraError, match="cannot be inverted"):
         fit_sip(_distorted(90.0, 1000, 1000, -2.0))
+
+
+def test_chosen_sip_order_is_the_lowest_good_to_a_hundredth_of_a_pixel():
+    assert choose_sip_order(_distorted(20.0, 1024, 1024, 0.0)) == 4  # nothing to fit
+    assert choose_sip_order(_distorted(20.0, 1024, 1024, -0.05)) == 4  # 0.007 px at order 4
+    camera = _distorted(30.0, 1024, 1024, -0.1)
+    order = choose_sip_order(camera)
+    assert order == 5 and fit_sip(camera, order=order).max_error_px <= 0.01
+    assert fit_sip(camera, order=order - 1).max_error_px > 0.01
+    assert choose_sip_order(camera, max_error_px=1e-6) == 7  # no higher than 7
+    assert choose_sip_order(camera, max_error_px=1e-6, highest=6) == 6
 
 
 @pytest.mark.filterwarnings("ignore:The WCS transformation has more axes")  # NAXIS = 0

@@ -1,9 +1,13 @@
-"""Reading the small CSV files starnav takes (star lists, catalogs) into header and rows."""
+"""The small CSV files starnav reads (star lists, catalogs) and writes (simulated frames,
+rendered truth): header and rows."""
 
 from __future__ import annotations
 
 import csv
+from collections.abc import Iterable, Sequence
 from pathlib import Path
+
+from starnav.errors import StarnavError
 
 
 def read_rows(
@@ -27,3 +31,15 @@ def read_rows(
     if len(header) != len(set(header)):
         raise error(f"{what} {str(path)!r} repeats a column name")
     return header, rows[1:]
+
+
+def write_rows(path: str | Path, header: Sequence[str], rows: Iterable[Sequence[object]]) -> None:
+    """Write a CSV file: the ``header`` row, then ``rows``; a file that cannot be written
+    raises ``StarnavError`` with a one-line message."""
+    try:
+        with Path(path).open("w", newline="") as fh:
+            writer = csv.writer(fh)
+            writer.writerow(header)
+            writer.writerows(rows)
+    except OSError as exc:
+        raise StarnavError(f"cannot write {str(path)!r}: {exc.strerror or exc}") from None

@@ -47,6 +47,29 @@ class ImageSolveResult:
         """Detection and solve (ms): from the decoded image to the attitude."""
         return self.detect_ms + self.solve_ms
 
+    def to_dict(self, file: str | None = None) -> dict:
+        """The JSON of the solve (``starnav.results.solve_dict``; the stars are the detections,
+        brightest first) with the image ``file``, its size, the fitted principal point and
+        distortion (null when unsolved), ``n_detected`` and the times (ms)."""
+        from starnav.results import solve_dict
+
+        det, cam = self.detections, self.camera
+        out = solve_dict(self.solution, self.reason, self.solve_ms, None, det.xy)
+        out.update(
+            file=file,
+            width=det.width,
+            height=det.height,
+            cx=cam.cx if cam else None,
+            cy=cam.cy if cam else None,
+            k1=cam.k1 if cam else None,
+            k2=cam.k2 if cam else None,
+            n_detected=len(det.xy),
+            read_ms=self.read_ms,
+            detect_ms=self.detect_ms,
+            solve_ms=self.solve_ms,
+        )
+        return out
+
 
 def solve_image(
     image: str | Path | np.ndarray,

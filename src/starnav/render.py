@@ -28,7 +28,9 @@ from scipy.special import erf
 
 from starnav.camera import Camera
 from starnav.catalog import Catalog
+from starnav.csvrows import write_rows
 from starnav.errors import ImageError, StarnavError
+from starnav.geometry import radec_roll_from_attitude
 from starnav.simulate import project_catalog
 
 # Sky photons are drawn from the Gaussian of the same variance above this level (e/px): after
@@ -176,6 +178,56 @@ class RenderedFrame:
     R_cam_from_icrs: np.ndarray
     camera: Camera
     settings: RenderSettings
+
+    def to_dict(self) -> dict:
+        """The truth as a JSON-ready dict: attitude, camera, ``n_stars`` listed, the matrix
+        (nested lists)."""
+        ra, dec, roll, parity = radec_roll_from_attitude(self.R_cam_from_icrs)
+        cam = self.camera
+        return {
+            "ra_deg": ra,
+            "dec_deg": dec,
+            "roll_deg": roll,
+            "parity": parity,
+            "fov_deg": cam.fov_deg,
+            "width": cam.width,
+            "height": cam.height,
+            "focal_px": cam.focal_px,
+            "k1": cam.k1,
+            "k2": cam.k2,
+            "n_stars": len(self.xy),
+            "R_cam_from_icrs": self.R_cam_from_icrs.tolist(),
+        }
+
+
+def write_truth_csv(path: str | Path, frame: RenderedFrame) -> None:
+    """The stars drawn (``x,y,catalog_id,mag``, brightest first) as CSV; ``StarnavError``
+    when the file cannot be written."""
+    rows = [
+        [f"{x:.4f}", f"{y:.4f}", int(cid), f"{mag:.3f}"]
+        for (x, y), cid, mag in zip(frame.xy, frame.ids, frame.mag, strict=True)
+    ]
+    write_rows(path, ["x", "y", "catalog_id", "mag"], rows)
+
+
+def adjust_camera(
+    camera: Camera,
+    *,
+    fov_deg: float | None = None,
+    width: int | None = None,
+    height: int | None = None,
+    k1: float = 0.0,
+    k2: float = 0.0,
+) -> Camera:
+    """``camera`` (a preset's) with the field of view and size given instead of its own (the
+    height follows a new width unless given; the principal point is the centre then) and
+    radial distortion ``k1``, ``k2``."""
+    if fov_deg is not None or width is not None or height is not None:
+        new_width = width or camera.width
+        new_height = height or (new_width if width else camera.height)
+        fov = camera.fov_deg if fov_deg is None else fov_deg
+        camera = Camera.from_fov(fov, new_width, new_height)
+    return Camera(camera.width, camera.height, camera.focal_px, camera.cx, camera.cy, k1, k2)
 
 
 def star_electrons(

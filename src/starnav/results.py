@@ -1,13 +1,39 @@
 """Result types of a solve: ``Solution`` (a verified attitude), its ``StarMatch`` rows and
-``SolveResult`` (the solution or the reason there is none)."""
+``SolveResult`` (the solution or the reason there is none), and the JSON of a solve that the
+command line prints (``SOLVE_KEYS``, ``solve_dict``)."""
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
 from starnav.identify.database import PairDatabase
+
+# The JSON of a solve, solved or not (``solve_dict``): these keys in this order; an unsolved
+# one has null for every number, 0 matched and its input points as the stars.
+SOLVE_KEYS = (
+    "solved",
+    "reason",
+    "ra_deg",
+    "dec_deg",
+    "roll_deg",
+    "parity",
+    "focal_px",
+    "fov_deg",
+    "rms_px",
+    "sigma_boresight_arcsec",
+    "sigma_roll_arcsec",
+    "sigma_focal_px",
+    "false_match_probability",
+    "time_ms",
+    "n_matched",
+    "algorithm",
+    "catalog",
+    "R_cam_from_icrs",
+    "stars",
+)
 
 
 @dataclass(frozen=True)
@@ -78,3 +104,34 @@ class SolveResult:
     hypotheses: int
     database: PairDatabase
     stage_ms: dict[str, float] = field(default_factory=dict)
+
+    def to_dict(self, labels: Sequence[str] | None = None, xy: np.ndarray | None = None) -> dict:
+        """The JSON of this solve (``solve_dict``); ``labels`` and ``xy`` are the input points,
+        listed as the stars when unsolved."""
+        return solve_dict(self.solution, self.reason, self.time_ms, labels, xy)
+
+
+def solve_dict(
+    solution: Solution | None,
+    reason: str = "",
+    time_ms: float = float("nan"),
+    labels: Sequence[str] | None = None,
+    xy: np.ndarray | None = None,
+) -> dict:
+    """The JSON of a solve, keys ``SOLVE_KEYS``: from the ``solution`` (its own time; reason
+    null) or, without one, ``solved`` false with the ``reason``, ``time_ms`` and every input
+    point (``xy`` (n, 2) px, ``labels`` default "1".."n") unidentified."""
+    if solution is not None:
+        full = solution.to_dict()
+        out = {key: full.get(key) for key in SOLVE_KEYS}
+        out["reason"] = None
+        return out
+    out = dict.fromkeys(SOLVE_KEYS)
+    points = np.empty((0, 2)) if xy is None else np.asarray(xy, dtype=float)
+    names = [str(n + 1) for n in range(len(points))] if labels is None else list(labels)
+    out.update(solved=False, reason=reason, time_ms=time_ms, n_matched=0)
+    out["stars"] = [
+        {"label": lab, "x": float(x), "y": float(y), "catalog_id": None, "residual_px": None}
+        for lab, (x, y) in zip(names, points, strict=True)
+    ]
+    return out

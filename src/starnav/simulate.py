@@ -9,13 +9,23 @@ carried beside it (-1 for a false star) so every stage can be scored.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from starnav.camera import Camera
 from starnav.catalog import Catalog
+from starnav.csvrows import write_rows
 from starnav.errors import StarnavError
-from starnav.geometry import attitude_from_radec_roll, radec_roll_from_attitude
+from starnav.geometry import (
+    attitude_difference_deg,
+    attitude_from_radec_roll,
+    radec_roll_from_attitude,
+)
+
+if TYPE_CHECKING:
+    from starnav.results import Solution
 
 FALSE_STAR_ID = -1
 MAX_FALSE_STARS = 10000
@@ -42,6 +52,67 @@ class SimulatedFrame:
     def truth(self) -> tuple[float, float, float, int]:
         """(ra_deg, dec_deg, roll_deg, parity) of the true attitude."""
         return radec_roll_from_attitude(self.R_cam_from_icrs)
+
+    def to_dict(self) -> dict:
+        """The truth as a JSON-ready dict: attitude, focal length, matrix (nested lists),
+        ``n_points`` given, ``n_in_view`` catalog stars in the image, ``n_false`` false stars."""
+        ra, dec, roll, parity = self.truth
+        return {
+            "ra_deg": ra,
+            "dec_deg": dec,
+            "roll_deg": roll,
+            "parity": parity,
+            "focal_px": self.camera.focal_px,
+            "R_cam_from_icrs": self.R_cam_from_icrs.tolist(),
+            "n_points": len(self.xy),
+            "n_in_view": self.n_in_view,
+            "n_false": int(np.sum(self.true_id == FALSE_STAR_ID)),
+        }
+
+    def compare(self, solution: Solution | None) -> dict | None:
+        """How a ``Solution`` of this frame compares with the truth (None for no solution):
+        attitude errors (arcsec) and the points identified right, identified wrong (a catalog
+        id other than their own) and false stars left unidentified."""
+        if solution is None:
+            return None
+        ids = np.array([-1 if m.catalog_id is None else m.catalog_id for m in solution.stars])
+        boresight_deg, roll_deg = attitude_difference_deg(
+            solution.R_cam_from_icrs, self.R_cam_from_icrs
+        )
+        return {
+            "boresight_error_arcsec": boresight_deg * 3600.0,
+            "roll_error_arcsec": roll_deg * 3600.0,
+            "ids_correct": int(np.sum((ids == self.true_id) & (ids != -1))),
+            "ids_wrong": int(np.sum((ids != self.true_id) & (ids != -1))),
+            "false_stars_refused": int(np.sum((ids == -1) & (self.true_id == FALSE_STAR_ID))),
+        }
+
+
+def write_frame_csv(path: str | Path, frame: SimulatedFrame) -> None:
+    """The frame as a star list CSV (``label,x,y,mag,true_catalog_id``; the id empty for a
+    false star) that ``starnav identify`` reads; ``StarnavError`` when it cannot be written."""
+    rows = [
+        [n + 1, f"{x:.4f}", f"{y:.4f}", f"{mag:.3f}", "" if cid == FALSE_STAR_ID else int(cid)]
+        for n, ((x, y), mag, cid) in enumerate(zip(frame.xy, frame.mag, frame.true_id, strict=True))
+    ]
+    write_rows(path, ["label", "x", "y", "mag", "true_catalog_id"], rows)
+
+
+def draw_radec_roll(
+    rng: np.random.Generator,
+    ra_deg: float | None = None,
+    dec_deg: float | None = None,
+    roll_deg: float | None = None,
+) -> tuple[float, float, float]:
+    """(ra_deg, dec_deg, roll_deg) with each missing value drawn from ``rng``, in that order:
+    the boresight uniform on the sky, the roll uniform in 0..360."""
+    if ra_deg is None:
+        ra_deg = rng.uniform(0.0, 360.0)
+    if dec_deg is None:
+        dec_deg = np.degrees(np.arcsin(rng.uniform(-1.0, 1.0)))
+    if roll_deg is None:
+        roll_deg = rng.uniform(0.0, 360.0)
+    return ra_deg, dec_deg, roll_deg
 
 
 def project_catalog(
@@ -82,12 +153,7 @@ def simulate_frame(
         raise StarnavError(f"parity must be +1 or -1, got {parity!r}")
     rng = np.random.default_rng(seed)
     if R_cam_from_icrs is None:
-        if ra_deg is None:
-            ra_deg = rng.uniform(0.0, 360.0)
-        if dec_deg is None:
-            dec_deg = np.degrees(np.arcsin(rng.uniform(-1.0, 1.0)))
-        if roll_deg is None:
-            roll_deg = rng.uniform(0.0, 360.0)
+        ra_deg, dec_deg, roll_deg = draw_radec_roll(rng, ra_deg, dec_deg, roll_deg)
         if not -90.0 <= dec_deg <= 90.0:
             raise StarnavError(f"dec_deg must be within ±90, got {dec_deg!r}")
         for name, value in (("ra_deg", ra_deg), ("roll_deg", roll_deg)):

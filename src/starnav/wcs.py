@@ -34,6 +34,8 @@ from starnav.geometry import north_east, unit_to_radec
 
 DEFAULT_SIP_ORDER = 4
 MAX_SIP_ORDER = 9
+SIP_AUTO_MAX_ORDER = 7  # highest order choose_sip_order goes to
+SIP_GOOD_ENOUGH_PX = 0.01  # fit error choose_sip_order asks for
 SIP_GRID_POINTS = 41  # per image axis: the grid the polynomials are fitted and checked on
 _ROUND_TRIP_TOLERANCE_PX = 1e-3
 
@@ -144,6 +146,23 @@ def fit_sip(camera: Camera, *, order: int = DEFAULT_SIP_ORDER) -> SipFit:
         max_inverse_error_px=inverse_error,
         max_distortion_px=float(np.max(np.linalg.norm(u - d, axis=1))),
     )
+
+
+def choose_sip_order(
+    camera: Camera,
+    *,
+    max_error_px: float = SIP_GOOD_ENOUGH_PX,
+    highest: int = SIP_AUTO_MAX_ORDER,
+) -> int:
+    """The lowest SIP order from ``DEFAULT_SIP_ORDER`` up whose fit of the camera's radial
+    distortion is good to ``max_error_px`` over the image (wide fields need more), at most
+    ``highest``; ``DEFAULT_SIP_ORDER`` for a camera without distortion."""
+    order = DEFAULT_SIP_ORDER
+    while (camera.k1 or camera.k2) and order < highest:
+        if fit_sip(camera, order=order).max_error_px <= max_error_px:
+            break
+        order += 1
+    return order
 
 
 def _date_obs(date_obs: str | _dt.datetime | Time) -> Time:

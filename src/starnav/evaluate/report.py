@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from starnav.evaluate.runner import EvalConfig, FrameResult, Summary
+from starnav.identify.options import describe_options
 
 TABLE_HEADER = (
     "| algorithm | frames | correct | wrong | none | correct % | correct % (>= 4 stars) "
@@ -32,8 +33,8 @@ def describe(config: EvalConfig, sampling: str) -> str:
     """One line naming the camera, the errors and the solver settings."""
     height = config.height or config.width
     algo = config.algorithm
-    if algo == "triangle":
-        algo += f" ({config.triangle_selection})"
+    if config.algorithm_options:
+        algo += f" ({describe_options(dict(config.algorithm_options))})"
     return (
         f"{sampling}; {config.fov_deg:g}° / {config.width}x{height} px, Hipparcos Hp <= "
         f"{config.mag_limit:g}; noise {config.noise_px:g} px, {config.false_stars} false stars, "

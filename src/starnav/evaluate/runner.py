@@ -24,7 +24,7 @@ from starnav.catalog import load_catalog
 from starnav.errors import StarnavError
 from starnav.evaluate.sampling import Boresights, frame_rng
 from starnav.geometry import angle_between, attitude_difference_deg
-from starnav.identify import cli_options, make_identifier
+from starnav.identify import make_identifier
 from starnav.pipeline import (
     DEFAULT_MAX_FALSE_MATCH_PROBABILITY,
     Solver,
@@ -48,7 +48,7 @@ class EvalConfig:
     Camera: ``fov_deg`` (horizontal), ``width``/``height`` (px), Hipparcos ``mag_limit``.
     Errors: ``noise_px`` (1-sigma centroid noise), ``false_stars`` per frame, ``missing_frac``
     of stars dropped, ``mag_noise`` (1-sigma, magnitudes; changes the brightness order).
-    Solver: ``algorithm`` (``triangle_selection`` for "triangle"), ``sigma_px`` told to it,
+    Solver: ``algorithm``, its ``algorithm_options`` ((name, value) pairs), ``sigma_px`` told to it,
     ``max_false_match_probability``. ``seed`` makes every frame reproducible.
     """
 
@@ -61,7 +61,7 @@ class EvalConfig:
     missing_frac: float = 0.1
     mag_noise: float = 0.0
     algorithm: str = "pyramid"
-    triangle_selection: str = "optimized"
+    algorithm_options: tuple[tuple[str, object], ...] = ()  # (name, value): hashable
     sigma_px: float | None = None
     max_false_match_probability: float = DEFAULT_MAX_FALSE_MATCH_PROBABILITY
     seed: int = 0
@@ -92,7 +92,7 @@ class EvalConfig:
 
     @property
     def identifier_options(self) -> dict:
-        return cli_options(self.algorithm, self.triangle_selection)
+        return dict(self.algorithm_options)
 
 
 @dataclass(frozen=True)

@@ -35,12 +35,6 @@ def make_identifier(name: str, **options) -> Identifier:
     return getattr(import_module(module), cls)(**options)
 
 
-def cli_options(algorithm: str, triangle_selection: str) -> dict:
-    """The class options the command line's choices mean for ``algorithm`` (only ``triangle``
-    takes one: its ``selection``)."""
-    return {"selection": triangle_selection} if algorithm == "triangle" else {}
-
-
 __all__ = [
     "ALGORITHMS",
     "DEFAULT_ALGORITHM",
@@ -51,6 +45,5 @@ __all__ = [
     "PairDatabase",
     "build_database",
     "cache_dir",
-    "cli_options",
     "make_identifier",
 ]

@@ -150,6 +150,7 @@ class Triangle:
     """
 
     name = "triangle"
+    OPTIONS = (("selection", SELECTIONS),)  # (name, allowed) set by name: identify/options.py
 
     def __init__(
         self,

@@ -127,8 +127,8 @@ def _camera(entry, n: int) -> CameraView:
         )
     if "image" in entry:
         raise ObservationError(
-            f"{name}: images are not read yet (star detection is issue 6); give 'stars' as "
-            "[x, y] pixel centroids"
+            f"{name}: starnav locate takes star lists, not images: give 'stars' as [x, y] "
+            "pixel centroids (starnav solve detects the stars of an image)"
         )
     if "stars" not in entry:
         raise ObservationError(f"{name}: 'stars' is missing (a list of [x, y] centroids)")

@@ -1,0 +1,75 @@
+"""The ``starnav`` command: parse, call the library, print. Exit status 0 solved / done,
+1 not solved, 2 bad input (one line on stderr, never a traceback).
+
+One module per command or group of commands, each with ``add_parser(subparsers)`` (which
+sets the command's ``run(args) -> int``); the options and output they share are in
+``starnav.cli.common``.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+
+from starnav.cli import (
+    calibrate,
+    database,
+    demo,
+    evaluate,
+    identify,
+    locate,
+    pointing,
+    render,
+    simulate,
+    solve,
+)
+from starnav.cli.common import EXIT_BAD_INPUT, EXIT_OK, Parser
+from starnav.errors import StarnavError
+
+# in the order of ``starnav --help``
+COMMAND_MODULES = (
+    identify,
+    simulate,
+    demo,
+    pointing,
+    evaluate,
+    locate,
+    database,
+    solve,
+    render,
+    calibrate,
+)
+
+
+def build_parser() -> Parser:
+    """The parser of every command."""
+    parser = Parser(
+        prog="starnav",
+        description="Star identification and attitude from star-camera centroids and images. "
+        "Exit status: 0 done/solved, 1 not solved, 2 bad input.",
+    )
+    subparsers = parser.add_subparsers(dest="command", required=True, parser_class=Parser)
+    for module in COMMAND_MODULES:
+        module.add_parser(subparsers)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of the ``starnav`` command."""
+    args = build_parser().parse_args(argv)
+    try:
+        return args.run(args)
+    except StarnavError as exc:
+        print(f"starnav {args.command}: error: {exc}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except MemoryError:
+        print(f"starnav {args.command}: error: out of memory (input too large)", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except BrokenPipeError:  # output piped into head & co: stop quietly
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return EXIT_OK
+    except KeyboardInterrupt:
+        return 130
+
+
+__all__ = ["build_parser", "main"]

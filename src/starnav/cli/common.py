@@ -1,0 +1,227 @@
+"""What the commands share: exit codes, the parser that reports a mistake in one line, the
+argument types, the option groups several commands take, and the output helpers."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+from collections.abc import Callable
+from pathlib import Path
+from typing import IO, Any, Protocol
+
+from starnav.catalog import DEFAULT_MAG_LIMIT
+from starnav.errors import StarnavError
+from starnav.fov import DEFAULT_FOV_RANGE_DEG
+from starnav.identify import ALGORITHMS, DEFAULT_ALGORITHM
+from starnav.identify.options import check_algorithm_options
+from starnav.results import Solution
+
+EXIT_OK, EXIT_NOT_SOLVED, EXIT_BAD_INPUT = 0, 1, 2
+# --triangle-selection is short for --algorithm-option selection=...: the algorithms that
+# declare a "selection" option (today triangle) get it unless the long form sets it
+SHORTHANDS = {"triangle_selection": "selection"}
+
+
+class Subparsers(Protocol):
+    """What a command module's ``add_parser`` needs of ``add_subparsers()``."""
+
+    def add_parser(self, name: str, **kwargs: Any) -> argparse.ArgumentParser: ...
+
+
+class Parser(argparse.ArgumentParser):
+    """argparse that reports a usage mistake in one line (exit 2), without the usage dump."""
+
+    def error(self, message: str) -> None:  # type: ignore[override]
+        self.exit(EXIT_BAD_INPUT, f"{self.prog}: error: {message} (see --help)\n")
+
+
+def finite(text: str) -> float:
+    """Argument type: a finite number."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"not a finite number: {text!r}")
+    return value
+
+
+def int_at_least(minimum: int) -> Callable[[str], int]:
+    """Argument type: a whole number >= ``minimum``."""
+
+    def convert(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"not a whole number: {text!r}") from None
+        if value < minimum:
+            raise argparse.ArgumentTypeError(f"must be at least {minimum}, got {text}")
+        return value
+
+    return convert
+
+
+positive_int = int_at_least(1)
+count = int_at_least(0)
+
+
+def png_path(text: str) -> str:
+    """Argument type: the name of a PNG file to write."""
+    if not text.lower().endswith(".png"):
+        raise argparse.ArgumentTypeError(
+            f"the plot is a PNG file: give a name ending in .png, got {text!r}"
+        )
+    return text
+
+
+def name_value(text: str) -> tuple[str, int | float | str]:
+    """Argument type: NAME=VALUE, the value read as a whole number, else a finite number,
+    else text."""
+    name, sep, value = text.partition("=")
+    if not sep or not name.strip():
+        raise argparse.ArgumentTypeError(f"expected NAME=VALUE, got {text!r}")
+    for kind in (int, float):
+        try:
+            number = kind(value)
+        except ValueError:
+            continue
+        if math.isfinite(number):
+            return name.strip(), number
+    return name.strip(), value
+
+
+def check_parent_dir(option: str, path: str | None) -> None:
+    """Refuse an output file whose directory does not exist, before any work."""
+    if path and not Path(path).resolve().parent.is_dir():
+        raise StarnavError(f"{option}: the directory of {path!r} does not exist")
+
+
+def add_camera(p: argparse.ArgumentParser, *, required: bool = True) -> None:
+    """--fov-deg, --width, --height."""
+    p.add_argument("--fov-deg", type=finite, required=required, help="horizontal field of view")
+    p.add_argument("--width", type=positive_int, required=required, help="image width (px)")
+    p.add_argument("--height", type=positive_int, help="image height (px; default: width)")
+
+
+def add_attitude(p: argparse.ArgumentParser) -> None:
+    """--ra-deg, --dec-deg, --roll-deg (each random when left out) and --parity."""
+    p.add_argument("--ra-deg", type=finite, help="boresight RA (default: random)")
+    p.add_argument("--dec-deg", type=finite, help="boresight Dec (default: random)")
+    p.add_argument("--roll-deg", type=finite, help="roll (default: random)")
+    p.add_argument("--parity", type=int, choices=(1, -1), default=1)
+
+
+def add_fov_search(
+    p: argparse.ArgumentParser, fov_help: str, *, camera_help: str | None = None
+) -> None:
+    """--fov-deg or --fov-range (the FOV search), or --camera (a camera file) when
+    ``camera_help`` is given."""
+    fov = p.add_mutually_exclusive_group()
+    fov.add_argument("--fov-deg", type=finite, help=fov_help)
+    fov.add_argument(
+        "--fov-range",
+        nargs=2,
+        type=finite,
+        metavar=("LO", "HI"),
+        default=DEFAULT_FOV_RANGE_DEG,
+        help="horizontal FOV range searched when the FOV is unknown (degrees; default 5 40)",
+    )
+    if camera_help:
+        fov.add_argument("--camera", help=camera_help)
+
+
+def add_catalog(p: argparse.ArgumentParser) -> None:
+    """--catalog, --mag-limit, --epoch."""
+    p.add_argument(
+        "--catalog",
+        help="CSV catalog id,ra_deg,dec_deg,mag (default: embedded Hipparcos)",
+    )
+    p.add_argument(
+        "--mag-limit",
+        type=finite,
+        help=f"faintest catalog magnitude used (default {DEFAULT_MAG_LIMIT:g} for Hipparcos, "
+        "all stars for a CSV)",
+    )
+    p.add_argument(
+        "--epoch",
+        type=finite,
+        help="year to apply Hipparcos proper motion to (default: this year)",
+    )
+
+
+def add_algorithm(p: argparse.ArgumentParser) -> None:
+    """--algorithm, its options by name (--algorithm-option) and --triangle-selection."""
+    p.add_argument(
+        "--algorithm",
+        choices=list(ALGORITHMS),
+        default=DEFAULT_ALGORITHM,
+        help="identification algorithm (default %(default)s)",
+    )
+    p.add_argument(
+        "--algorithm-option",
+        action="append",
+        type=name_value,
+        metavar="NAME=VALUE",
+        help="an option of the algorithm by name, e.g. selection=brightest for triangle "
+        "(repeatable; VALUE is read as a number when it is one)",
+    )
+    p.add_argument(
+        "--triangle-selection",
+        choices=("brightest", "optimized"),
+        default="optimized",
+        help="how --algorithm triangle picks its triangles (default %(default)s); short for "
+        "--algorithm-option selection=...",
+    )
+
+
+def algorithm_options(args: argparse.Namespace) -> dict[str, object]:
+    """The options of ``args.algorithm``: those of --algorithm-option, checked against what
+    the algorithm declares, plus the shorthands' values for the options it declares."""
+    defaults = {option: getattr(args, dest) for dest, option in SHORTHANDS.items()}
+    return check_algorithm_options(args.algorithm, dict(args.algorithm_option or []), defaults)
+
+
+def to_json(obj: dict) -> str:
+    """One line of JSON; NaN and infinities (e.g. an undetermined sigma) become null."""
+
+    def clean(v):
+        if isinstance(v, float) and not math.isfinite(v):
+            return None
+        if isinstance(v, dict):
+            return {k: clean(x) for k, x in v.items()}
+        if isinstance(v, list):
+            return [clean(x) for x in v]
+        return v
+
+    return json.dumps(clean(obj), allow_nan=False)
+
+
+def print_json(obj: dict) -> None:
+    """Print ``obj`` as one line of JSON (``to_json``)."""
+    print(to_json(obj))
+
+
+def print_solution(s: Solution, *, file: IO[str] | None = None) -> None:
+    """The readable table of a solution: attitude, quality, then one row per star."""
+    print(
+        f"solved: RA {s.ra_deg:.5f}°  Dec {s.dec_deg:+.5f}°  roll {s.roll_deg:.4f}°  "
+        f"parity {s.parity:+d}",
+        file=file,
+    )
+    print(
+        f"  {s.n_matched}/{len(s.stars)} stars matched, rms {s.rms_px:.3f} px, "
+        f"1σ boresight {s.sigma_boresight_arcsec:.2f}″ roll {s.sigma_roll_arcsec:.2f}″, "
+        f"focal {s.focal_px:.2f} px (FOV {s.fov_deg:.4f}°)",
+        file=file,
+    )
+    print(
+        f"  false-match probability {s.false_match_probability:.1e}, {s.time_ms:.1f} ms, "
+        f"catalog: {s.catalog}",
+        file=file,
+    )
+    print(f"{'label':>8} {'x':>9} {'y':>9} {'catalog_id':>10} {'residual_px':>11}", file=file)
+    for m in s.stars:
+        cid = "-" if m.catalog_id is None else str(m.catalog_id)
+        res = "-" if m.residual_px is None else f"{m.residual_px:.3f}"
+        print(f"{m.label:>8} {m.x:9.2f} {m.y:9.2f} {cid:>10} {res:>11}", file=file)

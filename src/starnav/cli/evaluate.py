@@ -1,0 +1,104 @@
+"""``starnav evaluate``: the lost-in-space evaluation over the whole sky (simulated frames)."""
+
+from __future__ import annotations
+
+import argparse
+from dataclasses import asdict
+
+from starnav.catalog import DEFAULT_MAG_LIMIT
+from starnav.cli.common import (
+    EXIT_OK,
+    Subparsers,
+    add_algorithm,
+    algorithm_options,
+    check_parent_dir,
+    count,
+    finite,
+    png_path,
+    positive_int,
+    print_json,
+)
+
+
+def add_parser(subparsers: Subparsers) -> None:
+    """The ``evaluate`` command and its options."""
+    p = subparsers.add_parser(
+        "evaluate", help="lost-in-space evaluation over the whole sky (simulated frames)"
+    )
+    p.add_argument("--sampling", choices=("grid", "uniform"), default="grid")
+    p.add_argument(
+        "--grid-step-deg",
+        type=finite,
+        default=3.0,
+        help="RA/Dec grid step (default 3: 7200 boresights)",
+    )
+    p.add_argument("--frames", type=positive_int, default=1000, help="frames of --sampling uniform")
+    p.add_argument("--fov-deg", type=finite, default=12.0, help="horizontal FOV (default 12)")
+    p.add_argument("--width", type=positive_int, default=512, help="image width (default 512)")
+    p.add_argument("--height", type=positive_int, help="image height (px; default: width)")
+    p.add_argument("--mag-limit", type=finite, default=DEFAULT_MAG_LIMIT, help="Hipparcos Hp limit")
+    p.add_argument(
+        "--noise-px", type=finite, default=0.5, help="centroid noise, 1 sigma (default 0.5)"
+    )
+    p.add_argument("--false-stars", type=count, default=2, help="per frame (default 2)")
+    p.add_argument("--missing-frac", type=finite, default=0.1, help="stars dropped (default 0.1)")
+    p.add_argument(
+        "--mag-noise", type=finite, default=0.0, help="magnitude noise, 1 sigma (default 0)"
+    )
+    p.add_argument(
+        "--sigma-px", type=finite, help="centroid sigma told to the solver (default: the noise)"
+    )
+    add_algorithm(p)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument(
+        "--workers", type=positive_int, help="processes (default: all cores; 1: this process)"
+    )
+    p.add_argument(
+        "--dask",
+        metavar="ADDRESS",
+        help="run on this Dask scheduler (e.g. tcp://host:8786), or 'local' for a LocalCluster",
+    )
+    p.add_argument("--frames-csv", metavar="CSV", help="write one row per frame here")
+    p.add_argument("--sky-map", metavar="PNG", type=png_path, help="whole-sky outcome map")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(run=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run the evaluation; print the summary, write the per-frame CSV and the sky map."""
+    from starnav.evaluate import EvalConfig, evaluate, grid_boresights, uniform_boresights
+    from starnav.evaluate.report import describe, markdown, plot_sky_map, write_frames_csv
+
+    config = EvalConfig(
+        fov_deg=args.fov_deg,
+        width=args.width,
+        height=args.height,
+        mag_limit=args.mag_limit,
+        noise_px=args.noise_px,
+        false_stars=args.false_stars,
+        missing_frac=args.missing_frac,
+        mag_noise=args.mag_noise,
+        algorithm=args.algorithm,
+        algorithm_options=tuple(algorithm_options(args).items()),
+        sigma_px=args.sigma_px,
+        seed=args.seed,
+    )
+    check_parent_dir("--frames-csv", args.frames_csv)
+    check_parent_dir("--sky-map", args.sky_map)
+    if args.sampling == "grid":
+        boresights = grid_boresights(args.grid_step_deg, seed=args.seed)
+        sampling = f"{len(boresights)} boresights on a {args.grid_step_deg:g}° RA/Dec grid"
+    else:
+        boresights = uniform_boresights(args.frames, seed=args.seed)
+        sampling = f"{len(boresights)} boresights uniform on the sphere"
+    summary, results = evaluate(config, boresights, workers=args.workers, dask_address=args.dask)
+    if args.frames_csv:
+        write_frames_csv(results, args.frames_csv)
+    if args.sky_map:
+        plot_sky_map(results, args.sky_map, title=describe(config, sampling))
+    if args.json:
+        config_dict = {**asdict(config), "algorithm_options": dict(config.algorithm_options)}
+        print_json({**summary.to_dict(), "config": config_dict, "sampling": sampling})
+    else:
+        print(markdown(config, sampling, summary))
+    return EXIT_OK

@@ -1,0 +1,208 @@
+"""``starnav identify``: a star list (CSV), or a directory of them, to a verified attitude."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from starnav.api import DEFAULT_MAX_FALSE_MATCH_PROBABILITY, DEFAULT_SIGMA_PX, make_camera
+from starnav.cli.common import (
+    EXIT_BAD_INPUT,
+    EXIT_NOT_SOLVED,
+    EXIT_OK,
+    Subparsers,
+    add_algorithm,
+    add_catalog,
+    add_fov_search,
+    algorithm_options,
+    finite,
+    png_path,
+    positive_int,
+    print_json,
+    print_solution,
+)
+from starnav.errors import StarnavError
+from starnav.geometry import attitude_from_radec_roll
+from starnav.identify import DEFAULT_ALGORITHM
+from starnav.results import SolveResult
+from starnav.solve_lists import FileResult, read_star_files, solve_star_files, solve_star_list
+from starnav.starlist import read_star_csv
+
+
+def add_parser(subparsers: Subparsers) -> None:
+    """The ``identify`` command and its options."""
+    p = subparsers.add_parser("identify", help="identify a star list (CSV) and solve the attitude")
+    p.add_argument(
+        "stars",
+        help="CSV with header: x,y and optionally label, flux or mag; or a directory of them",
+    )
+    add_fov_search(p, "horizontal field of view (without it the FOV is searched)")
+    p.add_argument("--width", type=positive_int, required=True, help="image width (px)")
+    p.add_argument("--height", type=positive_int, help="image height (px; default: width)")
+    add_catalog(p)
+    p.add_argument(
+        "--sigma-px",
+        type=finite,
+        default=DEFAULT_SIGMA_PX,
+        help=f"centroid error, 1 sigma (px; default {DEFAULT_SIGMA_PX:g}): sets the tolerances",
+    )
+    p.add_argument("--parity", type=int, choices=(1, -1), help="force parity (default: find)")
+    p.add_argument("--fit-focal", action="store_true", help="fit the focal length too")
+    p.add_argument(
+        "--max-false-match-probability",
+        type=finite,
+        default=DEFAULT_MAX_FALSE_MATCH_PROBABILITY,
+        help="refuse less certain answers (default %(default)g)",
+    )
+    add_algorithm(p)
+    p.add_argument(
+        "--workers", type=positive_int, help="a directory: processes (default: all cores)"
+    )
+    p.add_argument("--prior-ra-deg", type=finite, help="tracking: previous boresight RA")
+    p.add_argument("--prior-dec-deg", type=finite, help="tracking: previous boresight Dec")
+    p.add_argument("--prior-roll-deg", type=finite, help="tracking: previous roll")
+    p.add_argument(
+        "--prior-sigma-deg",
+        type=finite,
+        default=1.0,
+        help="tracking: 1-sigma error of the previous attitude (default 1)",
+    )
+    p.add_argument(
+        "--plot", metavar="PNG", type=png_path, help="draw the identified map into this PNG file"
+    )
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(run=run)
+
+
+def prior_attitude(args: argparse.Namespace) -> np.ndarray | None:
+    """The tracking prior of --prior-ra-deg/--prior-dec-deg/--prior-roll-deg (all or none)."""
+    given = [args.prior_ra_deg, args.prior_dec_deg, args.prior_roll_deg]
+    if all(v is None for v in given):
+        return None
+    if any(v is None for v in given):
+        raise StarnavError(
+            "tracking needs all of --prior-ra-deg, --prior-dec-deg, --prior-roll-deg"
+        )
+    if not -90.0 <= args.prior_dec_deg <= 90.0:
+        raise StarnavError(f"--prior-dec-deg must be within ±90, got {args.prior_dec_deg:g}")
+    return attitude_from_radec_roll(*given, args.parity or 1)
+
+
+def solve_options(args: argparse.Namespace) -> dict:
+    """The solver options ``identify`` takes from its command line (one list or many)."""
+    return dict(
+        width=args.width,
+        height=args.height,
+        fov_deg=args.fov_deg,
+        catalog=args.catalog,
+        mag_limit=args.mag_limit,
+        epoch_year=args.epoch,
+        parity=args.parity,
+        sigma_px=args.sigma_px,
+        fit_focal=args.fit_focal,
+        max_false_match_probability=args.max_false_match_probability,
+        algorithm=args.algorithm,
+        algorithm_options=algorithm_options(args),
+    )
+
+
+def _check_fov_search(args: argparse.Namespace, prior: np.ndarray | None) -> None:
+    """The options the FOV search (no --fov-deg) cannot take."""
+    why = (
+        "without it the FOV search picks the catalog depth of each FOV band and fits the "
+        "focal length"
+    )
+    if prior is not None or args.algorithm != DEFAULT_ALGORITHM or args.mag_limit is not None:
+        raise StarnavError(f"--prior-*, --algorithm and --mag-limit need --fov-deg ({why})")
+    if args.algorithm_option:
+        raise StarnavError(f"--algorithm-option needs --fov-deg ({why})")
+
+
+def run(args: argparse.Namespace) -> int:
+    """Identify one star list, or every ``*.csv`` of a directory."""
+    source = Path(args.stars)
+    if source.is_dir():
+        return run_directory(args, source)
+    stars = read_star_csv(args.stars)
+    prior = prior_attitude(args)
+    if args.fov_deg is None:
+        _check_fov_search(args, prior)
+    result = solve_star_list(
+        stars,
+        **solve_options(args),
+        fov_range_deg=tuple(args.fov_range),
+        prior=prior,
+        prior_sigma_deg=args.prior_sigma_deg,
+    )
+    _plot(args, result)
+    s = result.solution
+    if args.json:
+        print_json(result.to_dict(stars.labels, stars.xy))
+    elif s:
+        print_solution(s)
+    else:
+        print(f"not solved: {result.reason} ({result.time_ms:.1f} ms)")
+    return EXIT_OK if s else EXIT_NOT_SOLVED
+
+
+def _plot(args: argparse.Namespace, result: SolveResult) -> None:
+    """--plot: the identified map, or a note on stderr that there is none."""
+    if not args.plot:
+        return
+    s = result.solution
+    if s is None:
+        print(f"starnav identify: not solved, no plot written to {args.plot}", file=sys.stderr)
+        return
+    from starnav.plot import plot_solution
+
+    camera = make_camera(width=args.width, height=args.height, fov_deg=s.fov_deg)
+    plot_solution(s, camera, result.database.catalog, args.plot)
+
+
+def run_directory(args: argparse.Namespace, source: Path) -> int:
+    """Every star list of a directory on all cores: one line (or JSON line) per file."""
+    from tqdm import tqdm
+
+    paths = sorted(source.glob("*.csv"))
+    if not paths:
+        raise StarnavError(f"{args.stars!r} holds no .csv star lists")
+    if args.plot or prior_attitude(args) is not None:
+        raise StarnavError("--plot and --prior-* take one star list, not a directory")
+    if args.fov_deg is None:
+        raise StarnavError("a directory of star lists needs --fov-deg")
+    files = read_star_files(paths)
+    options = solve_options(args)
+    t0 = time.perf_counter()
+    with tqdm(total=len(files.lists), desc="identify", unit="file", file=sys.stderr) as bar:
+        results = solve_star_files(files, workers=args.workers, progress=bar.update, **options)
+    wall = time.perf_counter() - t0
+    for r in results:
+        if args.json:
+            print_json(r.to_dict())
+        else:
+            print(_file_line(r))
+    print(
+        f"{len(paths)} files in {wall:.2f} s ({len(files.lists) / max(wall, 1e-9):.0f} frames/s)",
+        file=sys.stderr,
+    )
+    return max((_exit_status(r) for r in results), default=EXIT_OK)
+
+
+def _file_line(r: FileResult) -> str:
+    s = r.solution
+    if s is None:
+        return f"{r.path}: not solved: {r.reason}"
+    return (
+        f"{r.path}: RA {s.ra_deg:.5f}° Dec {s.dec_deg:+.5f}° roll {s.roll_deg:.4f}° parity "
+        f"{s.parity:+d}, {s.n_matched} stars, {r.time_ms:.1f} ms"
+    )
+
+
+def _exit_status(r: FileResult) -> int:
+    if r.bad_input:
+        return EXIT_BAD_INPUT
+    return EXIT_OK if r.solution is not None else EXIT_NOT_SOLVED

@@ -1,0 +1,105 @@
+"""``starnav locate`` (latitude, longitude and heading from star cameras, gravity and UTC) and
+``starnav locate-study`` (the sensitivity of the fix to tilt and star errors)."""
+
+from __future__ import annotations
+
+import argparse
+from dataclasses import asdict
+
+from starnav.api import DEFAULT_SIGMA_PX
+from starnav.cli.common import (
+    EXIT_NOT_SOLVED,
+    EXIT_OK,
+    Subparsers,
+    add_catalog,
+    check_parent_dir,
+    finite,
+    png_path,
+    positive_int,
+    print_json,
+)
+from starnav.errors import StarnavError
+
+
+def add_parser(subparsers: Subparsers) -> None:
+    """The ``locate`` and ``locate-study`` commands and their options."""
+    p = subparsers.add_parser(
+        "locate", help="latitude, longitude and heading from star cameras, gravity and UTC"
+    )
+    p.add_argument("observation", help="observation JSON (see docs/locate.md)")
+    p.add_argument(
+        "--sigma-px",
+        type=finite,
+        default=DEFAULT_SIGMA_PX,
+        help=f"centroid error, 1 sigma (px; default {DEFAULT_SIGMA_PX:g})",
+    )
+    add_catalog(p)
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(run=run)
+
+    p = subparsers.add_parser(
+        "locate-study", help="sensitivity of the fix to tilt and star errors (Monte Carlo)"
+    )
+    p.add_argument("--trials", type=positive_int, default=50, help="per setting (default 50)")
+    p.add_argument("--fov-deg", type=finite, default=20.0, help="camera FOV (default 20)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--plot", metavar="PNG", type=png_path, help="draw the two curves here")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(run=run_study)
+
+
+def run(args: argparse.Namespace) -> int:
+    """The fix of one observation file (exit 1 when there is none)."""
+    from starnav.navigation import FixError, locate, read_observation
+
+    if not args.sigma_px > 0:
+        raise StarnavError(f"--sigma-px must be positive, got {args.sigma_px:g}")
+    if args.epoch is not None:
+        raise StarnavError("--epoch is taken from the observation's utc for locate")
+    observation = read_observation(args.observation)
+    try:
+        fix = locate(
+            observation, catalog=args.catalog, mag_limit=args.mag_limit, sigma_px=args.sigma_px
+        )
+    except FixError as exc:
+        if args.json:
+            print_json({"solved": False, "reason": str(exc)})
+        else:
+            print(f"no fix: {exc}")
+        return EXIT_NOT_SOLVED
+    if args.json:
+        print_json({"solved": True, "reason": None, **fix.to_dict()})
+        return EXIT_OK
+    print(f"fix: lat {fix.lat_deg:+.6f}°  lon {fix.lon_deg:+.6f}°  heading {fix.azimuth_deg:.4f}°")
+    print(
+        f"  1σ ellipse {fix.ellipse_major_m:.1f} x {fix.ellipse_minor_m:.1f} m (major axis at "
+        f"{fix.ellipse_angle_deg:.0f}° from North), heading 1σ {fix.sigma_azimuth_arcsec:.2f}″, "
+        f"{fix.n_stars} stars, rms {fix.rms_arcsec:.2f}″, {fix.time_ms:.0f} ms"
+    )
+    print("  (stars only: a tilt error of the gravity vector adds about 31 m per arcsecond)")
+    for c in fix.cameras:
+        status = (
+            f"{c.stars_used} of {c.n_points} points identified, boresight RA {c.ra_deg:.3f}° "
+            f"Dec {c.dec_deg:+.3f}°"
+            if c.stars_used
+            else f"not used: {c.reason}"
+        )
+        print(f"  {c.name}: {status}")
+    return EXIT_OK
+
+
+def run_study(args: argparse.Namespace) -> int:
+    """The Monte Carlo sensitivity study: tables (or JSON) and, with --plot, the curves."""
+    from starnav.studies.locate import format_tables, plot_study, run_locate_study
+
+    if not 1.0 <= args.fov_deg <= 60.0:
+        raise StarnavError(f"--fov-deg must be between 1 and 60, got {args.fov_deg:g}")
+    check_parent_dir("--plot", args.plot)
+    tables = run_locate_study(trials=args.trials, fov_deg=args.fov_deg, seed=args.seed)
+    if args.plot:
+        plot_study(tables, args.plot)
+    if args.json:
+        print_json({name: [asdict(r) for r in rows] for name, rows in tables.items()})
+    else:
+        print(format_tables(tables))
+    return EXIT_OK

@@ -1,0 +1,96 @@
+"""``starnav render``: a realistic star image (PSF, noise, hot pixels) of a preset camera."""
+
+from __future__ import annotations
+
+import argparse
+from dataclasses import replace
+
+import numpy as np
+
+from starnav.catalog import load_catalog
+from starnav.cli.common import (
+    EXIT_OK,
+    Subparsers,
+    add_attitude,
+    count,
+    finite,
+    positive_int,
+    print_json,
+)
+from starnav.geometry import attitude_from_radec_roll
+from starnav.render import PRESETS
+from starnav.simulate import draw_radec_roll
+
+SENSOR_NUMBERS = (  # RenderSettings fields with an option each (--psf-sigma-px, ...)
+    "psf_sigma_px",
+    "exposure_s",
+    "zero_point_e_per_s",
+    "background_e",
+    "read_noise_e",
+    "gain_e_per_adu",
+)
+DEFAULT_FAINTEST_MAG = 8.0  # stars drawn when the preset sets no magnitude limit
+
+
+def add_parser(subparsers: Subparsers) -> None:
+    """The ``render`` command and its options."""
+    p = subparsers.add_parser(
+        "render", help="render a realistic star image (PSF, noise, hot pixels)"
+    )
+    p.add_argument("-o", "--output", required=True, help="image file: .png, .tif, .tiff, .fits")
+    p.add_argument(
+        "--preset",
+        choices=sorted(PRESETS),
+        default="seed-1024",
+        help="camera and sensor (default %(default)s); the options below override it",
+    )
+    p.add_argument("--fov-deg", type=finite, help="horizontal FOV")
+    p.add_argument("--width", type=positive_int, help="image width (px)")
+    p.add_argument("--height", type=positive_int, help="image height (px; default: width)")
+    p.add_argument("--k1", type=finite, default=0.0, help="radial distortion k1")
+    p.add_argument("--k2", type=finite, default=0.0, help="radial distortion k2")
+    add_attitude(p)
+    for name in SENSOR_NUMBERS:
+        p.add_argument(f"--{name.replace('_', '-')}", type=finite, help=f"sensor: {name}")
+    p.add_argument("--bit-depth", type=int, choices=(8, 16), help="8 or 16 bit output")
+    p.add_argument("--hot-pixels", type=count, help="hot pixels at random places")
+    p.add_argument("--mag-limit", type=finite, help="faintest Hipparcos star drawn")
+    p.add_argument("--seed", type=count, help="random seed")
+    p.add_argument("--truth", metavar="CSV", help="write the drawn stars (x, y, id, mag) here")
+    p.add_argument("--json", action="store_true", help="print the truth as one JSON object")
+    p.set_defaults(run=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Render the image (and its truth CSV); print the truth."""
+    from starnav.render import adjust_camera, preset, render_frame, write_image, write_truth_csv
+
+    camera, settings = preset(args.preset)
+    camera = adjust_camera(
+        camera, fov_deg=args.fov_deg, width=args.width, height=args.height, k1=args.k1, k2=args.k2
+    )
+    changes = {
+        k: getattr(args, k)
+        for k in (*SENSOR_NUMBERS, "bit_depth", "hot_pixels", "mag_limit", "seed")
+        if getattr(args, k) is not None
+    }
+    settings = replace(settings, **changes)
+    rng = np.random.default_rng(args.seed)
+    R = attitude_from_radec_roll(
+        *draw_radec_roll(rng, args.ra_deg, args.dec_deg, args.roll_deg), args.parity
+    )
+    faintest = DEFAULT_FAINTEST_MAG if settings.mag_limit is None else settings.mag_limit
+    frame = render_frame(load_catalog(None, mag_limit=faintest), camera, R, settings)
+    write_image(args.output, frame.image)
+    if args.truth:
+        write_truth_csv(args.truth, frame)
+    truth = frame.to_dict()
+    if args.json:
+        print_json({"image": args.output, **truth})
+    else:
+        print(
+            f"wrote {args.output}: {camera.width} x {camera.height} px, FOV {camera.fov_deg:.3f}°, "
+            f"{truth['n_stars']} stars; RA {truth['ra_deg']:.5f}° Dec {truth['dec_deg']:+.5f}° "
+            f"roll {truth['roll_deg']:.4f}°"
+        )
+    return EXIT_OK
