@@ -4,8 +4,9 @@ command line prints (``SOLVE_KEYS``, ``solve_dict``)."""
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, fields
 
 import numpy as np
 
@@ -50,6 +51,26 @@ class StarMatch:
 
 
 @dataclass(frozen=True, eq=False)
+class StarTable:
+    """The input points of a solution as arrays: ``labels``, ``xy`` (n, 2, px), the
+    ``catalog_id`` of each (-1: none) and its residual length (px, NaN: unmatched)."""
+
+    labels: tuple[str, ...]
+    xy: np.ndarray
+    catalog_id: np.ndarray
+    residual_px: np.ndarray
+
+    def records(self) -> tuple[StarMatch, ...]:
+        """One ``StarMatch`` per point."""
+        ids = [None if i < 0 else i for i in self.catalog_id.tolist()]
+        res = [None if r != r else r for r in self.residual_px.tolist()]  # NaN -> None
+        return tuple(
+            StarMatch(label, x, y, i, r)
+            for label, (x, y), i, r in zip(self.labels, self.xy.tolist(), ids, res, strict=True)
+        )
+
+
+@dataclass(frozen=True, eq=False)
 class Solution:
     """A verified attitude.
 
@@ -60,7 +81,8 @@ class Solution:
     ``sigma_*_arcsec``: 1-sigma from the fit (``sigma_focal_px`` 0 unless the focal length
     was fitted); ``k1``, ``k2``: radial distortion of the camera (fitted or given, see
     ``starnav.camera``); ``time_ms``: identification and fit, without
-    loading the catalog or database.
+    loading the catalog or database; ``star_table``: every input point with its id and
+    residual, as arrays (``stars``: the same as ``StarMatch`` records, made on first use).
     """
 
     ra_deg: float
@@ -76,16 +98,22 @@ class Solution:
     false_match_probability: float
     time_ms: float
     R_cam_from_icrs: np.ndarray
-    stars: tuple[StarMatch, ...]
+    star_table: StarTable
     n_matched: int
     algorithm: str
     catalog: str
     k1: float = 0.0
     k2: float = 0.0
 
+    @functools.cached_property
+    def stars(self) -> tuple[StarMatch, ...]:
+        """Every input point: label, position, catalog id (None: none), residual (px)."""
+        return self.star_table.records()
+
     def to_dict(self) -> dict:
         """JSON-ready dict of every field (the matrix as nested lists)."""
-        out = {k: v for k, v in self.__dict__.items() if k not in ("stars", "R_cam_from_icrs")}
+        skip = ("star_table", "R_cam_from_icrs")
+        out = {f.name: getattr(self, f.name) for f in fields(self) if f.name not in skip}
         out["solved"] = True
         out["R_cam_from_icrs"] = self.R_cam_from_icrs.tolist()
         out["stars"] = [asdict(s) for s in self.stars]

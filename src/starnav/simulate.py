@@ -75,7 +75,7 @@ class SimulatedFrame:
         id other than their own) and false stars left unidentified."""
         if solution is None:
             return None
-        ids = np.array([-1 if m.catalog_id is None else m.catalog_id for m in solution.stars])
+        ids = solution.star_table.catalog_id
         boresight_deg, roll_deg = attitude_difference_deg(
             solution.R_cam_from_icrs, self.R_cam_from_icrs
         )

@@ -203,7 +203,7 @@ def solve_frame(config: EvalConfig, boresights: Boresights, index: int) -> Frame
             reason=result.reason,
         )
     boresight_deg, roll_deg = attitude_difference_deg(s.R_cam_from_icrs, frame.R_cam_from_icrs)
-    ids = np.array([-1 if m.catalog_id is None else m.catalog_id for m in s.stars])
+    ids = s.star_table.catalog_id
     within_tolerance = boresight_deg < CORRECT_BORESIGHT_DEG and roll_deg < CORRECT_ROLL_DEG
     # NaN sigmas (undetermined) never vouch for an answer
     within_sigmas = (

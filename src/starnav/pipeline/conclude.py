@@ -17,7 +17,7 @@ from starnav.catalog import Catalog
 from starnav.geometry import radec_roll_from_attitude
 from starnav.identify.base import Identification, MatchSettings
 from starnav.identify.database import PairDatabase
-from starnav.results import Solution, StarMatch
+from starnav.results import Solution, StarTable
 from starnav.starlist import StarList
 
 
@@ -81,17 +81,11 @@ def solution_of(
     """The ``Solution`` of matched ``obs`` rows of ``stars`` and ``cat_rows`` of ``cat`` with
     the ``Refinement`` ``fit`` (its camera, attitude and residuals); ``time_ms`` is set by the
     caller."""
-    residual = np.sqrt(np.sum(fit.residuals_px**2, axis=1)).tolist()
-    matched_id = cat.ids[cat_rows].tolist()
-    catalog_id: list[int | None] = [None] * len(stars.xy)
-    residual_px: list[float | None] = [None] * len(stars.xy)
-    for k, n in enumerate(obs.tolist()):
-        catalog_id[n], residual_px[n] = matched_id[k], residual[k]
-    xy = stars.xy.tolist()
-    star_matches = tuple(
-        StarMatch(stars.labels[n], xy[n][0], xy[n][1], catalog_id[n], residual_px[n])
-        for n in range(len(xy))
-    )
+    catalog_id = np.full(len(stars.xy), -1, dtype=np.int64)
+    residual_px = np.full(len(stars.xy), np.nan)
+    catalog_id[obs] = cat.ids[cat_rows]
+    residual_px[obs] = np.sqrt(np.sum(fit.residuals_px**2, axis=1))
+    table = StarTable(stars.labels, stars.xy, catalog_id, residual_px)
     R = fit.R_cam_from_icrs
     ra, dec, roll, par = radec_roll_from_attitude(R)
     camera = fit.camera
@@ -109,7 +103,7 @@ def solution_of(
         false_match_probability=float(p_false),
         time_ms=0.0,
         R_cam_from_icrs=R,
-        stars=star_matches,
+        star_table=table,
         n_matched=len(obs),
         algorithm="",
         catalog=cat.name,
