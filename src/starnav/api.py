@@ -6,10 +6,7 @@ loads the catalog and keeps the prepared solvers of a process.
 
 from __future__ import annotations
 
-import multiprocessing
-import os
 from collections.abc import Callable, Mapping, Sequence
-from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -26,6 +23,7 @@ from starnav.pipeline import (
     SolveSettings,
     get_database,
 )
+from starnav.pipeline.batch import solve_many
 from starnav.pipeline.solver import check_prior
 from starnav.pointing import Pointing, best_triple, three_star
 from starnav.results import Solution, SolveResult, StarMatch
@@ -41,6 +39,7 @@ __all__ = [
     "best_three_star",
     "get_database",
     "make_camera",
+    "prepare_solver",
     "solve",
     "solve_batch",
     "solve_verbose",
@@ -116,6 +115,48 @@ def solve_verbose(
     stars = check_star_list(
         xy, width=camera.width, height=camera.height, brightness=brightness, labels=labels
     )
+    R_prior = None
+    if prior is not None:
+        R_prior = check_prior(
+            prior.R_cam_from_icrs if isinstance(prior, Solution) else prior, prior_sigma_deg
+        )
+    solver = prepare_solver(
+        width=width,
+        height=height,
+        fov_deg=fov_deg,
+        catalog=catalog,
+        mag_limit=mag_limit,
+        epoch_year=epoch_year,
+        parity=parity,
+        sigma_px=sigma_px,
+        fit_focal=fit_focal,
+        max_false_match_probability=max_false_match_probability,
+        min_matched_fraction=min_matched_fraction,
+        algorithm=algorithm,
+        algorithm_options=algorithm_options,
+    )
+    return solver.solve(stars, prior=R_prior, prior_sigma_deg=prior_sigma_deg)
+
+
+def prepare_solver(
+    *,
+    width: float,
+    height: float | None = None,
+    fov_deg: float,
+    catalog: Catalog | str | Path | None = None,
+    mag_limit: float | None = None,
+    epoch_year: float | None = None,
+    parity: int | None = None,
+    sigma_px: float = DEFAULT_SIGMA_PX,
+    fit_focal: bool = False,
+    max_false_match_probability: float = DEFAULT_MAX_FALSE_MATCH_PROBABILITY,
+    min_matched_fraction: float = DEFAULT_MIN_MATCHED_FRACTION,
+    algorithm: str = DEFAULT_ALGORITHM,
+    algorithm_options: Mapping[str, object] | None = None,
+) -> Solver:
+    """The prepared ``Solver`` of ``solve_verbose``'s options (checked, one-line errors),
+    kept per process so repeated solves do not prepare it again."""
+    camera = make_camera(width=width, height=height, fov_deg=fov_deg)
     settings = SolveSettings(
         sigma_px=sigma_px,
         parity=parity,
@@ -123,14 +164,8 @@ def solve_verbose(
         max_false_match_probability=max_false_match_probability,
         min_matched_fraction=min_matched_fraction,
     )
-    R_prior = None
-    if prior is not None:
-        R_prior = check_prior(
-            prior.R_cam_from_icrs if isinstance(prior, Solution) else prior, prior_sigma_deg
-        )
     cat = load_catalog(catalog, mag_limit=mag_limit, epoch_year=epoch_year)
-    solver = solver_for(camera, cat, settings, algorithm, algorithm_options)
-    return solver.solve(stars, prior=R_prior, prior_sigma_deg=prior_sigma_deg)
+    return solver_for(camera, cat, settings, algorithm, algorithm_options)
 
 
 def solve(
@@ -209,15 +244,6 @@ def best_three_star(
     return pointing, tuple(matched[k].label for k in triple)
 
 
-def _solve_one(job: tuple[np.ndarray, np.ndarray | None, dict]) -> tuple:
-    xy, brightness, options = job
-    try:
-        r = solve_verbose(xy, brightness=brightness, **options)
-    except StarnavError as exc:
-        return None, f"error: {exc}", 0.0, 0
-    return r.solution, r.reason, r.time_ms, r.hypotheses
-
-
 def solve_batch(
     frames: Sequence[np.ndarray],
     *,
@@ -233,36 +259,21 @@ def solve_batch(
     input gets None and a reason starting with "error:" instead of stopping the batch.
     ``progress`` is called with the number of frames finished.
     """
-    if isinstance(options.get("catalog"), str | Path) or options.get("catalog") is None:
-        # load once here, so the workers inherit it (and the database) instead of each loading
-        options["catalog"] = load_catalog(
-            options.get("catalog"),
-            mag_limit=options.pop("mag_limit", None),
-            epoch_year=options.pop("epoch_year", None),
+    prior = options.pop("prior", None)
+    prior_sigma_deg = options.pop("prior_sigma_deg", 1.0)
+    R_prior = None
+    if prior is not None:
+        R_prior = check_prior(
+            prior.R_cam_from_icrs if isinstance(prior, Solution) else prior, prior_sigma_deg
         )
-    camera = make_camera(
-        width=options["width"], height=options.get("height"), fov_deg=options["fov_deg"]
-    )
-    get_database(options["catalog"], camera)
+    solver = prepare_solver(**options)
     lights = brightness if brightness is not None else [None] * len(frames)
-    jobs = [(np.asarray(xy, dtype=float), b, options) for xy, b in zip(frames, lights, strict=True)]
-    workers = workers or os.cpu_count() or 1
-    out = []
-    if workers == 1 or len(jobs) < 2:
-        for job in jobs:
-            out.append(_solve_one(job))
-            if progress:
-                progress(1)
-    else:
-        # the first frame here: it loads the compiled code, which forked workers then share
-        out.append(_solve_one(jobs[0]))
-        if progress:
-            progress(1)
-        jobs = jobs[1:]
-        context = multiprocessing.get_context("fork" if os.name == "posix" else "spawn")
-        with ProcessPoolExecutor(max_workers=workers, mp_context=context) as pool:
-            for result in pool.map(_solve_one, jobs, chunksize=max(1, len(jobs) // (8 * workers))):
-                out.append(result)
-                if progress:
-                    progress(1)
-    return [(solution, reason, ms) for solution, reason, ms, _ in out]
+    jobs = [(np.asarray(xy, dtype=float), b) for xy, b in zip(frames, lights, strict=True)]
+    return solve_many(
+        solver,
+        jobs,
+        workers=workers,
+        progress=progress,
+        prior=R_prior,
+        prior_sigma_deg=prior_sigma_deg,
+    )

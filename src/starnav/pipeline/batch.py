@@ -1,0 +1,80 @@
+"""Many frames through one prepared ``Solver``, here or on a pool of processes.
+
+Workers are forked after the solver is prepared and its machine code loaded (the parent solves
+the first frame), so they share its catalog, database and code instead of loading them again.
+A frame with bad input gets its one-line error as the reason; it never stops the batch.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import os
+from collections.abc import Callable, Sequence
+from concurrent.futures import ProcessPoolExecutor
+
+import numpy as np
+
+from starnav.errors import StarnavError
+from starnav.pipeline.solver import Solver
+from starnav.results import Solution
+from starnav.starlist import check_star_list
+
+Frame = tuple[np.ndarray, np.ndarray | None]  # centroids (n, 2, px) and brightness or None
+_WORKER: dict[str, object] = {}  # the solver and prior of a worker process
+
+
+def _init(solver: Solver, prior: np.ndarray | None, prior_sigma_deg: float) -> None:
+    _WORKER.update(solver=solver, prior=prior, prior_sigma_deg=prior_sigma_deg)
+
+
+def _solve_one(frame: Frame) -> tuple[Solution | None, str, float]:
+    solver: Solver = _WORKER["solver"]  # type: ignore[assignment]
+    xy, brightness = frame
+    camera = solver.camera
+    try:
+        stars = check_star_list(xy, width=camera.width, height=camera.height, brightness=brightness)
+    except StarnavError as exc:
+        return None, f"error: {exc}", 0.0
+    r = solver.solve(stars, prior=_WORKER["prior"], prior_sigma_deg=_WORKER["prior_sigma_deg"])
+    return r.solution, r.reason, r.time_ms
+
+
+def solve_many(
+    solver: Solver,
+    frames: Sequence[Frame],
+    *,
+    workers: int | None = None,
+    progress: Callable[[int], None] | None = None,
+    prior: np.ndarray | None = None,
+    prior_sigma_deg: float = 1.0,
+) -> list[tuple[Solution | None, str, float]]:
+    """``(solution or None, reason, time_ms)`` of each frame, in order, on ``workers``
+    processes (default: all cores; 1: here); ``progress`` is called with the number of frames
+    finished."""
+    _init(solver, prior, prior_sigma_deg)
+    workers = workers or os.cpu_count() or 1
+    out = []
+    todo = list(frames)
+    if workers == 1 or len(todo) < 2:
+        for frame in todo:
+            out.append(_solve_one(frame))
+            if progress:
+                progress(1)
+        return out
+    out.append(_solve_one(todo[0]))  # loads the machine code, which forked workers share
+    if progress:
+        progress(1)
+    todo = todo[1:]
+    context = multiprocessing.get_context("fork" if os.name == "posix" else "spawn")
+    with ProcessPoolExecutor(
+        max_workers=workers,
+        mp_context=context,
+        initializer=_init,
+        initargs=(solver, prior, prior_sigma_deg),
+    ) as pool:
+        chunk = max(1, len(todo) // (8 * workers))
+        for result in pool.map(_solve_one, todo, chunksize=chunk):
+            out.append(result)
+            if progress:
+                progress(1)
+    return out
