@@ -121,6 +121,19 @@ def sees_all(model, p, width, height, cos_limit, c):
 
 
 @njit(cache=True)
+def project_all(model, p, c):
+    """Pixels (n, 2) of directions (n, 3), with the Jacobians in the direction (n, 2, 3) and
+    in the intrinsics (n, 2, ``N_INTRINSIC``)."""
+    n = len(c)
+    xy = np.empty((n, 2))
+    J_c = np.empty((n, 2, 3))
+    J_p = np.empty((n, 2, N_INTRINSIC))
+    for s in range(n):
+        xy[s, 0], xy[s, 1] = project(model, p, c[s, 0], c[s, 1], c[s, 2], J_c[s], J_p[s])
+    return xy, J_c, J_p
+
+
+@njit(cache=True)
 def bearings_to_pixels(model, p, c):
     """Pixels (n, 2) of camera-frame directions (n, 3)."""
     out = np.empty((len(c), 2))

@@ -126,6 +126,12 @@ class Camera:
         c = np.ascontiguousarray(np.asarray(c, dtype=np.float64).reshape(-1, 3))
         return kernels().bearings_to_pixels(self.model_code, self.params, c)
 
+    def project_with_jacobian(self, c: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Pixels (n, 2) of camera-frame vectors (n, 3), d(pixel)/d(direction) (n, 2, 3) and
+        d(pixel)/d(log focal_px, k1, k2) (n, 2, 3): what the attitude fit uses."""
+        c = np.ascontiguousarray(np.asarray(c, dtype=np.float64).reshape(-1, 3))
+        return kernels().project_all(self.model_code, self.params, c)
+
     def sees(self, c: np.ndarray) -> np.ndarray:
         """Boolean mask of camera-frame directions (n, 3) that land inside the image."""
         c = np.ascontiguousarray(np.asarray(c, dtype=np.float64).reshape(-1, 3))
