@@ -146,26 +146,21 @@ def prepare_solver(
     catalog: Catalog | str | Path | None = None,
     mag_limit: float | None = None,
     epoch_year: float | None = None,
-    parity: int | None = None,
-    sigma_px: float = DEFAULT_SIGMA_PX,
-    fit_focal: bool = False,
-    max_false_match_probability: float = DEFAULT_MAX_FALSE_MATCH_PROBABILITY,
-    min_matched_fraction: float = DEFAULT_MIN_MATCHED_FRACTION,
     algorithm: str = DEFAULT_ALGORITHM,
     algorithm_options: Mapping[str, object] | None = None,
+    **settings,
 ) -> Solver:
-    """The prepared ``Solver`` of ``solve_verbose``'s options (checked, one-line errors),
-    kept per process so repeated solves do not prepare it again."""
+    """The prepared ``Solver`` of ``solve_verbose``'s options (checked, one-line errors):
+    the camera, catalog and algorithm, and ``settings``, the fields of ``SolveSettings``
+    (``sigma_px``, ``parity``, ``fit_focal``, ...). Kept per process, so repeated solves do
+    not prepare it again."""
     camera = make_camera(width=width, height=height, fov_deg=fov_deg)
-    settings = SolveSettings(
-        sigma_px=sigma_px,
-        parity=parity,
-        fit_focal=fit_focal,
-        max_false_match_probability=max_false_match_probability,
-        min_matched_fraction=min_matched_fraction,
-    )
+    try:
+        solve_settings = SolveSettings(**settings)
+    except TypeError as exc:  # an option solve does not have
+        raise StarnavError(f"unknown solve option: {exc}") from None
     cat = load_catalog(catalog, mag_limit=mag_limit, epoch_year=epoch_year)
-    return solver_for(camera, cat, settings, algorithm, algorithm_options)
+    return solver_for(camera, cat, solve_settings, algorithm, algorithm_options)
 
 
 def solve(
