@@ -27,7 +27,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from starnav.camera import focal_px_from_fov
+from starnav.camera import Camera, focal_px_from_fov
 from starnav.catalog import Catalog
 from starnav.identify.base import Identification, MatchSettings
 from starnav.identify.database import PairDatabase
@@ -88,19 +88,24 @@ class FovMatch:
 
 
 def pinhole_bearings(xy: np.ndarray, cx: float, cy: float, focal: np.ndarray) -> np.ndarray:
-    """Unit bearings of pixel positions ``xy`` (..., 2) through a distortion-free camera with
+    """Unit bearings of pixel positions ``xy`` (..., 2) through a distortion-free pinhole with
     principal point (cx, cy) and focal length(s) ``focal`` (px, broadcast against ``xy``'s
-    leading dimensions)."""
+    leading dimensions; one focal length along the last of them), by the camera model's own
+    projection (``camera.kernels``)."""
+    from starnav.camera import kernels  # numba: loaded on first use
+
     shape = np.broadcast_shapes(xy.shape[:-1], np.shape(focal))
-    b = np.stack(
-        [
-            np.broadcast_to(xy[..., 0] - cx, shape),
-            np.broadcast_to(xy[..., 1] - cy, shape),
-            np.broadcast_to(focal, shape),
-        ],
-        axis=-1,
+    rows = int(np.prod(shape[:-1])) if len(shape) > 1 else 1
+    pixels = np.ascontiguousarray(np.broadcast_to(xy, (*shape, 2)), dtype=np.float64)
+    focals = np.ascontiguousarray(np.broadcast_to(focal, shape), dtype=np.float64)
+    params = np.array([1.0, cx, cy, 0.0, 0.0])  # [focal_px, cx, cy, k1, k2], focal per row
+    out = kernels.bearings_at_focals(
+        Camera.model_code,
+        params,
+        pixels.reshape(rows, -1, 2),
+        focals.reshape(rows, -1)[:, 0],
     )
-    return b / np.linalg.norm(b, axis=-1, keepdims=True)
+    return out.reshape(*shape, 3)
 
 
 def fit_pattern_focal(

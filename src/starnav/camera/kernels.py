@@ -121,6 +121,20 @@ def sees_all(model, p, width, height, cos_limit, c):
 
 
 @njit(cache=True)
+def bearings_at_focals(model, p, xy, focal):
+    """Unit directions (m, k, 3) of pixels ``xy`` (m, k, 2), row i seen with the focal length
+    ``focal[i]`` (px) and the rest of ``p`` (the FOV search's trial scales)."""
+    m, k = xy.shape[0], xy.shape[1]
+    out = np.empty((m, k, 3))
+    q = p.copy()
+    for i in range(m):
+        q[0] = focal[i]
+        for j in range(k):
+            unproject(model, q, xy[i, j, 0], xy[i, j, 1], out[i, j])
+    return out
+
+
+@njit(cache=True)
 def project_all(model, p, c):
     """Pixels (n, 2) of directions (n, 3), with the Jacobians in the direction (n, 2, 3) and
     in the intrinsics (n, 2, ``N_INTRINSIC``)."""
