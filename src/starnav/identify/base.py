@@ -11,6 +11,15 @@ import numpy as np
 
 from starnav.identify.database import PairDatabase
 
+# a measured angle carries two centroid errors: PAIR_TOL_SIGMAS sigma of their sum, at least
+# MIN_PAIR_TOL_PX
+PAIR_TOL_SIGMAS = 3.0
+MIN_PAIR_TOL_PX = 1.0
+# radial distance of a 2-D Gaussian error: beyond 3.5 sigma in 0.2 % of cases; the agreement
+# is also scored within 1 and 2 sigma, each radius at least its floor (px)
+MATCH_RADII_SIGMAS = (1.0, 2.0, 3.5)
+MIN_MATCH_RADII_PX = (0.5, 0.5, 1.0)
+
 
 @dataclass(frozen=True)
 class MatchSettings:
@@ -47,14 +56,14 @@ class MatchSettings:
         """Tolerances for centroids good to ``sigma_px`` (1-sigma, px) seen with a focal
         length of ``focal_px``."""
         return cls(
-            # a measured angle carries two centroid errors: 3 sigma of their sum, at least 1 px
-            pair_tol_rad=max(3.0 * np.sqrt(2.0) * sigma_px, 1.0) / focal_px,
-            # radial distance of a 2-D Gaussian error: beyond 3.5 sigma in 0.2 % of cases; the
-            # agreement is also scored within 1 and 2 sigma (at least 0.5 px)
+            pair_tol_rad=max(PAIR_TOL_SIGMAS * np.sqrt(2.0) * sigma_px, MIN_PAIR_TOL_PX) / focal_px,
             match_radii_rad=tuple(
                 r / focal_px
                 for r in sorted(
-                    {max(sigma_px, 0.5), max(2.0 * sigma_px, 0.5), max(3.5 * sigma_px, 1.0)}
+                    {
+                        max(k * sigma_px, floor)
+                        for k, floor in zip(MATCH_RADII_SIGMAS, MIN_MATCH_RADII_PX, strict=True)
+                    }
                 )
             ),
             max_false_match_probability=max_false_match_probability,

@@ -27,6 +27,7 @@ from starnav.attitude.rotation import det3, wahba
 REJECTED, FOUND, AMBIGUOUS, NOT_FOUND = 0, 1, 2, 3
 FLAT_FACTOR = 3.0  # a triangle is too flat to give its orientation below 3 tol x its longest side
 GATE_SIGMAS = 3.0  # a gated catalog star's radius grows by this many sigma of its position
+PRIOR_SIGMAS = 3.0  # tracking allows the catalog stars within the field plus this many sigma
 _NO_EDGE = 1e6  # cost of a pair that is not within the radius (chord^2 is at most 4)
 
 Pairs = namedtuple("Pairs", "obs cat dist n_cone field_area")
@@ -540,9 +541,9 @@ def triangle_search(bearings, triangles, pair_a, pair_b, pair_angle, max_angle, 
 
 @njit(cache=True)
 def prior_mask(bearings, R_prior, match_radius, sigma, sky):
-    """The catalog stars a prior attitude allows: within the field plus 3 ``sigma`` (rad) of
-    its boresight (a mask over the catalog)."""
-    radius = field_radius(bearings, match_radius) + 3.0 * sigma
+    """The catalog stars a prior attitude allows: within the field plus ``PRIOR_SIGMAS``
+    ``sigma`` (rad) of its boresight (a mask over the catalog)."""
+    radius = field_radius(bearings, match_radius) + PRIOR_SIGMAS * sigma
     allowed = np.zeros(len(sky[0]), dtype=np.bool_)
     everything = np.ones(len(sky[0]), dtype=np.bool_)
     work = np.empty(len(sky[0]), dtype=np.int64)
