@@ -146,7 +146,9 @@ def test_database_nbytes_counts_table_catalog_and_tree(database, table):
 def test_catalog_nbytes_counts_each_array_once(database):
     cat, tree = database.catalog, database.tree
     arrays = cat.ids.nbytes + cat.ra_deg.nbytes + cat.dec_deg.nbytes + cat.mag.nbytes
-    held = arrays + cat.vectors.nbytes + tree.indices.nbytes + 72 * tree.size
+    # the grid: a start per 1° cell and a row per star, 4 bytes each
+    grid = 4 * (180 * 360 + 1) + 4 * len(cat)
+    held = arrays + cat.vectors.nbytes + tree.indices.nbytes + 72 * tree.size + grid
     assert np.shares_memory(tree.data, cat.vectors)  # scipy keeps the vectors: no copy
     assert p4.catalog_nbytes(database) == held
     # a tree over a copy of the vectors holds them twice

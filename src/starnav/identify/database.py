@@ -64,11 +64,17 @@ class PairDatabase:
 
     @property
     def verification_nbytes(self) -> int:
-        """Bytes of what every verification searches: catalog vectors and their KD-tree (its
-        copy of the vectors counted only when it is one)."""
+        """Bytes of what every verification searches: catalog vectors, their KD-tree (its
+        copy of the vectors counted only when it is one) and the RA / Dec grid's arrays."""
         shared = np.shares_memory(self.tree.data, self.catalog.vectors)
         data = 0 if shared else self.tree.data.nbytes
-        return int(self.catalog.vectors.nbytes + data + self.tree.indices.nbytes)
+        return int(self.catalog.vectors.nbytes + data + self.tree.indices.nbytes + self.grid_nbytes)
+
+    @property
+    def grid_nbytes(self) -> int:
+        """Bytes of the RA / Dec grid's own arrays (its vectors are the catalog's)."""
+        _, start, rows, *_ = self.sky
+        return int(start.nbytes + rows.nbytes)
 
     @functools.cached_property
     def sky(self) -> tuple:
@@ -113,8 +119,8 @@ def sky_grid(vectors: np.ndarray, step_deg: float = GRID_STEP_DEG) -> tuple:
     i = np.clip(np.floor((dec + 0.5 * np.pi) / step).astype(np.int64), 0, n_dec - 1)
     j = np.clip(np.floor(ra / step).astype(np.int64), 0, n_ra - 1)
     cell = i * n_ra + j
-    rows = np.argsort(cell, kind="stable").astype(np.int64)
-    start = np.searchsorted(cell[rows], np.arange(n_dec * n_ra + 1)).astype(np.int64)
+    rows = np.argsort(cell, kind="stable").astype(np.int32)
+    start = np.searchsorted(cell[rows], np.arange(n_dec * n_ra + 1)).astype(np.int32)
     return (vectors, start, rows, n_dec, n_ra, step)
 
 

@@ -158,13 +158,17 @@ _KDTREE_NODE_BYTES = 72  # scipy's ckdtreenode: nine 8-byte fields
 
 def catalog_nbytes(database: PairDatabase) -> int:
     """Bytes of what verification searches, each array once: the catalog's arrays (ids,
-    positions, magnitudes, unit vectors) and its KD-tree (indices and nodes; the tree's data
-    is the unit vectors themselves unless scipy had to copy them)."""
+    positions, magnitudes, unit vectors), its KD-tree (indices and nodes; the tree's data
+    is the unit vectors themselves unless scipy had to copy them) and its RA / Dec grid."""
     catalog, tree = database.catalog, database.tree
     arrays = (catalog.ids, catalog.ra_deg, catalog.dec_deg, catalog.mag, catalog.vectors)
     data = 0 if np.shares_memory(tree.data, catalog.vectors) else tree.data.nbytes
     return int(
-        sum(a.nbytes for a in arrays) + data + tree.indices.nbytes + tree.size * _KDTREE_NODE_BYTES
+        sum(a.nbytes for a in arrays)
+        + data
+        + tree.indices.nbytes
+        + tree.size * _KDTREE_NODE_BYTES
+        + database.grid_nbytes
     )
 
 
