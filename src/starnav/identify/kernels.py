@@ -29,6 +29,7 @@ FLAT_FACTOR = 3.0  # a triangle is too flat to give its orientation below 3 tol 
 GATE_SIGMAS = 3.0  # a gated catalog star's radius grows by this many sigma of its position
 PRIOR_SIGMAS = 3.0  # tracking allows the catalog stars within the field plus this many sigma
 _NO_EDGE = 1e6  # cost of a pair that is not within the radius (chord^2 is at most 4)
+SMALL_GROUP = 8  # contested groups of up to this many pairs: every subset tried (2^8)
 
 Pairs = namedtuple("Pairs", "obs cat dist n_cone field_area")
 Tested = namedtuple("Tested", "status obs cat R p")
@@ -213,11 +214,39 @@ def assign(cost):
 
 
 @njit(cache=True)
+def _resolve_small(members, e_b, e_m, e_d2, chosen):
+    """``_resolve_group`` of a group of at most ``SMALL_GROUP`` pairs: every subset of
+    pairs tried (no point or star twice; most pairs, then least total squared distance)."""
+    size = len(members)
+    best_mask, best_n, best_cost = 0, -1, np.inf
+    for mask in range(1, 1 << size):
+        n_pairs, cost, ok = 0, 0.0, True
+        for x in range(size):
+            if not (mask >> x) & 1:
+                continue
+            for y in range(x):
+                if (mask >> y) & 1 and (
+                    e_b[members[x]] == e_b[members[y]] or e_m[members[x]] == e_m[members[y]]
+                ):
+                    ok = False
+            n_pairs += 1
+            cost += e_d2[members[x]]
+        if ok and (n_pairs > best_n or (n_pairs == best_n and cost < best_cost)):
+            best_mask, best_n, best_cost = mask, n_pairs, cost
+    for x in range(size):
+        chosen[members[x]] = (best_mask >> x) & 1 == 1
+
+
+@njit(cache=True)
 def _resolve_group(members, e_b, e_m, e_d2, chosen):
     """One-to-one pairing of a group of candidate pairs linked through shared points or
-    stars: most pairs, then least total squared distance (a linear assignment in which a
-    pair that is not a candidate costs more than any that is)."""
+    stars: most pairs, then least total squared distance. Small groups by trying every
+    subset; larger ones as a linear assignment in which a pair that is not a candidate costs
+    more than any that is."""
     size = len(members)
+    if size <= SMALL_GROUP:
+        _resolve_small(members, e_b, e_m, e_d2, chosen)
+        return
     pts = np.unique(e_b[members])
     sts = np.unique(e_m[members])
     transpose = len(pts) > len(sts)
