@@ -65,7 +65,7 @@ def main() -> None:
             "|---|---|---|---|---|",
             *rows,
             "",
-            f"The compiled code was loaded before timing ({load_s:.1f} s); forked workers "
+            f"The machine code was loaded before timing ({load_s:.1f} s); forked workers "
             f"share it. `python benchmarks/batch.py --frames {args.frames}`",
         ]
     )

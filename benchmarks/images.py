@@ -96,7 +96,7 @@ CHECK_BORESIGHT_ARCSEC = 10.0
 MATCH_PX = 1.0  # a centroid this close to a true star is that star (for the offset check)
 ISOLATED_PX = 6.0  # true stars with a neighbour closer than this are left out of that check
 STARNAV = Peer("starnav", "images.py", (f"starnav=={starnav.__version__}",))
-TARGETS = {  # issue 6, point 8: starnav with the FOV unknown
+TARGETS = {  # the targets for images, starnav with the FOV unknown
     "solved %": (">=", 99.0),
     "boresight median ″": ("<=", 5.0),
     "FOV error max %": ("<=", 0.1),
@@ -520,7 +520,7 @@ def write_doc(args, truths, rows, answers, checks, installs, databases, core, t_
         "answers that are not wrong (roll: rotation about the boresight); FOV error relative to "
         "the true horizontal FOV. tetra3rs needs an FOV estimate, so it has no FOV-unknown row.",
         "",
-        "starnav with the FOV unknown against the targets of issue 6:",
+        "starnav with the FOV unknown against the targets for images:",
         "",
         *target_lines(unknown),
         "",

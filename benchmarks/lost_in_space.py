@@ -6,7 +6,7 @@ Hp <= 6. Scenarios: "clean" (0.1 px centroid noise) and "noisy" (0.5 px, 2 false
 A solution is correct when its boresight is within 0.05° and its roll
 within 0.5° of the truth (with 0.5 px noise a perfect solver's roll error is ~0.1° at p95),
 wrong otherwise; "none" when starnav refuses. Time is ``Solution.time_ms``/``SolveResult``:
-identification and attitude fit, catalog, database and compiled code already loaded.
+identification and attitude fit, catalog, database and machine code already loaded.
 
     python benchmarks/lost_in_space.py --frames 1000 --out docs/benchmark_lost_in_space.md
 """
@@ -56,7 +56,7 @@ def machine() -> str:
 
 def warm_up(catalog, camera) -> float:
     """Seconds the first solves of a process take (lost in space and tracking, on one
-    simulated frame): they load the compiled code, or compile it the first time after
+    simulated frame): they load the machine code, or compile it the first time after
     installing. Benchmarks call this before timing anything."""
     t0 = time.perf_counter()
     frame = simulate_frame(catalog, camera, ra_deg=10.0, dec_deg=20.0, roll_deg=30.0)

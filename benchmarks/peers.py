@@ -274,11 +274,8 @@ def check_frames(catalog, fov_deg: float, width: int, seed: int) -> list[Frame]:
     return frames
 
 
-def starnav_solve(
-    frame: Frame, catalog, fov_deg: float, width: int, sigma_px: float, compiled: bool = True
-) -> dict:
-    """starnav's answer in the adapters' form (attitude kept as the matrix); ``compiled``
-    False: its numpy path."""
+def starnav_solve(frame: Frame, catalog, fov_deg: float, width: int, sigma_px: float) -> dict:
+    """starnav's answer in the adapters' form (attitude kept as the matrix)."""
     t0 = time.perf_counter()
     try:
         r = solve_verbose(
@@ -288,7 +285,6 @@ def starnav_solve(
             brightness=frame.brightness,
             catalog=catalog,
             sigma_px=sigma_px,
-            compiled=compiled,
         )
     except StarnavError as exc:  # fewer than 3 points, for example
         return {"error": str(exc), "time_ms": None}
@@ -341,7 +337,7 @@ def peak_rss_mb() -> float:
         return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
 
 
-def starnav_worker(compiled: bool) -> None:
+def starnav_worker() -> None:
     """Solve JSON-line frames from stdin with starnav (peers' protocol) and report memory."""
     catalog = load_catalog(None, mag_limit=MAG_LIMIT)
     for line in sys.stdin:
@@ -349,9 +345,7 @@ def starnav_worker(compiled: bool) -> None:
         xy = np.asarray(fr["xy"], dtype=float).reshape(-1, 2)
         get_database(catalog, make_camera(width=fr["width"], height=None, fov_deg=fr["fov_deg"]))
         frame = Frame(xy, np.arange(len(xy), 0, -1, dtype=float), np.eye(3), 1, 0, 0)
-        out = starnav_solve(
-            frame, catalog, fr["fov_deg"], fr["width"], fr["sigma_px"], compiled=compiled
-        )
+        out = starnav_solve(frame, catalog, fr["fov_deg"], fr["width"], fr["sigma_px"])
         out.pop("R", None)
         print(json.dumps(out))
     print(json.dumps({"done": True, "peak_rss_mb": peak_rss_mb()}))
@@ -378,8 +372,7 @@ class Solver:
 def check_conventions(solver: Solver, db_arg, frames, fov, width, catalog) -> dict:
     """Run the noise-free frames; stop unless every answer is within CHECK_TOL_DEG."""
     if solver.peer is None:
-        compiled = "--numpy" not in solver.options
-        outs = [starnav_solve(f, catalog, fov, width, 0.1, compiled) for f in frames]
+        outs = [starnav_solve(f, catalog, fov, width, 0.1) for f in frames]
     else:
         outs, _ = run_adapter(
             solver.python,
@@ -474,10 +467,9 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=2026)
     parser.add_argument("--out", type=Path, default=DOC, help="markdown file ('-': none)")
     parser.add_argument("--starnav-worker", action="store_true", help=argparse.SUPPRESS)
-    parser.add_argument("--numpy", action="store_true", help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.starnav_worker:
-        starnav_worker(compiled=not args.numpy)
+        starnav_worker()
         return
     t_start = time.time()
     root = cache_dir()
@@ -493,14 +485,6 @@ def main() -> None:
         starnav_dbs[fov] = {"build_s": db.build_s, "bytes": size}
     solvers = [
         Solver(f"starnav {starnav.__version__}", "Hp <= 6 pairs", None, None, False),
-        Solver(
-            f"starnav {starnav.__version__}",
-            "Hp <= 6 pairs; numpy path (`compiled=False`)",
-            None,
-            None,
-            False,
-            ("--numpy",),
-        ),
     ]
     installs = {}
     for peer in PEERS:
@@ -548,21 +532,15 @@ def main() -> None:
             db_arg, db_info = database_for(solver, fov)
             t0 = time.time()
             if solver.peer is None:
-                compiled = "--numpy" not in solver.options
                 # the answers kept so far are this script's, not the solver's: out of the
                 # collector's sight, so that no full collection over them lands in a solve
                 gc.collect()
                 gc.freeze()
                 outs = [
-                    starnav_solve(f, catalog, fov, width, sigma, compiled)
+                    starnav_solve(f, catalog, fov, width, sigma)
                     for f in tqdm(frames, desc=f"starnav {name}", file=sys.stderr, leave=False)
                 ]
-                cmd = [
-                    sys.executable,
-                    str(Path(__file__).resolve()),
-                    "--starnav-worker",
-                    *solver.options,
-                ]
+                cmd = [sys.executable, str(Path(__file__).resolve()), "--starnav-worker"]
                 proc = subprocess.run(
                     cmd,
                     input="".join(json.dumps(p) + "\n" for p in payload),

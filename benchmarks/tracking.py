@@ -2,9 +2,9 @@
 
     python benchmarks/tracking.py --frames 2000
 
-Scenario (a) of issue 8: 12° / 512 px, Hipparcos Hp <= 6, 0.1 px noise. The camera slews along
-a great circle at ``--step-deg`` per frame (default 0.5°) with a slow roll drift, starting at
-random; each frame is solved with the previous frame's solution as the prior (1° sigma), and
+Scenario (a) of docs/peers.md: 12° / 512 px, Hipparcos Hp <= 6, 0.1 px noise. The camera slews
+along a great circle at ``--step-deg`` per frame (default 0.5°) with a slow roll drift, starting
+at random; each frame is solved with the previous frame's solution as the prior (1° sigma), and
 again from scratch. Times are ``SolveResult.time_ms`` (identification and fit). Writes the
 ``tracking`` block of docs/performance.md.
 """
@@ -34,8 +34,6 @@ DOC = ROOT / "docs" / "performance.md"
 MODES = {
     "tracking": ({}, True),
     "lost in space": ({}, False),
-    "tracking, numpy path": ({"compiled": False}, True),
-    "lost in space, numpy path": ({"compiled": False}, False),
 }
 
 
@@ -107,7 +105,7 @@ def main() -> None:
     lines += [
         "",
         f"{tracked} frames answered by tracking, the rest fell back to lost in space. The "
-        f"first two solves of the process (not counted) loaded the compiled code: {load_s:.1f} s. "
+        f"first two solves of the process (not counted) loaded the machine code: {load_s:.1f} s. "
         f"`python benchmarks/tracking.py --frames {args.frames}`: {time.time() - t0:.0f} s on "
         f"{machine()}, one process.",
     ]
