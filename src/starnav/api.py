@@ -115,11 +115,7 @@ def solve_verbose(
     stars = check_star_list(
         xy, width=camera.width, height=camera.height, brightness=brightness, labels=labels
     )
-    R_prior = None
-    if prior is not None:
-        R_prior = check_prior(
-            prior.R_cam_from_icrs if isinstance(prior, Solution) else prior, prior_sigma_deg
-        )
+    R_prior = check_prior(prior, prior_sigma_deg)
     solver = prepare_solver(
         width=width,
         height=height,
@@ -256,11 +252,7 @@ def solve_batch(
     """
     prior = options.pop("prior", None)
     prior_sigma_deg = options.pop("prior_sigma_deg", 1.0)
-    R_prior = None
-    if prior is not None:
-        R_prior = check_prior(
-            prior.R_cam_from_icrs if isinstance(prior, Solution) else prior, prior_sigma_deg
-        )
+    R_prior = check_prior(prior, prior_sigma_deg)
     solver = prepare_solver(**options)
     lights = brightness if brightness is not None else [None] * len(frames)
     jobs = [(np.asarray(xy, dtype=float), b) for xy, b in zip(frames, lights, strict=True)]

@@ -180,17 +180,19 @@ def fit(R0, icrs, xy, model, p0, fit_focal, fit_distortion):
         p = update(model, p, step[3:], free)
         if np.max(np.abs(step)) < STEP_TOL_RAD:
             break
-    cost = _cost_at(R, icrs, xy, model, p, free)
+    res, J = residuals_jacobian(R, icrs, xy, model, p, free)
+    cost = res @ res
     if not (np.isfinite(cost) and cost <= cost0):
         R, p = _levenberg_marquardt(R0, icrs, xy, model, p0, free)
-    return _spread(R, icrs, xy, model, p, free)
+        res, J = residuals_jacobian(R, icrs, xy, model, p, free)
+    return _spread(R, p, free, res, J)
 
 
 @njit(cache=True)
-def _spread(R, icrs, xy, model, p, free):
-    """The ``Fit`` at (R, p): residuals, covariance (a-posteriori variance), leverage."""
-    n = len(xy)
-    res, J = residuals_jacobian(R, icrs, xy, model, p, free)
+def _spread(R, p, free, res, J):
+    """The ``Fit`` at (R, p) from its residuals ``res`` and Jacobian ``J`` there: residuals,
+    covariance (a-posteriori variance), leverage."""
+    n = len(res) // 2
     n_par = J.shape[1]
     cost = res @ res
     residuals = np.empty((n, 2))

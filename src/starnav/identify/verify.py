@@ -158,8 +158,9 @@ class HypothesisTester:
         self.tally = tally if tally is not None else Tally()
         self.allowed = database.everything if allowed is None else allowed
         self._radii = np.asarray(settings.match_radii_rad, dtype=np.float64)
-        # one int64 per catalog row: the kernels' work space (a search may share one)
-        self._work = np.empty(len(database.catalog), dtype=np.int64) if work is None else work
+        # one int64 per catalog row: the kernels' work space (a search may share one; made
+        # on the first test, as the triangle search only uses the tally and outcome)
+        self._work = work
 
     @property
     def hypotheses(self) -> int:
@@ -182,6 +183,8 @@ class HypothesisTester:
         k = kernels()
         self.tally.proposed += 1
         s = self.settings
+        if self._work is None:
+            self._work = np.empty(len(self.database.catalog), dtype=np.int64)
         r = k.test_hypothesis(
             self.bearings,
             np.ascontiguousarray(obs_rows, dtype=np.int64),

@@ -32,7 +32,6 @@ def conclude(
     found: Identification,
     stars: StarList,
     camera: CameraModel,
-    cat: Catalog,
     database: PairDatabase,
     settings: MatchSettings,
     *,
@@ -42,8 +41,8 @@ def conclude(
     fit_distortion: bool = False,
 ) -> tuple[Solution | None, str]:
     """The fitted solution of an identification, or None and the reason it is refused.
-    ``database`` holds ``cat`` (its catalog); ``camera`` the model the identification used;
-    ``settings`` its tolerances."""
+    ``database``: what it was identified on (its catalog's rows); ``camera``: the model the
+    identification used; ``settings``: its tolerances."""
     k = kernels()
     xy = np.ascontiguousarray(stars.xy, dtype=np.float64)
     done = k.conclude(
@@ -72,7 +71,10 @@ def conclude(
     if done.refusal == k.TOO_FEW:
         return None, too_few(len(done.obs), done.expected, min_matched_fraction)
     fit = refinement(done.fit, camera)
-    return solution_of(stars, done.obs, done.cat, cat, fit, done.false_match_probability), ""
+    solution = solution_of(
+        stars, done.obs, done.cat, database.catalog, fit, done.false_match_probability
+    )
+    return solution, ""
 
 
 def solution_of(

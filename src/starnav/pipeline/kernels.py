@@ -142,9 +142,9 @@ def conclude(obs, cat, R, xy, sky, allowed, model, p0, width, height, fit_focal,
         rms_a, rms_b = shared_rms(a.obs, a.cat, a.fit.residuals, b.obs, b.cat, b.fit.residuals)
         if len(b.obs) > len(a.obs) and rms_b <= WIDE_RMS_FACTOR * rms_a + WIDE_RMS_SIGMA * sigma_px:
             a = b
+            bearings = pixels_to_bearings(model, a.fit.params, xy)
     f = a.fit
     # score the final pairs (the last verification may hold a slightly different set)
-    bearings = pixels_to_bearings(model, f.params, xy)
     dist = np.empty(len(a.obs))
     for s in range(len(a.obs)):
         row = a.cat[s]

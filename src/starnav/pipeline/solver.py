@@ -26,7 +26,7 @@ from starnav.identify.base import Identification, Identifier, IdentifyOutcome
 from starnav.identify.database import build_database, database_angle_deg
 from starnav.identify.tracking import Tracking
 from starnav.pipeline.conclude import conclude, elapsed_ms
-from starnav.results import SolveResult
+from starnav.results import Solution, SolveResult
 from starnav.starlist import StarList
 
 DEFAULT_SIGMA_PX = 1.0
@@ -93,9 +93,12 @@ def get_database(catalog: Catalog, camera: CameraModel) -> PairDatabase:
     return _DATABASES[key]
 
 
-def check_prior(prior: np.ndarray, prior_sigma_deg: float) -> np.ndarray:
-    """The prior attitude as a 3x3 rotation, or a one-line error."""
-    R = np.asarray(prior, dtype=float)
+def check_prior(prior: Solution | np.ndarray | None, prior_sigma_deg: float) -> np.ndarray | None:
+    """The prior attitude (a ``Solution`` or ``R_cam_from_icrs``) as a 3x3 rotation, None
+    for no prior, or a one-line error."""
+    if prior is None:
+        return None
+    R = np.asarray(prior.R_cam_from_icrs if isinstance(prior, Solution) else prior, dtype=float)
     if R.shape != (3, 3) or not np.allclose(R @ R.T, np.eye(3), atol=1e-6):
         raise StarnavError("prior must be a Solution or a 3x3 rotation (R_cam_from_icrs)")
     if not (np.isfinite(prior_sigma_deg) and 0.0 < prior_sigma_deg <= 30.0):
@@ -107,7 +110,7 @@ def _say_compiling() -> None:
     if "notice" not in _LOADED:  # once per process
         _LOADED.add("notice")
         print(
-            "starnav: compiling the solver's machine code (once per installation, ~60 s)",
+            "starnav: compiling the solver's machine code (once per installation, ~1-2 min)",
             file=sys.stderr,
             flush=True,
         )
@@ -261,7 +264,6 @@ def fit_identification(
         found,
         stars,
         camera,
-        database.catalog,
         database,
         match_settings,
         sigma_px=settings.sigma_px,
