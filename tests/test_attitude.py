@@ -68,7 +68,7 @@ def test_analytic_jacobian_matches_finite_differences(k1, k2, fit_focal, fit_dis
     v /= np.linalg.norm(v, axis=1, keepdims=True)
     xy = rng.uniform(0, 1000, (6, 2))
     cam = Camera(1000, 1000, 1500.0, k1=k1, k2=k2)
-    free = np.array([fit_focal, fit_distortion, fit_distortion])
+    free = np.array([fit_focal, fit_distortion, fit_distortion, False, False])  # N_INTRINSIC
     R0 = np.eye(3)
 
     def residuals(q):

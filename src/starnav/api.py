@@ -11,9 +11,9 @@ from pathlib import Path
 
 import numpy as np
 
-from starnav.camera import Camera
+from starnav.camera import MODELS, CameraModel, load_camera
 from starnav.catalog import Catalog, load_catalog
-from starnav.errors import StarnavError
+from starnav.errors import CameraError, StarnavError
 from starnav.identify import DEFAULT_ALGORITHM
 from starnav.pipeline import (
     DEFAULT_MAX_FALSE_MATCH_PROBABILITY,
@@ -49,13 +49,35 @@ _SOLVERS: dict[tuple, Solver] = {}  # per process: the prepared solvers of recen
 _MAX_SOLVERS = 32
 
 
-def make_camera(*, width: float, height: float | None, fov_deg: float) -> Camera:
-    """Camera from the user's numbers (height defaults to width)."""
-    return Camera.from_fov(fov_deg, width, height)
+def make_camera(
+    *,
+    width: float | None = None,
+    height: float | None = None,
+    fov_deg: float | None = None,
+    camera: CameraModel | str | Path | None = None,
+    lens: str = "pinhole",
+) -> CameraModel:
+    """The camera of the user's numbers: a ``camera`` (a camera model or a camera file;
+    ``width``/``height`` must then agree with it), or the ``lens`` model (``MODELS``; default
+    pinhole) with the horizontal ``fov_deg`` across ``width`` px (height defaults to
+    width)."""
+    if camera is not None:
+        cam = load_camera(camera) if isinstance(camera, str | Path) else camera
+        for name, given in (("width", width), ("height", height)):
+            if given is not None and given != getattr(cam, name):
+                raise CameraError(
+                    f"{name} {given:g} disagrees with the camera's {getattr(cam, name)} px"
+                )
+        return cam
+    if lens not in MODELS:
+        raise CameraError(f"unknown lens model {lens!r}; known: {', '.join(MODELS)}")
+    if fov_deg is None or width is None:
+        raise StarnavError("give the field of view and the image width, or a camera file")
+    return MODELS[lens].from_fov(fov_deg, width, height)
 
 
 def solver_for(
-    camera: Camera,
+    camera: CameraModel,
     catalog: Catalog,
     settings: SolveSettings,
     algorithm: str,
@@ -77,9 +99,11 @@ def solver_for(
 def solve_verbose(
     xy: np.ndarray,
     *,
-    width: float,
+    width: float | None = None,
     height: float | None = None,
-    fov_deg: float,
+    fov_deg: float | None = None,
+    camera: CameraModel | str | Path | None = None,
+    lens: str = "pinhole",
     brightness: np.ndarray | None = None,
     labels: list[str] | tuple[str, ...] | None = None,
     catalog: Catalog | str | Path | None = None,
@@ -97,6 +121,9 @@ def solve_verbose(
 ) -> SolveResult:
     """Like ``solve`` but always returns a ``SolveResult`` with the reason when unsolved.
 
+    The camera: ``camera`` (a camera model or a camera file), or the ``lens`` model's
+    (``starnav.camera.MODELS``, default pinhole) with the horizontal ``fov_deg`` across
+    ``width`` px (``height`` defaults to width).
     ``labels``: a name per star (default "1", "2", ...); ``mag_limit``, ``epoch_year``: for
     the embedded Hipparcos catalog (see ``load_catalog``); ``parity``: +1 / -1 when known;
     ``sigma_px``: 1-sigma centroid error, which sets the matching tolerances;
@@ -111,15 +138,13 @@ def solve_verbose(
     matches the catalog stars near it only, and falls back to ``algorithm`` when that fails
     (``Solution.algorithm`` says which answered).
     """
-    camera = make_camera(width=width, height=height, fov_deg=fov_deg)
+    cam = make_camera(width=width, height=height, fov_deg=fov_deg, camera=camera, lens=lens)
     stars = check_star_list(
-        xy, width=camera.width, height=camera.height, brightness=brightness, labels=labels
+        xy, width=cam.width, height=cam.height, brightness=brightness, labels=labels
     )
     R_prior = check_prior(prior, prior_sigma_deg)
     solver = prepare_solver(
-        width=width,
-        height=height,
-        fov_deg=fov_deg,
+        camera=cam,
         catalog=catalog,
         mag_limit=mag_limit,
         epoch_year=epoch_year,
@@ -136,9 +161,11 @@ def solve_verbose(
 
 def prepare_solver(
     *,
-    width: float,
+    width: float | None = None,
     height: float | None = None,
-    fov_deg: float,
+    fov_deg: float | None = None,
+    camera: CameraModel | str | Path | None = None,
+    lens: str = "pinhole",
     catalog: Catalog | str | Path | None = None,
     mag_limit: float | None = None,
     epoch_year: float | None = None,
@@ -147,24 +174,24 @@ def prepare_solver(
     **settings,
 ) -> Solver:
     """The prepared ``Solver`` of ``solve_verbose``'s options (checked, one-line errors):
-    the camera, catalog and algorithm, and ``settings``, the fields of ``SolveSettings``
-    (``sigma_px``, ``parity``, ``fit_focal``, ...). Kept per process, so repeated solves do
-    not prepare it again."""
-    camera = make_camera(width=width, height=height, fov_deg=fov_deg)
+    the camera (``make_camera``), catalog and algorithm, and ``settings``, the fields of
+    ``SolveSettings`` (``sigma_px``, ``parity``, ``fit_focal``, ...). Kept per process, so
+    repeated solves do not prepare it again."""
+    cam = make_camera(width=width, height=height, fov_deg=fov_deg, camera=camera, lens=lens)
     try:
         solve_settings = SolveSettings(**settings)
     except TypeError as exc:  # an option solve does not have
         raise StarnavError(f"unknown solve option: {exc}") from None
     cat = load_catalog(catalog, mag_limit=mag_limit, epoch_year=epoch_year)
-    return solver_for(camera, cat, solve_settings, algorithm, algorithm_options)
+    return solver_for(cam, cat, solve_settings, algorithm, algorithm_options)
 
 
 def solve(
     xy: np.ndarray,
     *,
-    width: float,
+    width: float | None = None,
     height: float | None = None,
-    fov_deg: float,
+    fov_deg: float | None = None,
     brightness: np.ndarray | None = None,
     catalog: Catalog | str | Path | None = None,
     **options,
@@ -172,7 +199,8 @@ def solve(
     """Identify the stars at pixel positions ``xy`` (n, 2) and return the verified attitude.
 
     ``width``/``height``: image size (px; height defaults to width); ``fov_deg``: horizontal
-    field of view; ``brightness``: optional, larger is brighter (only the order is used);
+    field of view (or ``camera=``: a camera model or file, see ``solve_verbose``);
+    ``brightness``: optional, larger is brighter (only the order is used);
     ``catalog``: a ``Catalog``, a CSV path (``id,ra_deg,dec_deg,mag``) or None for the
     embedded Hipparcos. Other keywords: see ``solve_verbose``. Returns None when no
     identification is convincing. Raises ``StarnavError`` (a ``ValueError``) on bad input.

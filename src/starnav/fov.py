@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from starnav.camera import Camera, focal_px_from_fov
+from starnav.camera import MODELS, Camera, CameraModel, focal_px_from_fov
 from starnav.catalog import Catalog, load_catalog
 from starnav.errors import CatalogError, StarnavError
 from starnav.fov_search import BAND_FACTOR, Band, search_fov
@@ -27,16 +27,18 @@ from starnav.pipeline.conclude import elapsed_ms
 from starnav.pipeline.solver import (
     DEFAULT_MAX_FALSE_MATCH_PROBABILITY,
     DEFAULT_MIN_MATCHED_FRACTION,
+    Solver,
     SolveSettings,
     brightness_order,
     first_use,
     fit_identification,
 )
 from starnav.results import SolveResult
-from starnav.starlist import check_star_list
+from starnav.starlist import StarList, check_star_list
 
 DEFAULT_FOV_RANGE_DEG = (5.0, 40.0)
 FOV_LIMITS_DEG = (1.0, 100.0)
+LENS_FOV_LIMITS_DEG = (10.0, 360.0)  # the focal scan of a fisheye model
 GIVEN_FOV_TOLERANCE = 0.05  # a given FOV is searched within +-5 %
 CAMERA_FOV_TOLERANCE = 0.01  # a calibrated camera's within +-1 %
 _STARS_PER_FIELD = 40.0  # catalog depth of a band: mean stars in one of its pattern fields
@@ -154,15 +156,17 @@ def load_bands(
     return bands
 
 
-def check_fov_range(fov_range_deg: tuple[float, float]) -> tuple[float, float]:
-    """The range as two floats, or a one-line error."""
+def check_fov_range(
+    fov_range_deg: tuple[float, float], limits_deg: tuple[float, float] = FOV_LIMITS_DEG
+) -> tuple[float, float]:
+    """The range as two floats within ``limits_deg``, or a one-line error."""
     try:
         lo, hi = (float(v) for v in fov_range_deg)
     except (TypeError, ValueError):
         raise StarnavError(
             f"fov_range_deg must be two numbers (degrees), got {fov_range_deg!r}"
         ) from None
-    a, b = FOV_LIMITS_DEG
+    a, b = limits_deg
     if not (a <= lo < hi <= b):
         raise StarnavError(
             f"fov range must satisfy {a:g} <= low < high <= {b:g} degrees, got {lo:g} {hi:g}"
@@ -171,21 +175,25 @@ def check_fov_range(fov_range_deg: tuple[float, float]) -> tuple[float, float]:
 
 
 def search_range(
-    fov_deg: float | None, fov_range_deg: tuple[float, float], camera: Camera | None
+    fov_deg: float | None,
+    fov_range_deg: tuple[float, float],
+    camera: CameraModel | None,
+    lens: str = "pinhole",
 ) -> tuple[float, float]:
     """The horizontal FOV range searched (degrees): within 1 % of a calibrated ``camera``,
-    5 % of ``fov_deg``, or ``fov_range_deg``; a one-line error for a bad one."""
+    5 % of ``fov_deg``, or ``fov_range_deg`` (up to ``FOV_LIMITS_DEG`` for the pinhole,
+    ``LENS_FOV_LIMITS_DEG`` for the fisheye models); a one-line error for a bad one."""
     if camera is not None:
         f = camera.fov_deg
         return f * (1 - CAMERA_FOV_TOLERANCE), f * (1 + CAMERA_FOV_TOLERANCE)
+    limits = FOV_LIMITS_DEG if lens == "pinhole" else LENS_FOV_LIMITS_DEG
     if fov_deg is not None:
-        if not (np.isfinite(fov_deg) and FOV_LIMITS_DEG[0] <= fov_deg <= FOV_LIMITS_DEG[1]):
+        if not (np.isfinite(fov_deg) and limits[0] <= fov_deg <= limits[1]):
             raise StarnavError(
-                f"fov_deg must be within {FOV_LIMITS_DEG[0]:g}..{FOV_LIMITS_DEG[1]:g} degrees, "
-                f"got {fov_deg!r}"
+                f"fov_deg must be within {limits[0]:g}..{limits[1]:g} degrees, got {fov_deg!r}"
             )
         return fov_deg * (1 - GIVEN_FOV_TOLERANCE), fov_deg * (1 + GIVEN_FOV_TOLERANCE)
-    return check_fov_range(fov_range_deg)
+    return check_fov_range(fov_range_deg, limits)
 
 
 def solve_fov(
@@ -197,7 +205,8 @@ def solve_fov(
     labels: list[str] | tuple[str, ...] | None = None,
     fov_deg: float | None = None,
     fov_range_deg: tuple[float, float] = DEFAULT_FOV_RANGE_DEG,
-    camera: Camera | None = None,
+    camera: CameraModel | None = None,
+    lens: str = "pinhole",
     fit_distortion: bool = False,
     catalog: Catalog | str | Path | None = None,
     epoch_year: float | None = None,
@@ -206,6 +215,7 @@ def solve_fov(
     max_false_match_probability: float = DEFAULT_MAX_FALSE_MATCH_PROBABILITY,
     min_matched_fraction: float = DEFAULT_MIN_MATCHED_FRACTION,
     pattern_stars: int = 15,
+    mag_limit: float | None = None,
 ) -> SolveResult:
     """Identify stars at ``xy`` (n, 2, px) in an image ``width`` x ``height`` px whose field
     of view is unknown: searched within ``fov_range_deg`` (horizontal, degrees), or within
@@ -213,13 +223,17 @@ def solve_fov(
     distortion are then used). The solution's ``fov_deg``/``focal_px`` are fitted;
     ``fit_distortion`` fits k1, k2 as well (with at least 12 matched stars).
     ``brightness``: larger is brighter (without it the rows are taken as brightest first).
-    Other options as ``starnav.solve_verbose``.
+    A fisheye ``lens`` model (``starnav.camera.MODELS``), or a fisheye ``camera``, is solved
+    by ``scan_focal`` (``mag_limit``: its catalog's, default Hp <= 6; the pinhole search
+    picks a depth per band and takes none). Other options as ``starnav.solve_verbose``.
     """
-    lo, hi = search_range(fov_deg, fov_range_deg, camera)
     if camera is not None:
-        width, height = camera.width, camera.height
+        width, height, lens = camera.width, camera.height, camera.model
+    if lens not in MODELS:
+        raise StarnavError(f"unknown lens model {lens!r}; known: {', '.join(MODELS)}")
+    lo, hi = search_range(fov_deg, fov_range_deg, camera, lens)
     height = width if height is None else height
-    base = camera or Camera.from_fov(0.5 * (lo + hi), width, height)
+    base = camera or MODELS[lens].from_fov(0.5 * (lo + hi), width, height)
     stars = check_star_list(
         xy, width=base.width, height=base.height, brightness=brightness, labels=labels
     )
@@ -231,9 +245,51 @@ def solve_fov(
         max_false_match_probability=max_false_match_probability,
         min_matched_fraction=min_matched_fraction,
     )
+    if lens != "pinhole":
+        cat = load_catalog(catalog, mag_limit=mag_limit, epoch_year=epoch_year)
+        return scan_focal(stars, base, (lo, hi), cat, settings)
+    if mag_limit is not None:
+        raise StarnavError("mag_limit needs fov_deg (the FOV search chooses its own)")
     bands = load_bands(lo, hi, base.width, base.height, catalog, epoch_year)
     with first_use("solve"):
         return _search_and_fit(stars, base, bands, settings, (lo, hi), pattern_stars)
+
+
+def scan_focal(
+    stars: StarList,
+    base: CameraModel,
+    fov_range_deg: tuple[float, float],
+    catalog: Catalog,
+    settings: SolveSettings,
+) -> SolveResult:
+    """A lens of known model but unknown focal length: the solver's identification at trial
+    focal lengths over the horizontal ``fov_range_deg`` (degrees), from the middle outward,
+    steps small enough that the longest star triangle side keeps within the pair tolerance;
+    the first verified one is fitted with the focal length free and returned."""
+    t0 = time.perf_counter()
+    f_lo, f_hi = (type(base).from_fov(v, base.width, base.height).focal_px for v in fov_range_deg)
+    f_lo, f_hi = min(f_lo, f_hi), max(f_lo, f_hi)
+    middle = base.with_focal(math.sqrt(f_lo * f_hi))
+    solver = Solver(middle, catalog, settings=replace(settings, fit_focal=True))
+    tol_px = solver.match_settings.pair_tol_rad * middle.scale_px_per_rad
+    longest = solver.database.max_angle_rad
+    half = math.log1p(tol_px / (longest * middle.focal_px))  # each trial covers +-half
+    n = math.ceil(0.5 * math.log(f_hi / f_lo) / (2.0 * half) - 1e-9)
+    focals = [middle.focal_px * math.exp(2.0 * half * k) for k in sorted(range(-n, n + 1), key=abs)]
+    result = None
+    for focal in focals:
+        result = solver.with_camera(base.with_focal(focal)).solve(stars)
+        if result.solution is not None:
+            break
+    ms = elapsed_ms(t0)
+    if result.solution is not None:
+        return replace(result, solution=replace(result.solution, time_ms=ms), time_ms=ms)
+    lo, hi = fov_range_deg
+    reason = (
+        f"no identification at {len(focals)} focal lengths over {lo:g}-{hi:g}° "
+        f"({base.model} lens; last: {result.reason})"
+    )
+    return replace(result, reason=reason, time_ms=ms)
 
 
 def _search_and_fit(stars, base: Camera, bands, settings: SolveSettings, fov_range, pattern_stars):
@@ -279,7 +335,7 @@ def _search_and_fit(stars, base: Camera, bands, settings: SolveSettings, fov_ran
             camera,
             found.band.database,
             settings,
-            settings.match_settings(found.focal_px),
+            settings.match_settings(camera),
             t0=t0,
             t_fit=time.perf_counter(),
             algorithm="fov-search",

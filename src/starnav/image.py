@@ -61,8 +61,7 @@ class ImageSolveResult:
             height=det.height,
             cx=cam.cx if cam else None,
             cy=cam.cy if cam else None,
-            k1=cam.k1 if cam else None,
-            k2=cam.k2 if cam else None,
+            **{k: getattr(self.solution, k) if cam else None for k in ("k1", "k2", "k3", "k4")},
             n_detected=len(det.xy),
             read_ms=self.read_ms,
             detect_ms=self.detect_ms,
@@ -142,16 +141,11 @@ def solve_image(
         **options,
     )
     sol = result.solution
-    fitted = None
-    if sol is not None:
-        cx = camera.cx if camera is not None else width / 2.0
-        cy = camera.cy if camera is not None else height / 2.0
-        fitted = Camera(width, height, sol.focal_px, cx, cy, sol.k1, sol.k2)
     return ImageSolveResult(
         sol,
         result.reason,
         found,
-        fitted,
+        None if sol is None else sol.camera,
         read_ms,
         detect_ms,
         result.time_ms,

@@ -7,10 +7,14 @@ from __future__ import annotations
 import functools
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field, fields
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from starnav.identify.database import PairDatabase
+
+if TYPE_CHECKING:
+    from starnav.camera import CameraModel
 
 # The JSON of a solve, solved or not (``solve_dict``): these keys in this order; an unsolved
 # one has null for every number, 0 matched and its input points as the stars.
@@ -23,6 +27,7 @@ SOLVE_KEYS = (
     "parity",
     "focal_px",
     "fov_deg",
+    "camera_model",
     "rms_px",
     "sigma_boresight_arcsec",
     "sigma_roll_arcsec",
@@ -79,8 +84,9 @@ class Solution:
     ``parity``: +1 the sky as seen, -1 mirrored. ``R_cam_from_icrs``: rows are the camera axes
     in ICRS (determinant = parity). ``rms_px``: residual rms of matched stars;
     ``sigma_*_arcsec``: 1-sigma from the fit (``sigma_focal_px`` 0 unless the focal length
-    was fitted); ``k1``, ``k2``: radial distortion of the camera (fitted or given, see
-    ``starnav.camera``); ``time_ms``: identification and fit, without
+    was fitted); ``camera_model``: the lens model's name, ``k1``..``k4`` its coefficients
+    (fitted or given, see ``starnav.camera``; 0 for those it lacks), ``camera`` the fitted
+    camera itself; ``time_ms``: identification and fit, without
     loading the catalog or database; ``star_table``: every input point with its id and
     residual, as arrays (``stars``: the same as ``StarMatch`` records, made on first use).
     """
@@ -102,8 +108,12 @@ class Solution:
     n_matched: int
     algorithm: str
     catalog: str
+    camera_model: str = "pinhole"
     k1: float = 0.0
     k2: float = 0.0
+    k3: float = 0.0
+    k4: float = 0.0
+    camera: CameraModel | None = None
 
     @functools.cached_property
     def stars(self) -> tuple[StarMatch, ...]:
@@ -112,7 +122,7 @@ class Solution:
 
     def to_dict(self) -> dict:
         """JSON-ready dict of every field (the matrix as nested lists)."""
-        skip = ("star_table", "R_cam_from_icrs")
+        skip = ("star_table", "R_cam_from_icrs", "camera")
         out = {f.name: getattr(self, f.name) for f in fields(self) if f.name not in skip}
         out["solved"] = True
         out["R_cam_from_icrs"] = self.R_cam_from_icrs.tolist()

@@ -17,6 +17,7 @@ from starnav.api import (
     solve_batch,
     solve_verbose,
 )
+from starnav.camera import CameraModel
 from starnav.catalog import Catalog
 from starnav.errors import StarnavError
 from starnav.fov import DEFAULT_FOV_RANGE_DEG
@@ -28,9 +29,11 @@ from starnav.starlist import StarList, read_star_csv
 def solve_star_list(
     stars: StarList,
     *,
-    width: int,
+    width: int | None = None,
     height: int | None = None,
     fov_deg: float | None = None,
+    camera: CameraModel | str | Path | None = None,
+    lens: str = "pinhole",
     fov_range_deg: tuple[float, float] = DEFAULT_FOV_RANGE_DEG,
     catalog: Catalog | str | Path | None = None,
     mag_limit: float | None = None,
@@ -44,19 +47,20 @@ def solve_star_list(
     prior: np.ndarray | None = None,
     prior_sigma_deg: float = 1.0,
 ) -> SolveResult:
-    """Solve one star list: with ``fov_deg`` by ``solve_verbose`` (options as there), without
-    it by ``solve_fov``, which searches ``fov_range_deg`` and fits the focal length. The FOV
+    """Solve one star list: with ``fov_deg`` or a ``camera`` (model or file) by
+    ``solve_verbose`` (options as there), without them by ``solve_fov``, which searches
+    ``fov_range_deg`` (for the ``lens`` model) and fits the focal length. The pinhole FOV
     search picks the catalog depth of each FOV band and identifies by 4-star patterns, so a
     ``prior``, another ``algorithm``, ``algorithm_options`` and ``mag_limit`` need ``fov_deg``
-    (``StarnavError`` otherwise)."""
-    if fov_deg is None:
+    (``StarnavError`` otherwise; a fisheye lens's scan takes ``mag_limit``)."""
+    if fov_deg is None and camera is None:
         from starnav.fov import solve_fov
 
         needing = {
             "prior": prior is not None,
             "algorithm": algorithm != DEFAULT_ALGORITHM,
             "algorithm_options": bool(algorithm_options),
-            "mag_limit": mag_limit is not None,
+            "mag_limit": mag_limit is not None and lens == "pinhole",
         }
         if any(needing.values()):
             names = ", ".join(name for name, given in needing.items() if given)
@@ -68,6 +72,8 @@ def solve_star_list(
             brightness=stars.brightness,
             labels=stars.labels,
             fov_range_deg=tuple(fov_range_deg),
+            lens=lens,
+            mag_limit=mag_limit,
             catalog=catalog,
             epoch_year=epoch_year,
             parity=parity,
@@ -79,6 +85,8 @@ def solve_star_list(
         width=width,
         height=height,
         fov_deg=fov_deg,
+        camera=camera,
+        lens=lens,
         brightness=stars.brightness,
         labels=stars.labels,
         catalog=catalog,
@@ -155,8 +163,8 @@ def solve_star_files(
     """Solve the lists read (``solve_batch``: same camera and ``options``, ``fov_deg``
     included, on ``workers`` processes; ``progress`` called per list finished); one result
     per path in order, the files not read with "error: ..." reasons."""
-    if options.get("fov_deg") is None:
-        raise StarnavError("a set of star lists needs fov_deg")
+    if options.get("fov_deg") is None and options.get("camera") is None:
+        raise StarnavError("a set of star lists needs fov_deg or a camera")
     read = [p for p in files.paths if p in files.lists]
     results = solve_batch(
         [files.lists[p].xy for p in read],

@@ -18,7 +18,7 @@ import numpy as np
 from numba import njit
 
 from starnav.attitude.rotation import rotate_by
-from starnav.camera.kernels import N_INTRINSIC, project, update
+from starnav.camera.kernels import N_INTRINSIC, n_coefficients, project, update
 from starnav.geometry import ARCSEC_PER_RAD
 
 MAX_STEPS = 10  # Gauss-Newton steps
@@ -147,12 +147,13 @@ def _levenberg_marquardt(R0, icrs, xy, model, p0, free):
 
 
 @njit(cache=True)
-def free_columns(n_stars, fit_focal, fit_distortion):
-    """The intrinsic columns the fit frees for ``n_stars`` matched stars."""
+def free_columns(n_stars, fit_focal, fit_distortion, model):
+    """The intrinsic columns the fit frees for ``n_stars`` matched stars (the distortion
+    coefficients the ``model`` has)."""
     free = np.zeros(N_INTRINSIC, dtype=np.bool_)
     distortion = fit_distortion and n_stars >= MIN_DISTORTION_STARS
     free[0] = (fit_focal or distortion) and n_stars >= MIN_FOCAL_STARS
-    for k in range(1, N_INTRINSIC):
+    for k in range(1, n_coefficients(model) + 1):
         free[k] = distortion and free[0]
     return free
 
@@ -165,7 +166,7 @@ def fit(R0, icrs, xy, model, p0, fit_focal, fit_distortion):
     when it does not reduce the cost, Levenberg-Marquardt from the start. The covariance
     comes from the Jacobian at the solution and the a-posteriori variance."""
     n = len(xy)
-    free = free_columns(n, fit_focal, fit_distortion)
+    free = free_columns(n, fit_focal, fit_distortion, model)
     R, p = R0.copy(), p0.copy()
     cost0 = -1.0
     for _ in range(MAX_STEPS):

@@ -1,9 +1,11 @@
 """The camera-model seam: what every lens model provides, and the camera file.
 
-A lens model is one file: a frozen dataclass with the methods of ``CameraModel`` whose
-arithmetic is a branch of ``camera.kernels.project`` / ``unproject``, registered in
-``MODELS`` by its file name. The attitude fit and the verification use only this interface
-(and the kernels by model code), so no other module writes a projection.
+A lens model is a frozen dataclass with the methods of ``CameraModel`` (most from
+``camera.lens.Lens``) whose arithmetic is a branch of ``camera.kernels.project`` /
+``unproject``, registered in ``MODELS`` by its name in camera files: the pinhole
+(``pinhole.py``) and the fisheye family (``fisheye.py``). The attitude fit and the
+verification use only this interface (and the kernels by model code), so no other module
+writes a projection.
 """
 
 from __future__ import annotations
@@ -14,6 +16,13 @@ from typing import Protocol
 
 import numpy as np
 
+from starnav.camera.fisheye import (
+    Equidistant,
+    Equisolid,
+    KannalaBrandt,
+    Orthographic,
+    Stereographic,
+)
 from starnav.camera.pinhole import Camera
 from starnav.errors import CameraError
 
@@ -51,6 +60,9 @@ class CameraModel(Protocol):
     @property
     def distorted(self) -> bool: ...
 
+    @property
+    def scale_px_per_rad(self) -> float: ...
+
     def with_focal(self, focal_px: float) -> CameraModel: ...
 
     @classmethod
@@ -59,7 +71,10 @@ class CameraModel(Protocol):
     def to_dict(self) -> dict: ...
 
 
-MODELS: dict[str, type] = {"pinhole": Camera}
+MODELS: dict[str, type] = {
+    cls.model: cls
+    for cls in (Camera, Equidistant, Equisolid, Stereographic, Orthographic, KannalaBrandt)
+}
 
 
 def camera_from_dict(data: dict, where: str = "camera") -> CameraModel:

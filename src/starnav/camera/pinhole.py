@@ -15,6 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from starnav.camera.lens import Lens, check_size
 from starnav.errors import CameraError
 
 PINHOLE_KEYS = ("width", "height", "focal_px", "cx", "cy", "k1", "k2")
@@ -25,14 +26,8 @@ def focal_px_from_fov(fov_deg: float, width: int) -> float:
     return 0.5 * width / np.tan(0.5 * np.radians(fov_deg))
 
 
-def kernels():
-    from starnav.camera import kernels  # numba: loaded when a projection is first needed
-
-    return kernels
-
-
 @dataclass(frozen=True)
-class Camera:
+class Camera(Lens):
     """Pinhole camera with optional radial distortion.
 
     Attributes: ``width``, ``height`` (px); ``focal_px``; principal point ``cx``, ``cy`` (px,
@@ -52,21 +47,8 @@ class Camera:
     coefficients = ("k1", "k2")  # the model's coefficients, in the order of ``params``
 
     def __post_init__(self) -> None:
-        for name in ("width", "height"):
-            value = getattr(self, name)
-            if not (np.isfinite(value) and value > 0):
-                raise CameraError(f"{name} must be a positive number of pixels, got {value!r}")
-        if not (np.isfinite(self.focal_px) and self.focal_px > 0):
-            raise CameraError(f"focal_px must be positive, got {self.focal_px!r}")
-        if self.cx is None:
-            object.__setattr__(self, "cx", self.width / 2.0)
-        if self.cy is None:
-            object.__setattr__(self, "cy", self.height / 2.0)
-        object.__setattr__(
-            self,
-            "params",
-            np.array([self.focal_px, self.cx, self.cy, self.k1, self.k2], dtype=np.float64),
-        )
+        check_size(self.width, self.height, self.focal_px)
+        self._centre_and_params([self.k1, self.k2])
 
     @classmethod
     def from_fov(cls, fov_deg: float, width: int, height: int | None = None) -> Camera:
@@ -80,97 +62,18 @@ class Camera:
             raise CameraError(f"height must be at least 8 px, got {height!r}")
         return cls(int(width), int(height), focal_px_from_fov(fov_deg, width))
 
-    @classmethod
-    def from_params(cls, width: int, height: int, params: np.ndarray) -> Camera:
-        """The camera of a parameter vector ``[focal_px, cx, cy, k1, k2]``."""
-        f, cx, cy, k1, k2 = (float(v) for v in params)
-        return cls(width, height, f, cx, cy, k1, k2)
-
-    @property
-    def distorted(self) -> bool:
-        """Whether the model has non-zero distortion coefficients."""
-        return bool(self.k1 or self.k2)
-
     @property
     def fov_deg(self) -> float:
         """Horizontal field of view in degrees."""
         return float(np.degrees(2.0 * np.arctan(0.5 * self.width / self.focal_px)))
 
     @property
-    def half_diagonal_rad(self) -> float:
-        """Largest angle (radians) between the boresight and a corner of the image."""
-        return float(
-            kernels().half_diagonal(
-                self.model_code, self.params, float(self.width), float(self.height)
-            )
-        )
+    def scale_px_per_rad(self) -> float:
+        """Pixels per radian the tolerances divide by: the focal length (the pinhole is
+        finest at its centre; its distortion is taken as small)."""
+        return self.focal_px
 
-    @property
-    def field_cos(self) -> float:
-        """Cosine of the cone (about the boresight) outside which nothing is in the image."""
-        return float(
-            kernels().field_cos(self.model_code, self.params, float(self.width), float(self.height))
-        )
-
-    def with_focal(self, focal_px: float) -> Camera:
-        """The same camera with another focal length."""
-        return Camera(self.width, self.height, focal_px, self.cx, self.cy, self.k1, self.k2)
-
-    def pixels_to_bearings(self, xy: np.ndarray) -> np.ndarray:
-        """Unit bearing vectors (n, 3) in the camera frame for pixel positions (n, 2)."""
-        xy = np.ascontiguousarray(np.asarray(xy, dtype=np.float64).reshape(-1, 2))
-        return kernels().pixels_to_bearings(self.model_code, self.params, xy)
-
-    def bearings_to_pixels(self, c: np.ndarray) -> np.ndarray:
-        """Pixel positions (n, 2) of camera-frame vectors (n, 3) with positive z."""
-        c = np.ascontiguousarray(np.asarray(c, dtype=np.float64).reshape(-1, 3))
-        return kernels().bearings_to_pixels(self.model_code, self.params, c)
-
-    def project_with_jacobian(self, c: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Pixels (n, 2) of camera-frame vectors (n, 3), d(pixel)/d(direction) (n, 2, 3) and
-        d(pixel)/d(log focal_px, k1, k2) (n, 2, 3): what the attitude fit uses."""
-        c = np.ascontiguousarray(np.asarray(c, dtype=np.float64).reshape(-1, 3))
-        return kernels().project_all(self.model_code, self.params, c)
-
-    def sees(self, c: np.ndarray) -> np.ndarray:
-        """Boolean mask of camera-frame directions (n, 3) that land inside the image."""
-        c = np.ascontiguousarray(np.asarray(c, dtype=np.float64).reshape(-1, 3))
-        return kernels().sees_all(
-            self.model_code, self.params, float(self.width), float(self.height), self.field_cos, c
-        )
-
-    def contains(self, xy: np.ndarray, margin_px: float = 0.0) -> np.ndarray:
-        """Boolean mask of pixel positions inside the image, grown by ``margin_px``."""
-        xy = np.asarray(xy, dtype=float).reshape(-1, 2)
-        return (
-            (xy[:, 0] >= -margin_px)
-            & (xy[:, 0] <= self.width + margin_px)
-            & (xy[:, 1] >= -margin_px)
-            & (xy[:, 1] <= self.height + margin_px)
-        )
-
-    def to_dict(self) -> dict:
-        """The camera-file form (``load_camera`` reads it back)."""
-        out: dict = {"model": self.model}
-        out.update({key: getattr(self, key) for key in PINHOLE_KEYS})
-        out["fov_deg"] = self.fov_deg
-        return out
-
-    @classmethod
-    def from_dict(cls, data: dict, where: str) -> Camera:
-        """The camera of a camera file's object (``where`` names it in errors)."""
-        missing = [k for k in PINHOLE_KEYS if k not in data]
-        if missing:
-            raise CameraError(f"{where} lacks {', '.join(missing)}")
-        values = {}
-        for key in PINHOLE_KEYS:
-            value = data[key]
-            if isinstance(value, bool) or not isinstance(value, int | float):
-                raise CameraError(f"{where}: {key} must be a number, got {value!r}")
-            if not np.isfinite(value):
-                raise CameraError(f"{where}: {key} must be finite, got {value!r}")
-            values[key] = value
-        if values["width"] != int(values["width"]) or values["height"] != int(values["height"]):
-            raise CameraError(f"{where}: width and height must be whole pixels")
-        values["width"], values["height"] = int(values["width"]), int(values["height"])
-        return cls(**values)
+    def check_monotonic(self, where: str) -> None:
+        """As ``Lens.check_monotonic``, only for a distorted pinhole."""
+        if self.distorted:
+            super().check_monotonic(where)

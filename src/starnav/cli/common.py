@@ -10,6 +10,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import IO, Any, Protocol
 
+from starnav.camera import MODELS
 from starnav.catalog import DEFAULT_MAG_LIMIT
 from starnav.errors import StarnavError
 from starnav.fov import DEFAULT_FOV_RANGE_DEG
@@ -129,6 +130,13 @@ def add_fov_search(
     )
     if camera_help:
         fov.add_argument("--camera", help=camera_help)
+        p.add_argument(
+            "--lens",
+            choices=tuple(MODELS),
+            default="pinhole",
+            help="the lens model when no camera file is given (default pinhole; a fisheye "
+            "model's focal length is scanned over --fov-range, or within 5 %% of --fov-deg)",
+        )
 
 
 def add_catalog(p: argparse.ArgumentParser) -> None:

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from starnav.api import DEFAULT_MAX_FALSE_MATCH_PROBABILITY, DEFAULT_SIGMA_PX, make_camera
+from starnav.api import DEFAULT_MAX_FALSE_MATCH_PROBABILITY, DEFAULT_SIGMA_PX
 from starnav.cli.common import (
     EXIT_BAD_INPUT,
     EXIT_NOT_SOLVED,
@@ -40,8 +40,12 @@ def add_parser(subparsers: Subparsers) -> None:
         "stars",
         help="CSV with header: x,y and optionally label, flux or mag; or a directory of them",
     )
-    add_fov_search(p, "horizontal field of view (without it the FOV is searched)")
-    p.add_argument("--width", type=positive_int, required=True, help="image width (px)")
+    add_fov_search(
+        p,
+        "horizontal field of view (without it the FOV is searched)",
+        camera_help="camera file (any lens model; width and height come from it)",
+    )
+    p.add_argument("--width", type=positive_int, help="image width (px; or give --camera)")
     p.add_argument("--height", type=positive_int, help="image height (px; default: width)")
     add_catalog(p)
     p.add_argument(
@@ -94,10 +98,14 @@ def prior_attitude(args: argparse.Namespace) -> np.ndarray | None:
 
 def solve_options(args: argparse.Namespace) -> dict:
     """The solver options ``identify`` takes from its command line (one list or many)."""
+    if args.camera is None and args.width is None:
+        raise StarnavError("give --width (and --fov-deg or --fov-range), or a --camera file")
     return dict(
         width=args.width,
         height=args.height,
         fov_deg=args.fov_deg,
+        camera=args.camera,
+        lens=args.lens,
         catalog=args.catalog,
         mag_limit=args.mag_limit,
         epoch_year=args.epoch,
@@ -116,7 +124,8 @@ def _check_fov_search(args: argparse.Namespace, prior: np.ndarray | None) -> Non
         "without it the FOV search picks the catalog depth of each FOV band and fits the "
         "focal length"
     )
-    if prior is not None or args.algorithm != DEFAULT_ALGORITHM or args.mag_limit is not None:
+    wide = args.lens != "pinhole"  # the focal scan of a fisheye model takes a catalog depth
+    if prior is not None or args.algorithm != DEFAULT_ALGORITHM or (args.mag_limit and not wide):
         raise StarnavError(f"--prior-*, --algorithm and --mag-limit need --fov-deg ({why})")
     if args.algorithm_option:
         raise StarnavError(f"--algorithm-option needs --fov-deg ({why})")
@@ -129,7 +138,7 @@ def run(args: argparse.Namespace) -> int:
         return run_directory(args, source)
     stars = read_star_csv(args.stars)
     prior = prior_attitude(args)
-    if args.fov_deg is None:
+    if args.fov_deg is None and args.camera is None:
         _check_fov_search(args, prior)
     result = solve_star_list(
         stars,
@@ -159,8 +168,7 @@ def _plot(args: argparse.Namespace, result: SolveResult) -> None:
         return
     from starnav.plot import plot_solution
 
-    camera = make_camera(width=args.width, height=args.height, fov_deg=s.fov_deg)
-    plot_solution(s, camera, result.database.catalog, args.plot)
+    plot_solution(s, s.camera, result.database.catalog, args.plot)
 
 
 def run_directory(args: argparse.Namespace, source: Path) -> int:
@@ -172,8 +180,8 @@ def run_directory(args: argparse.Namespace, source: Path) -> int:
         raise StarnavError(f"{args.stars!r} holds no .csv star lists")
     if args.plot or prior_attitude(args) is not None:
         raise StarnavError("--plot and --prior-* take one star list, not a directory")
-    if args.fov_deg is None:
-        raise StarnavError("a directory of star lists needs --fov-deg")
+    if args.fov_deg is None and args.camera is None:
+        raise StarnavError("a directory of star lists needs --fov-deg or --camera")
     files = read_star_files(paths)
     options = solve_options(args)
     t0 = time.perf_counter()

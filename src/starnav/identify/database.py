@@ -38,7 +38,9 @@ def cache_dir() -> Path:
 class PairDatabase:
     """Catalog star pairs with their angular separation, sorted by angle.
 
-    ``pair_a``, ``pair_b``: catalog row indices (a < b); ``pair_angle_rad`` ascending.
+    ``pair_a``, ``pair_b``: catalog row indices (a < b); ``pair_angle_rad`` ascending;
+    ``pair_stars``: the pairs join the brightest this many catalog stars (all of them but
+    in wide fields; the verification always searches the whole catalog).
     ``build_s``: seconds the build took (kept in the cache file, so also shown when loaded);
     ``from_cache``: whether it was loaded from disk; ``path``: the cache file, if any.
     """
@@ -52,6 +54,7 @@ class PairDatabase:
     build_s: float
     from_cache: bool
     path: Path | None
+    pair_stars: int = 0
 
     @property
     def nbytes(self) -> int:
@@ -181,17 +184,32 @@ def build_pairs(vectors: np.ndarray, max_angle_rad: float):
     )
 
 
+def brightest_pairs(catalog: Catalog, max_angle_rad: float, n_stars: int):
+    """``build_pairs`` among the brightest ``n_stars`` of ``catalog``, as catalog rows."""
+    rows = np.sort(np.argsort(catalog.mag, kind="stable")[:n_stars])
+    a, b, ang, _ = build_pairs(catalog.vectors[rows], max_angle_rad)
+    index_type = a.dtype if len(catalog) <= np.iinfo(np.uint16).max else np.int32
+    return rows[a].astype(index_type), rows[b].astype(index_type), ang  # rows ascending: a < b
+
+
 def build_database(
-    catalog: Catalog, max_angle_deg: float, *, use_cache: bool = True
+    catalog: Catalog,
+    max_angle_deg: float,
+    *,
+    use_cache: bool = True,
+    pair_stars: int | None = None,
 ) -> PairDatabase:
-    """The pair database of ``catalog`` for pairs up to ``max_angle_deg`` (rounded up).
+    """The pair database of ``catalog`` for pairs up to ``max_angle_deg`` (rounded up),
+    among its brightest ``pair_stars`` (default all).
 
     Loaded from the disk cache when an identical one was built before.
     """
     max_angle_deg = database_angle_deg(max_angle_deg)
     max_angle_rad = float(np.radians(max_angle_deg))
+    n_pair = len(catalog) if pair_stars is None else min(int(pair_stars), len(catalog))
+    subset = "" if n_pair == len(catalog) else f"|{n_pair}"
     key = hashlib.sha1(
-        f"{_FORMAT_VERSION}|{catalog.fingerprint}|{max_angle_deg:.3f}".encode()
+        f"{_FORMAT_VERSION}|{catalog.fingerprint}|{max_angle_deg:.3f}{subset}".encode()
     ).hexdigest()[:20]
     path = cache_dir() / f"pairs-{key}.npz"
     data = load_cached(path) if use_cache else None
@@ -206,9 +224,14 @@ def build_database(
             float(data["build_s"]),
             True,
             path,
+            n_pair,
         )
     t0 = time.perf_counter()
-    a, b, ang, tree = build_pairs(catalog.vectors, max_angle_rad)
+    if subset:
+        a, b, ang = brightest_pairs(catalog, max_angle_rad, n_pair)
+        tree = cKDTree(catalog.vectors)
+    else:
+        a, b, ang, tree = build_pairs(catalog.vectors, max_angle_rad)
     build_s = time.perf_counter() - t0
     saved = save_cached(path, a=a, b=b, angle=ang, build_s=build_s) if use_cache else None
-    return PairDatabase(catalog, max_angle_rad, a, b, ang, tree, build_s, False, saved)
+    return PairDatabase(catalog, max_angle_rad, a, b, ang, tree, build_s, False, saved, n_pair)

@@ -109,8 +109,9 @@ def solution_of(
         n_matched=len(obs),
         algorithm="",
         catalog=cat.name,
-        k1=camera.k1,
-        k2=camera.k2,
+        camera_model=camera.model,
+        camera=camera,
+        **{name: getattr(camera, name) for name in camera.coefficients},
     )
 
 

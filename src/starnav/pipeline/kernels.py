@@ -16,7 +16,7 @@ import numpy as np
 from numba import njit
 
 from starnav.attitude.kernels import fit, free_focal_step, studentized
-from starnav.camera.kernels import field_cos, pixels_to_bearings, sees
+from starnav.camera.kernels import N_INTRINSIC, field_cos, pixels_to_bearings, sees
 from starnav.identify.kernels import chord, cone, false_match_radii, pair_catalog
 
 MAX_REMATCH = 5  # fit / rematch rounds
@@ -109,7 +109,7 @@ def expected_stars(R, sky, model, p, width, height, work):
     limit = field_cos(model, p, width, height)
     n_front = cone(R[2], chord(math.acos(limit)) ** 2, sky, everything, work)
     J_c = np.empty((2, 3))
-    J_p = np.empty((2, 3))
+    J_p = np.empty((2, N_INTRINSIC))
     inside = 0
     for m in range(n_front):
         row = work[m]

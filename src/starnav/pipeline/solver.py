@@ -9,6 +9,7 @@ the same way.
 
 from __future__ import annotations
 
+import copy
 import sys
 import threading
 import time
@@ -33,7 +34,9 @@ DEFAULT_SIGMA_PX = 1.0
 DEFAULT_MAX_FALSE_MATCH_PROBABILITY = 1e-4
 DEFAULT_MIN_MATCHED_FRACTION = 0.5
 MAX_PAIRS = 3e7  # largest pair database built (about 0.5 GB)
-_DATABASES: dict[tuple[str, float], PairDatabase] = {}  # in-memory, per process
+MAX_PAIR_DEG = 60.0  # wider fields identify on star triangles of sides up to this (degrees)
+WIDE_PAIR_CANDIDATES = 2000  # catalog pairs a measured side of a wide field may match
+_DATABASES: dict[tuple[str, float, int], PairDatabase] = {}  # in-memory, per process
 _LOADED: set[str] = set()  # what this process has run once (its machine code is loaded)
 
 
@@ -66,30 +69,43 @@ class SolveSettings:
         if not 0.0 < p < 1.0:
             raise StarnavError(f"max_false_match_probability must be in (0, 1), got {p!r}")
 
-    def match_settings(self, focal_px: float) -> MatchSettings:
-        """The identification's tolerances at a focal length of ``focal_px``."""
+    def match_settings(self, camera: CameraModel) -> MatchSettings:
+        """The identification's tolerances through ``camera`` (its coarsest angular scale)."""
         return MatchSettings.for_focal(
             self.sigma_px,
-            focal_px,
+            camera.scale_px_per_rad,
             max_false_match_probability=self.max_false_match_probability,
             parity=self.parity,
         )
 
 
 def get_database(catalog: Catalog, camera: CameraModel) -> PairDatabase:
-    """The pair database for this catalog and field (memory, then disk cache, then built)."""
-    max_angle_deg = float(np.degrees(2.0 * camera.half_diagonal_rad))
+    """The pair database for this catalog and field (memory, then disk cache, then built):
+    pairs up to the field's diagonal, or ``MAX_PAIR_DEG`` for wider fields (a 180° field
+    holds every pair of its half of the sky; its triangles are looked up among the nearer
+    stars, and verified over the whole field). In wide fields the pairs join only the
+    brightest catalog stars, as many as keep about ``WIDE_PAIR_CANDIDATES`` catalog pairs
+    within the tolerance of a side measured to 1 px."""
+    field_deg = float(np.degrees(2.0 * camera.half_diagonal_rad))
+    max_angle_deg = min(field_deg, MAX_PAIR_DEG)
+    pair_stars = len(catalog)
+    if field_deg > MAX_PAIR_DEG:
+        angle = np.radians(max_angle_deg)
+        window = 2.0 * MatchSettings.for_focal(1.0, camera.scale_px_per_rad).pair_tol_rad
+        # pairs within the window: n^2 (1 - cos angle) / 4 spread over the angle
+        n = np.sqrt(4.0 * WIDE_PAIR_CANDIDATES * angle / (window * (1.0 - np.cos(angle))))
+        pair_stars = min(len(catalog), int(n))
     # pairs expected for n stars spread over the sky: n^2 (1 - cos angle) / 4
-    expected_pairs = len(catalog) ** 2 * (1.0 - np.cos(np.radians(max_angle_deg))) / 4.0
+    expected_pairs = pair_stars**2 * (1.0 - np.cos(np.radians(max_angle_deg))) / 4.0
     if expected_pairs > MAX_PAIRS:
         raise CatalogError(
             f"{len(catalog)} catalog stars in a {camera.fov_deg:.3g}° field make about "
             f"{expected_pairs:.2g} star pairs (limit {MAX_PAIRS:.0e}): use a brighter "
             "magnitude limit"
         )
-    key = (catalog.fingerprint, database_angle_deg(max_angle_deg))
+    key = (catalog.fingerprint, database_angle_deg(max_angle_deg), pair_stars)
     if key not in _DATABASES:
-        _DATABASES[key] = build_database(catalog, max_angle_deg)
+        _DATABASES[key] = build_database(catalog, max_angle_deg, pair_stars=pair_stars)
     return _DATABASES[key]
 
 
@@ -180,7 +196,15 @@ class Solver:
         self.identifier = identifier
         self.settings = settings or SolveSettings()
         self.database = get_database(catalog, camera)
-        self.match_settings = self.settings.match_settings(camera.focal_px)
+        self.match_settings = self.settings.match_settings(camera)
+
+    def with_camera(self, camera: CameraModel) -> Solver:
+        """This solver through another ``camera`` of the same lens (a trial focal length of
+        a search), on the same database."""
+        other = copy.copy(self)
+        other.camera = camera
+        other.match_settings = self.settings.match_settings(camera)
+        return other
 
     def solve(
         self,
