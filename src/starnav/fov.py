@@ -39,6 +39,8 @@ from starnav.starlist import StarList, check_star_list
 DEFAULT_FOV_RANGE_DEG = (5.0, 40.0)
 FOV_LIMITS_DEG = (1.0, 100.0)
 LENS_FOV_LIMITS_DEG = (10.0, 360.0)  # the focal scan of a fisheye model
+SCAN_STARS = 60  # the focal scan identifies the brightest this many stars,
+SCAN_HYPOTHESES = 2000  # testing at most this many hypotheses per trial focal length
 GIVEN_FOV_TOLERANCE = 0.05  # a given FOV is searched within +-5 %
 CAMERA_FOV_TOLERANCE = 0.01  # a calibrated camera's within +-1 %
 _STARS_PER_FIELD = 40.0  # catalog depth of a band: mean stars in one of its pattern fields
@@ -262,24 +264,27 @@ def scan_focal(
     catalog: Catalog,
     settings: SolveSettings,
 ) -> SolveResult:
-    """A lens of known model but unknown focal length: the solver's identification at trial
-    focal lengths over the horizontal ``fov_range_deg`` (degrees), from the middle outward,
-    steps small enough that the longest star triangle side keeps within the pair tolerance;
-    the first verified one is fitted with the focal length free and returned."""
+    """A lens of known model but unknown focal length: the solver's identification of the
+    brightest ``SCAN_STARS`` at trial focal lengths over the horizontal ``fov_range_deg``
+    (degrees), from the middle outward, in steps small enough that the longest star triangle
+    side keeps within the pair tolerance; the first verified one's fitted focal length then
+    solves the whole list (focal length free)."""
     t0 = time.perf_counter()
     f_lo, f_hi = (type(base).from_fov(v, base.width, base.height).focal_px for v in fov_range_deg)
     f_lo, f_hi = min(f_lo, f_hi), max(f_lo, f_hi)
     middle = base.with_focal(math.sqrt(f_lo * f_hi))
     solver = Solver(middle, catalog, settings=replace(settings, fit_focal=True))
     tol_px = solver.match_settings.pair_tol_rad * middle.scale_px_per_rad
-    longest = solver.database.max_angle_rad
-    half = math.log1p(tol_px / (longest * middle.focal_px))  # each trial covers +-half
+    half = math.log1p(tol_px / (solver.database.max_angle_rad * middle.focal_px))
     n = math.ceil(0.5 * math.log(f_hi / f_lo) / (2.0 * half) - 1e-9)
     focals = [middle.focal_px * math.exp(2.0 * half * k) for k in sorted(range(-n, n + 1), key=abs)]
+    brightest = brightness_order(stars)[:SCAN_STARS]
+    few = StarList(stars.xy[brightest], tuple(stars.labels[i] for i in brightest), None)
     result = None
     for focal in focals:
-        result = solver.with_camera(base.with_focal(focal)).solve(stars)
+        result = solver.with_camera(base.with_focal(focal), SCAN_HYPOTHESES).solve(few)
         if result.solution is not None:
+            result = solver.with_camera(base.with_focal(result.solution.focal_px)).solve(stars)
             break
     ms = elapsed_ms(t0)
     if result.solution is not None:

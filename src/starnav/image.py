@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from starnav.camera import Camera, load_camera
+from starnav.camera import CameraModel, load_camera
 from starnav.catalog import Catalog
 from starnav.detect.read import read_image
 from starnav.detect.stars import Detections, detect_stars
@@ -36,7 +36,7 @@ class ImageSolveResult:
     solution: Solution | None
     reason: str
     detections: Detections
-    camera: Camera | None
+    camera: CameraModel | None
     read_ms: float
     detect_ms: float
     solve_ms: float
@@ -75,7 +75,8 @@ def solve_image(
     *,
     fov_deg: float | None = None,
     fov_range_deg: tuple[float, float] = DEFAULT_FOV_RANGE_DEG,
-    camera: Camera | str | Path | None = None,
+    camera: CameraModel | str | Path | None = None,
+    lens: str = "pinhole",
     fit_distortion: bool = False,
     max_stars: int = DEFAULT_MAX_STARS,
     threshold_sigma: float = 5.0,
@@ -88,15 +89,17 @@ def solve_image(
     """Solve an image file (FITS, PNG, JPEG, TIFF) or a 2-D array (row 0 at the top).
 
     The field of view is searched within ``fov_range_deg`` (horizontal, degrees) unless
-    ``fov_deg`` (searched within 5 %) or a calibrated ``camera`` (a ``Camera`` or a camera
-    file; within 1 %) is given; the fitted one is reported either way. ``max_stars``: the
+    ``fov_deg`` (searched within 5 %) or a calibrated ``camera`` (a camera model or a camera
+    file; within 1 %) is given; the fitted one is reported either way. ``lens``: the lens
+    model when no camera is given (``starnav.camera.MODELS``; a fisheye model's focal length
+    is scanned, see ``starnav.fov.scan_focal``). ``max_stars``: the
     brightest this many detections are used; ``threshold_sigma``: detection threshold over
     the background noise; ``sigma_px``: centroid 1-sigma assumed by the matching
     tolerances. Other keywords: see ``starnav.fov.solve_fov``.
     """
     if isinstance(camera, str | Path):
         camera = load_camera(camera)
-    search_range(fov_deg, fov_range_deg, camera)  # a bad range is an error before any work
+    search_range(fov_deg, fov_range_deg, camera, lens)  # a bad range fails before any work
     if isinstance(max_stars, bool) or not (isinstance(max_stars, int) and max_stars >= 4):
         raise ImageError(f"max_stars must be an integer >= 4, got {max_stars!r}")
     t0 = time.perf_counter()
@@ -133,6 +136,7 @@ def solve_image(
         fov_deg=fov_deg,
         fov_range_deg=fov_range_deg,
         camera=camera,
+        lens=lens,
         fit_distortion=fit_distortion,
         sigma_px=sigma_px,
         catalog=catalog,

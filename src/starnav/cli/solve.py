@@ -36,7 +36,8 @@ def add_parser(subparsers: Subparsers) -> None:
     add_fov_search(
         p,
         "horizontal FOV, roughly (searched ±5 %%)",
-        camera_help="camera file from 'starnav calibrate' (searched ±1 %%)",
+        camera_help="camera file (any lens model, e.g. from 'starnav calibrate'; its focal "
+        "length searched ±1 %%)",
     )
     p.add_argument(
         "--fit-distortion", action="store_true", help="fit radial distortion k1, k2 as well"
@@ -87,6 +88,7 @@ def run(args: argparse.Namespace) -> int:
         fov_deg=args.fov_deg,
         fov_range_deg=tuple(args.fov_range),
         camera=args.camera,
+        lens=args.lens,
         fit_distortion=args.fit_distortion,
         max_stars=args.max_stars,
         threshold_sigma=args.threshold_sigma,
@@ -129,8 +131,9 @@ def _print_text(res: ImageSolveResult) -> None:
         )
         return
     print_solution(s)
+    coefficients = "".join(f" {k} {getattr(cam, k):.5f}" for k in cam.coefficients)
     print(
-        f"  camera: FOV {cam.fov_deg:.4f}°, "
-        f"k1 {cam.k1:.5f} k2 {cam.k2:.5f}; {len(res.detections.xy)} stars detected; "
+        f"  camera: {cam.model}, FOV {cam.fov_deg:.4f}°,{coefficients}; "
+        f"{len(res.detections.xy)} stars detected; "
         f"read {res.read_ms:.1f} ms, detect {res.detect_ms:.1f} ms, solve {res.solve_ms:.1f} ms"
     )

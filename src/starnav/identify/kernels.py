@@ -53,6 +53,9 @@ def angle(a, b):
     return 2.0 * math.atan2(math.sqrt(d), math.sqrt(s))
 
 
+WIDE_CONE_RAD = math.radians(60.0)  # cones wider than this are searched row by row
+
+
 @njit(cache=True)
 def cone(axis, chord2, sky, allowed, out):
     """Allowed rows of the sky's vectors within chord sqrt(chord2) of ``axis``, written to
@@ -60,6 +63,16 @@ def cone(axis, chord2, sky, allowed, out):
     vectors, start, rows, n_dec, n_ra, step = sky
     n = 0
     radius = 2.0 * math.asin(min(1.0, 0.5 * math.sqrt(chord2))) + 1e-9
+    if radius > WIDE_CONE_RAD:  # a wide field's cone: every row beats visiting the cells
+        for r in range(len(vectors)):
+            if allowed[r]:
+                dx = vectors[r, 0] - axis[0]
+                dy = vectors[r, 1] - axis[1]
+                dz = vectors[r, 2] - axis[2]
+                if dx * dx + dy * dy + dz * dz <= chord2:
+                    out[n] = r
+                    n += 1
+        return n
     dec0 = math.asin(max(-1.0, min(1.0, axis[2])))
     ra0 = math.atan2(axis[1], axis[0])
     lo, hi = dec0 - radius, dec0 + radius

@@ -198,12 +198,15 @@ class Solver:
         self.database = get_database(catalog, camera)
         self.match_settings = self.settings.match_settings(camera)
 
-    def with_camera(self, camera: CameraModel) -> Solver:
+    def with_camera(self, camera: CameraModel, max_hypotheses: int | None = None) -> Solver:
         """This solver through another ``camera`` of the same lens (a trial focal length of
-        a search), on the same database."""
+        a search), on the same database; ``max_hypotheses``: another budget of the
+        identification."""
         other = copy.copy(self)
         other.camera = camera
         other.match_settings = self.settings.match_settings(camera)
+        if max_hypotheses is not None:
+            other.match_settings = replace(other.match_settings, max_hypotheses=max_hypotheses)
         return other
 
     def solve(
