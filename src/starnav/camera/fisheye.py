@@ -69,9 +69,9 @@ class Fisheye(Lens):
         """The camera whose horizontal field across ``width`` px is ``fov_deg`` degrees
         (``coefficients``: the model's, e.g. k1..k4 of Kannala-Brandt)."""
         top = 2.0 * math.degrees(kernels().model_theta_max(cls.model_code))
-        if not (np.isfinite(fov_deg) and 0.0 < fov_deg < top):
+        if not (np.isfinite(fov_deg) and 0.0 < fov_deg <= top):
             raise CameraError(
-                f"fov_deg must be above 0 and below {top:.0f} degrees for the {cls.model} "
+                f"fov_deg must be above 0 and at most {top:.0f} degrees for the {cls.model} "
                 f"model, got {fov_deg!r}"
             )
         height = width if height is None else height

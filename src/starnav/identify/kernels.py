@@ -54,6 +54,7 @@ def angle(a, b):
 
 
 WIDE_CONE_RAD = math.radians(60.0)  # cones wider than this are searched row by row
+WIDE_SCREEN_RAD = math.radians(35.0)  # wider fields screen hypotheses star by star
 
 
 @njit(cache=True)
@@ -479,8 +480,19 @@ def _screen(bearings, tri, triples, parities, sky, allowed, field_rad, screen2, 
     m = len(triples)
     agree = np.zeros(m, dtype=np.int64)
     ones = np.ones(3)
+    sky_b = np.empty(3)
     for h in range(m):
         R = wahba(tri, vectors[triples[h]], ones, parities[h])
+        if field_rad > WIDE_SCREEN_RAD:  # a wide field: look up each bearing's own cells
+            for b in range(len(bearings)):
+                for k in range(3):
+                    sky_b[k] = (
+                        R[0, k] * bearings[b, 0]
+                        + R[1, k] * bearings[b, 1]
+                        + R[2, k] * bearings[b, 2]
+                    )
+                agree[h] += cone(sky_b, screen2, sky, allowed, work) > 0
+            continue
         n_cone = cone(R[2], chord(field_rad) ** 2, sky, allowed, work)
         for c in range(n_cone):
             row = work[c]
