@@ -111,7 +111,7 @@ def _observation(**changes):
                     }
                 ]
             ),
-            "takes star lists, not images",
+            "sky.fits' does not exist",
         ),
         (
             _observation(
