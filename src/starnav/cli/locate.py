@@ -46,6 +46,11 @@ def add_parser(subparsers: Subparsers) -> None:
     p.add_argument("--trials", type=positive_int, default=50, help="per setting (default 50)")
     p.add_argument("--fov-deg", type=finite, default=20.0, help="camera FOV (default 20)")
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument(
+        "--upward-camera",
+        metavar="CAMERA_JSON",
+        help="compare with one camera of this camera file looking straight up",
+    )
     p.add_argument("--plot", metavar="PNG", type=png_path, help="draw the two curves here")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(run=run_study)
@@ -100,12 +105,16 @@ def run(args: argparse.Namespace) -> int:
 
 def run_study(args: argparse.Namespace) -> int:
     """The Monte Carlo sensitivity study: tables (or JSON) and, with --plot, the curves."""
-    from starnav.studies.locate import format_tables, plot_study, run_locate_study
+    from starnav.camera import load_camera
+    from starnav.studies.locate import format_tables, plot_study, run_locate_study, upward_camera
 
     if not 1.0 <= args.fov_deg <= 60.0:
         raise StarnavError(f"--fov-deg must be between 1 and 60, got {args.fov_deg:g}")
     check_parent_dir("--plot", args.plot)
-    tables = run_locate_study(trials=args.trials, fov_deg=args.fov_deg, seed=args.seed)
+    compare = (upward_camera(load_camera(args.upward_camera)),) if args.upward_camera else ()
+    tables = run_locate_study(
+        trials=args.trials, fov_deg=args.fov_deg, seed=args.seed, compare=compare
+    )
     if args.plot:
         plot_study(tables, args.plot)
     if args.json:
