@@ -290,3 +290,21 @@ def test_image_times_that_disagree_or_lack_an_offset(small, tmp_path, capsys):
     # the file's utc is used as it is, whatever the images say
     path = _write_obs(tmp_path, sky, ["a.fits", "b.fits", "c.jpg"], utc="2025-06-01T22:00:00Z")
     assert read_observation(path).utc_source == "file"
+
+
+def test_the_committed_example(capsys):
+    """docs/examples/locate_images (made by its make_images.py) works from the CLI, from any
+    working directory: its utc from the FITS and JPEG headers, one camera's FOV searched."""
+    folder = Path(__file__).parents[1] / "docs" / "examples" / "locate_images"
+    truth = json.loads((folder / "truth.json").read_text())
+    assert main(["locate", str(folder / "obs.json"), "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["utc"] == "2025-06-01T22:00:00.000Z"
+    assert "fore: FITS DATE-OBS" in out["utc_source"]
+    assert "right: EXIF DateTimeOriginal" in out["utc_source"]
+    assert all(c["stars_used"] >= 10 for c in out["cameras"])
+    m_north, m_east = radii_of_curvature_m(truth["lat_deg"])
+    north = np.radians(out["lat_deg"] - truth["lat_deg"]) * m_north
+    east = np.radians(out["lon_deg"] - truth["lon_deg"]) * m_east * np.cos(np.radians(47.37))
+    assert np.hypot(north, east) < 200.0
+    assert abs(out["azimuth_deg"] - truth["azimuth_deg"]) * 3600 < 10.0
