@@ -130,6 +130,18 @@ def test_camera_file_and_inline_camera(three_1024, tmp_path):
         assert fix.lat_deg == pytest.approx(by_fov.lat_deg, abs=1e-9)
         assert fix.azimuth_deg == pytest.approx(by_fov.azimuth_deg, abs=1e-9)
         assert fix.cameras[0].focal_px == pytest.approx(camera.focal_px)
+    # a star list with a camera takes its size from the camera, and must agree with a given one
+    data = json.loads((folder / "obs.json").read_text())  # the inline camera's
+    views = read_observation(folder / "obs.json").cameras
+    for entry, view in zip(data["cameras"], views, strict=True):
+        entry["stars"] = view.xy.tolist()
+        del entry["image"]
+    observation = parse_observation(data)
+    assert [(v.width, v.height) for v in observation.cameras] == [(1024, 1024)] * 3
+    assert locate(observation, sigma_px=0.1).lat_deg == pytest.approx(by_fov.lat_deg, abs=1e-9)
+    data["cameras"][0]["width"] = 512
+    with pytest.raises(ObservationError, match="width 512 px, but the camera's is 1024 px"):
+        parse_observation(data)
 
 
 def test_fov_searched_when_not_given(three_1024):

@@ -254,7 +254,9 @@ def identify_view(
         )
         base: CameraModel = Camera(view.width, view.height, 1.0)
     else:
-        base = view.camera or Camera.from_fov(view.fov_deg, view.width, view.height)
+        base = view.camera
+        if base is None:
+            base = Camera.from_fov(view.fov_deg, view.width, view.height)
         settings = SolveSettings(sigma_px=sigma_px)
         result = Solver(base, catalog, settings=settings).solve(stars)
     s = result.solution

@@ -116,8 +116,10 @@ def _exif_time(path: Path) -> ImageTime | None:
     try:
         with Image.open(path) as img:
             exif = img.getexif().get_ifd(_EXIF_IFD)
-    except (OSError, UnidentifiedImageError, ValueError, SyntaxError) as exc:
-        raise ImageError(f"cannot read image file {str(path)!r}: {exc}") from None
+    except (OSError, UnidentifiedImageError, ValueError, SyntaxError):
+        # its pixels were read (16-bit colour TIFF / PNG go past Pillow): it records no
+        # time that Pillow can see
+        return None
     text = exif.get(_DATE_TIME_ORIGINAL)
     if text is None:
         return None
