@@ -111,7 +111,7 @@ def _observation(**changes):
                     }
                 ]
             ),
-            "takes star lists, not images",
+            "sky.fits' does not exist",
         ),
         (
             _observation(
@@ -198,3 +198,38 @@ def test_cli_locate_study(capsys, tmp_path):
     out = capsys.readouterr().out
     assert "| 3″ | 126.99 |" in out and png.stat().st_size > 10_000
     assert main(["locate-study", "--fov-deg", "0"]) == 2
+
+
+def test_study_takes_the_camera_set_up_one_upward_camera():
+    """One upward-looking camera (a 90° pinhole standing in for a fisheye) as the study's
+    set-up and compared with three 20° cameras at the same star and tilt errors."""
+    from starnav.camera import Camera
+    from starnav.studies.locate import run_locate_study, three_cameras, upward_camera
+
+    up = upward_camera(Camera.from_fov(90.0, 1024))
+    tables = run_locate_study(trials=3, fovs_deg=(), cameras=up, progress=False)
+    assert [r.setting for r in tables["cameras"]] == ["one upward 90° camera"]
+    assert tables["fov"] == []
+    for row, tilt in zip(tables["tilt"], (3, 5, 10, 15, 20), strict=True):
+        assert row.mean_position_m == pytest.approx(30.87 * tilt, rel=0.03)
+    tables = run_locate_study(
+        trials=3, fovs_deg=(), compare=(up,), compare_conditions=((2.0, 0.0),), progress=False
+    )
+    three, upward = tables["setups"]
+    assert three.setting == f"{three_cameras().label}, 2″ stars, 0″ tilt"
+    assert upward.setting.startswith("one upward 90° camera")
+    assert upward.stars > 3 * three.stars  # 2.1 sr of sky against 3 x 0.12 sr
+    assert 0 < upward.mean_position_m < 30 and 0 < three.mean_position_m < 30
+
+
+def test_cli_locate_study_upward_camera(capsys, tmp_path):
+    from starnav.camera import Camera, save_camera
+
+    up = tmp_path / "up.json"
+    save_camera(up, Camera.from_fov(90.0, 512))
+    assert main(["locate-study", "--trials", "2", "--upward-camera", str(up)]) == 0
+    out = capsys.readouterr().out
+    assert "| camera set-up |" in out and "| one upward 90° camera, 2″ stars, 5″ tilt |" in out
+    assert main(["locate-study", "--upward-camera", str(tmp_path / "none.json")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "none.json does not exist" in err and "\n" not in err

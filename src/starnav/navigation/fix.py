@@ -1,7 +1,9 @@
 """Latitude, longitude and heading from identified stars, gravity and UTC.
 
 Method (the reference work's, domain.md section 3): every camera's stars are identified by the
-lost-in-space solver and turned into directions in the body frame; Wahba's problem (SVD, the
+lost-in-space solver (with its lens model, or a pinhole of its field of view, or with the
+field of view searched, as ``starnav solve`` does) and turned into directions in the body frame
+through the lens model with the focal length the solve settled on; Wahba's problem (SVD, the
 loss sum |b_i - R s_i|^2 over all cameras together) gives the body's orientation against the
 stars' directions. Where that orientation puts gravity is the local vertical: the site is where
 the WGS84 ellipsoid normal points along it. A first fix comes from geocentric directions in the
@@ -23,9 +25,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from starnav.attitude.wahba import wahba
-from starnav.camera import Camera
+from starnav.camera import Camera, CameraModel
 from starnav.catalog import Catalog, load_catalog
 from starnav.errors import StarnavError
+from starnav.fov import solve_fov
 from starnav.geometry import ARCSEC_PER_RAD
 from starnav.navigation.frames import (
     enu_directions,
@@ -33,8 +36,9 @@ from starnav.navigation.frames import (
     parse_utc,
     radii_of_curvature_m,
 )
-from starnav.navigation.observation import Observation
+from starnav.navigation.observation import CameraView, Observation
 from starnav.pipeline import Solver, SolveSettings
+from starnav.results import SolveResult
 from starnav.starlist import check_star_list
 
 _MAX_ITERATIONS = 8
@@ -48,7 +52,8 @@ class FixError(StarnavError):
 @dataclass(frozen=True)
 class CameraReport:
     """What one camera contributed: ``stars_used`` identified stars (0 when ``reason`` says
-    why not), and its boresight RA/Dec (degrees) when it was solved."""
+    why not), and when it was solved its boresight RA/Dec (degrees) and the ``focal_px`` its
+    bearings were made with (the searched one when its field of view was not given)."""
 
     name: str
     n_points: int
@@ -56,6 +61,7 @@ class CameraReport:
     reason: str
     ra_deg: float | None = None
     dec_deg: float | None = None
+    focal_px: float | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -192,32 +198,33 @@ def locate(
         cat_fix = load_catalog(None, mag_limit=mag_limit, epoch_year=float(t.decimalyear))
     else:
         cat = cat_fix = load_catalog(catalog, mag_limit=mag_limit)
-    reports, body, rows = [], [], []
+    reports, body, rows, focals = [], [], [], []
     for view in observation.cameras:
         if len(view.xy) < 3:
             reports.append(CameraReport(view.name, len(view.xy), 0, "fewer than 3 stars"))
             continue
-        view_camera = Camera.from_fov(view.fov_deg, view.width, view.height)
-        stars = check_star_list(view.xy, width=view_camera.width, height=view_camera.height)
-        result = Solver(view_camera, cat, settings=SolveSettings(sigma_px=sigma_px)).solve(stars)
+        result, camera = identify_view(view, cat, sigma_px=sigma_px)
         s = result.solution
         if s is None:
             reports.append(CameraReport(view.name, len(view.xy), 0, result.reason))
             continue
         matched = [m for m in s.stars if m.catalog_id is not None]
-        c = view_camera.with_focal(s.focal_px).pixels_to_bearings(
-            np.array([[m.x, m.y] for m in matched])
-        )
+        c = camera.pixels_to_bearings(np.array([[m.x, m.y] for m in matched]))
         body.append(c @ view.R_cam_from_body)  # b = R^T c, row-wise
         rows.append(cat_fix.rows([m.catalog_id for m in matched]))
-        reports.append(CameraReport(view.name, len(view.xy), len(matched), "", s.ra_deg, s.dec_deg))
+        focals.append(camera.focal_px)
+        reports.append(
+            CameraReport(
+                view.name, len(view.xy), len(matched), "", s.ra_deg, s.dec_deg, camera.focal_px
+            )
+        )
     if not body:
         raise FixError(
             "no camera's stars could be identified: "
             + "; ".join(f"{r.name}: {r.reason}" for r in reports)
         )
     rows_all = np.concatenate(rows)
-    focal = min(Camera.from_fov(v.fov_deg, v.width, v.height).focal_px for v in observation.cameras)
+    focal = min(focals)
     fix = fix_from_directions(
         np.vstack(body),
         cat_fix.ra_deg[rows_all],
@@ -231,3 +238,26 @@ def locate(
     return Fix(
         **{**fix.__dict__, "cameras": tuple(reports), "time_ms": (_time.perf_counter() - t0) * 1e3}
     )
+
+
+def identify_view(
+    view: CameraView, catalog: Catalog, *, sigma_px: float = 1.0
+) -> tuple[SolveResult, CameraModel]:
+    """Identify one camera's stars in ``catalog``: with its lens model, or a pinhole of its
+    ``fov_deg``, or (neither given) with the field of view searched in ``starnav solve``'s
+    default range, among the same catalog's stars. Returns the solve and the camera model
+    with the focal length the solution settled on (the searched one, or the model's own)."""
+    stars = check_star_list(view.xy, width=view.width, height=view.height)
+    if view.camera is None and view.fov_deg is None:
+        result = solve_fov(
+            stars.xy, width=view.width, height=view.height, catalog=catalog, sigma_px=sigma_px
+        )
+        base: CameraModel = Camera(view.width, view.height, 1.0)
+    else:
+        base = view.camera
+        if base is None:
+            base = Camera.from_fov(view.fov_deg, view.width, view.height)
+        settings = SolveSettings(sigma_px=sigma_px)
+        result = Solver(base, catalog, settings=settings).solve(stars)
+    s = result.solution
+    return result, base if s is None else base.with_focal(s.focal_px)

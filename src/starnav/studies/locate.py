@@ -3,8 +3,11 @@ and the error of single star directions move the position and the heading.
 
 Monte Carlo on the real fix path (``fix_from_directions``): the stars a set of cameras sees at a
 known site and UTC are simulated once (``simulate_observation``); each trial perturbs them and
-the gravity vector and fixes again. Identification is not part of it (the stars are known), so
-the numbers isolate the geometry of the fix.
+the gravity vector and fixes again. The camera set-up is a parameter (``CameraSetup``: mounts
+and one lens model, any ``CameraModel``): three 20° cameras by default, or e.g. one camera
+looking up (``upward_camera``); other set-ups can be compared at the same star error and tilt.
+Identification is not part of it (the stars are known), so the numbers isolate the geometry of
+the fix.
 
 - tilt error t: gravity turned by exactly t about a random horizontal axis;
 - single-star error e: every star direction moved by an isotropic Gaussian error whose rms
@@ -18,6 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 from tqdm import tqdm
 
+from starnav.camera import Camera, CameraModel
 from starnav.geometry import ARCSEC_PER_RAD
 from starnav.navigation.fix import fix_from_directions
 from starnav.navigation.frames import radii_of_curvature_m
@@ -32,7 +36,33 @@ PUBLISHED_STAR = {
     5: (45.98, 1.805),
 }
 THREE_CAMERAS = ((0.0, 45.0), (120.0, 45.0), (240.0, 45.0))
+UPWARD = ((0.0, 90.0),)
 FEW_STARS = 3  # brightest stars per camera of the study's "few stars" columns
+COMPARE_CONDITIONS = ((2.0, 0.0), (2.0, 5.0))  # (star error, tilt error) arcsec of set-ups
+
+
+@dataclass(frozen=True)
+class CameraSetup:
+    """The star cameras of the platform: a ``label``, the ``mounts`` ((azimuth, elevation) of
+    each boresight in the body frame, degrees; elevation 90 looks straight up when level) and
+    the lens model ``camera`` they all have (any ``starnav.camera.CameraModel``)."""
+
+    label: str
+    mounts: tuple[tuple[float, float], ...]
+    camera: CameraModel
+
+
+def three_cameras(fov_deg: float = 20.0, width: int = 1024) -> CameraSetup:
+    """The reference set-up: three pinhole cameras of ``fov_deg`` (horizontal, degrees) and
+    ``width`` x ``width`` px, 120° apart in azimuth at 45° elevation."""
+    return CameraSetup(
+        f"three {fov_deg:g}° cameras", THREE_CAMERAS, Camera.from_fov(fov_deg, width)
+    )
+
+
+def upward_camera(camera: CameraModel, label: str | None = None) -> CameraSetup:
+    """One camera with the lens model ``camera`` looking straight up (body -z)."""
+    return CameraSetup(label or f"one upward {camera.fov_deg:.0f}° camera", UPWARD, camera)
 
 
 @dataclass(frozen=True)
@@ -85,7 +115,8 @@ def _tilt(gravity: np.ndarray, angle_rad: float, rng, *, both_axes: bool = False
 
 @dataclass(frozen=True)
 class Setup:
-    """Where and when the study's platform stands, and its cameras."""
+    """Where and when the study's platform stands, the size of its default cameras and the
+    faintest stars they see."""
 
     lat_deg: float = 34.26
     lon_deg: float = 108.94
@@ -149,28 +180,36 @@ def run_locate_study(
     fovs_deg: tuple[float, ...] = (5.0, 10.0, 20.0, 30.0),
     seed: int = 0,
     setup: Setup | None = None,
+    cameras: CameraSetup | None = None,
+    compare: tuple[CameraSetup, ...] = (),
+    compare_conditions: tuple[tuple[float, float], ...] = COMPARE_CONDITIONS,
     progress: bool = True,
 ) -> dict[str, list[StudyRow]]:
-    """The study's tables: ``tilt`` (tilt error alone, about one axis; ``tilt2``: that much
-    about each of two axes), ``star`` (single-star error alone, every star in view; ``star3``:
-    the 3 brightest per camera), ``cameras`` (one camera against three, 2″ star error) and
-    ``fov`` (2″ star error, three cameras, each field of view in ``fovs_deg``)."""
+    """The study's tables for the camera set-up ``cameras`` (default: ``three_cameras(fov_deg,
+    setup.width)``): ``tilt`` (tilt error alone, about one axis; ``tilt2``: that much about
+    each of two axes), ``star`` (single-star error alone, every star in view; ``star3``: the 3
+    brightest per camera), ``cameras`` (its first camera alone against all of them, 2″ star
+    error; the whole set-up only when it has one camera), ``fov`` (2″ star error, pinholes of
+    each field of view in ``fovs_deg`` on the set-up's mounts) and, when ``compare`` names
+    other set-ups, ``setups``: the set-up and each of those at every (star error, tilt error)
+    of ``compare_conditions`` (arcsec)."""
     setup = setup or Setup()
+    cameras = cameras or three_cameras(fov_deg, setup.width)
     rng = np.random.default_rng(seed)
 
-    def sky_for(fov):
+    def sky_for(lens, mounts=cameras.mounts):
         return simulate_observation(
             lat_deg=setup.lat_deg,
             lon_deg=setup.lon_deg,
             utc=setup.utc,
             heading_deg=setup.heading_deg,
-            mounts=THREE_CAMERAS,
-            fov_deg=fov,
-            width=setup.width,
+            mounts=mounts,
+            camera=lens,
             mag_limit=setup.mag_limit,
         )
 
-    sky = sky_for(fov_deg)
+    sky = sky_for(cameras.camera)
+    az = cameras.mounts[0][0]
     jobs = (
         [("tilt", f"{t}″", {"tilt_arcsec": t}) for t in PUBLISHED_TILT]
         + [("tilt2", f"{t}″", {"tilt_arcsec": t, "both_axes": True}) for t in PUBLISHED_TILT]
@@ -179,22 +218,37 @@ def run_locate_study(
             ("star3", f"{e}″", {"star_rms_arcsec": e, "brightest": FEW_STARS})
             for e in PUBLISHED_STAR
         ]
-        + [
-            ("cameras", "one camera (az 0°)", {"star_rms_arcsec": 2.0, "cameras": [0]}),
-            ("cameras", "three cameras", {"star_rms_arcsec": 2.0}),
-        ]
+        + (
+            [("cameras", f"one camera (az {az:g}°)", {"star_rms_arcsec": 2.0, "cameras": [0]})]
+            if len(cameras.mounts) > 1
+            else []
+        )
+        + [("cameras", cameras.label, {"star_rms_arcsec": 2.0})]
     )
     tables: dict[str, list[StudyRow]] = {k: [] for k in ("tilt", "tilt2", "star", "star3")}
     tables.update(cameras=[], fov=[])
-    bar = tqdm(total=len(jobs) + len(fovs_deg), desc="locate study", disable=not progress)
+    others = [(other, sky_for(other.camera, other.mounts)) for other in compare]
+    total = len(jobs) + len(fovs_deg) + (len(others) + 1) * len(compare_conditions) * bool(others)
+    bar = tqdm(total=total, desc="locate study", disable=not progress)
     for table, label, options in jobs:
         n, position, azimuth = _trials(sky, setup, trials, rng, **options)
         tables[table].append(_row(label, n, position, azimuth))
         bar.update()
     for fov in fovs_deg:
-        n, position, azimuth = _trials(sky_for(fov), setup, trials, rng, star_rms_arcsec=2.0)
+        lens = Camera.from_fov(fov, setup.width)
+        n, position, azimuth = _trials(sky_for(lens), setup, trials, rng, star_rms_arcsec=2.0)
         tables["fov"].append(_row(f"{fov:g}°", n, position, azimuth))
         bar.update()
+    if others:
+        tables["setups"] = []
+        for star, tilt in compare_conditions:
+            for which, its_sky in [(cameras, sky), *others]:
+                n, position, azimuth = _trials(
+                    its_sky, setup, trials, rng, star_rms_arcsec=star, tilt_arcsec=tilt
+                )
+                label = f"{which.label}, {star:g}″ stars, {tilt:g}″ tilt"
+                tables["setups"].append(_row(label, n, position, azimuth))
+                bar.update()
     bar.close()
     return tables
 
@@ -228,7 +282,11 @@ def format_tables(tables: dict[str, list[StudyRow]]) -> str:
             f"{few.mean_position_m:.2f} | {az:.3f} | {row.mean_azimuth_arcsec:.3f} | "
             f"{few.mean_azimuth_arcsec:.3f} |"
         )
-    for name, title in (("cameras", "cameras (2″ star error)"), ("fov", "field of view (2″)")):
+    titles = [("cameras", "cameras (2″ star error)"), ("fov", "field of view (2″)")]
+    titles += [("setups", "camera set-up")] if tables.get("setups") else []
+    for name, title in titles:
+        if not tables[name]:
+            continue
         lines += [
             "",
             f"| {title} | stars | mean position (m) | mean abs azimuth (″) |",
