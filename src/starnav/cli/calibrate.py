@@ -1,11 +1,12 @@
-"""``starnav calibrate``: focal length, principal point and distortion from star images."""
+"""``starnav calibrate``: focal length, principal point and the lens model's coefficients
+from star images."""
 
 from __future__ import annotations
 
 import argparse
 import sys
 
-from starnav.camera import CAMERA_FILE_KEYS
+from starnav.camera import MODELS
 from starnav.cli.common import (
     EXIT_OK,
     Subparsers,
@@ -23,6 +24,13 @@ def add_parser(subparsers: Subparsers) -> None:
     p.add_argument("images", nargs="+", help="image files of one camera")
     p.add_argument("-o", "--output", required=True, help="camera file (JSON) to write")
     add_fov_search(p, "horizontal FOV, roughly (searched ±5 %%)")
+    p.add_argument(
+        "--model",
+        choices=tuple(MODELS),
+        default="pinhole",
+        help="lens model fitted (default pinhole: k1, k2; kannala-brandt: k1..k4; the other "
+        "fisheyes have no coefficients; give a fisheye --fov-deg or e.g. --fov-range 150 200)",
+    )
     p.add_argument("--max-stars", type=int_at_least(4), default=100)
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(run=run)
@@ -38,6 +46,7 @@ def run(args: argparse.Namespace) -> int:
     with tqdm(total=len(args.images), desc="calibrate", unit="image", file=sys.stderr) as bar:
         cal = calibrate(
             args.images,
+            model=args.model,
             fov_deg=args.fov_deg,
             fov_range_deg=tuple(args.fov_range),
             max_stars=args.max_stars,
@@ -48,8 +57,7 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         print_json(
             {
-                **{k: getattr(cam, k) for k in CAMERA_FILE_KEYS},
-                "fov_deg": cam.fov_deg,
+                **cam.to_dict(),
                 "sigma": cal.sigma,
                 "rms_px": cal.rms_px,
                 "n_stars": cal.n_stars,
@@ -60,12 +68,14 @@ def run(args: argparse.Namespace) -> int:
         )
         return EXIT_OK
     sg = cal.sigma
+    coefficients = "".join(
+        f", {k} {getattr(cam, k):.5f} ± {sg[k]:.5f}" for k in type(cam).coefficients
+    )
     print(
-        f"wrote {args.output}: focal {cam.focal_px:.2f} ± {sg['focal_px']:.2f} px "
-        f"(FOV {cam.fov_deg:.4f}°), principal point ({cam.cx:.1f} ± {sg['cx']:.1f}, "
-        f"{cam.cy:.1f} ± {sg['cy']:.1f}) px, k1 {cam.k1:.5f} ± {sg['k1']:.5f}, "
-        f"k2 {cam.k2:.5f} ± {sg['k2']:.5f}; rms {cal.rms_px:.3f} px over {cal.n_stars} "
-        f"stars in {len(cal.frames)} images"
+        f"wrote {args.output}: {cam.model}, focal {cam.focal_px:.2f} ± {sg['focal_px']:.2f} px "
+        f"(FOV {cam.fov_deg:.4f}°), principal point ({cam.cx:.2f} ± {sg['cx']:.2f}, "
+        f"{cam.cy:.2f} ± {sg['cy']:.2f}) px{coefficients}; rms {cal.rms_px:.3f} px over "
+        f"{cal.n_stars} stars in {len(cal.frames)} images"
     )
     for name, reason in cal.failed:
         print(f"  left out {name}: {reason}")
