@@ -370,3 +370,30 @@ def test_fisheye_header_written_and_read_back(tmp_path, catalog, camera):
     assert behind.sum() > 10  # stars past 90° from the axis are in the file's field too
     got = again.all_world2pix(_radec(catalog, rows), 0) + 0.5
     assert np.abs(got - xy).max() < (0.1 if camera.distorted else 1e-6)
+
+
+@pytest.mark.parametrize(
+    "cls, theta_of_rho",
+    [
+        (Equidistant, lambda rho: rho),
+        (Stereographic, lambda rho: 2.0 * np.arctan(0.5 * rho)),
+        (Equisolid, lambda rho: 2.0 * np.arcsin(0.5 * rho)),
+        (Orthographic, np.arcsin),
+    ],
+)
+def test_fisheye_radius_and_orientation_independent_of_the_camera_code(cls, theta_of_rho):
+    """From the domain formulas alone: a pixel r px above the principal point is θ(r / f)
+    from the boresight, due North for parity +1 and roll 0 (East left; right when mirrored)."""
+    camera = cls.from_fov(170.0, 1000, 1000)
+    centre = np.array([camera.cx - 0.5, camera.cy - 0.5])  # astropy 0-based pixels
+    for parity, east_sign in ((1, -1), (-1, 1)):
+        wcs = wcs_from_attitude(attitude_from_radec_roll(40.0, 10.0, 0.0, parity), camera)
+        r_px = np.array([50.0, 200.0, 450.0])
+        up = wcs.all_pix2world(centre - np.column_stack([0 * r_px, r_px]), 0)
+        distance = np.arccos(
+            radec_to_unit(*np.radians(up).T) @ radec_to_unit(*np.radians([40, 10]))
+        )
+        assert np.allclose(distance, theta_of_rho(r_px / camera.focal_px), rtol=0, atol=1e-12)
+        assert np.all(np.diff(up[:, 1]) > 0) and np.allclose(up[:, 0], 40.0)  # due North
+        side = wcs.all_pix2world((centre + np.array([east_sign * 100.0, 0.0]))[None], 0)[0]
+        assert 40.5 < side[0] < 90.0  # toward East: RA grows
