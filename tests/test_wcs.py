@@ -7,12 +7,26 @@ from astropy.coordinates import SkyCoord
 from astropy.io import fits
 from astropy.wcs import WCS
 
-from starnav.camera import Camera
+from starnav.camera import (
+    Camera,
+    Equidistant,
+    Equisolid,
+    KannalaBrandt,
+    Orthographic,
+    Stereographic,
+)
 from starnav.catalog import load_catalog
 from starnav.errors import CameraError, ImageError, StarnavError
 from starnav.geometry import attitude_from_radec_roll, radec_to_unit, unit_to_radec
 from starnav.simulate import project_catalog
-from starnav.wcs import choose_sip_order, fit_sip, wcs_from_attitude, write_wcs
+from starnav.wcs import (
+    MAX_SIP_ORDER,
+    choose_sip_order,
+    fit_sip,
+    projection,
+    wcs_from_attitude,
+    write_wcs,
+)
 
 
 @pytest.fixture(scope="module")
@@ -209,3 +223,177 @@ def test_crval_is_the_boresight():
     wcs = wcs_from_attitude(R, Camera.from_fov(5.0, 100))
     ra, dec = np.degrees(unit_to_radec(R[2]))
     assert np.allclose(wcs.wcs.crval, [ra, dec])
+
+
+# --- every lens model in its own projection ------------------------------------------------
+
+_KB_NORMAL = {"k1": -0.02, "k2": 0.003, "k3": -0.0005}
+_KB_WIDE = {"k1": 0.0368, "k2": -0.0129, "k3": 0.0011}
+
+
+def _circular(cls, circle_deg, size=1000, **coefficients):
+    """A circular fisheye: the image circle of ``circle_deg`` just fits the image's width."""
+    return cls.from_fov(circle_deg, size, size, **coefficients).with_circle(circle_deg)
+
+
+# (camera, FITS projection, tolerance in px): the exact projections to 1e-6 px (they agree to
+# ~1e-12), SIP to 0.1 px; the orthographic circle stops short of 180° because with a 180°
+# circle ``sees`` takes directions up to 0.57° behind the image plane (kernels.MARGIN_RAD),
+# which r = f sin θ folds back into the image and SIN cannot reach;
+# 90° across 1200 x 900 px, or a 185° circular fisheye (the orthographic stops at 180°)
+WIDE_CAMERAS = [
+    (Camera.from_fov(90.0, 1200, 900), "TAN", 1e-6),
+    (Equidistant.from_fov(90.0, 1200, 900), "ARC", 1e-6),
+    (_circular(Equidistant, 185.0), "ARC", 1e-6),
+    (Stereographic.from_fov(90.0, 1200, 900), "STG", 1e-6),
+    (_circular(Stereographic, 185.0), "STG", 1e-6),
+    (Equisolid.from_fov(90.0, 1200, 900), "ZEA", 1e-6),
+    (_circular(Equisolid, 185.0), "ZEA", 1e-6),
+    (Orthographic.from_fov(90.0, 1200, 900), "SIN", 1e-6),
+    (_circular(Orthographic, 178.0), "SIN", 1e-6),
+    (KannalaBrandt.from_fov(90.0, 1200, 900, **_KB_NORMAL), "ARC-SIP", 0.1),
+    (_circular(KannalaBrandt, 185.0, **_KB_WIDE), "ARC-SIP", 0.1),
+]
+_IDS = [f"{c.model}-{c.fov_deg:.0f}" for c, _, _ in WIDE_CAMERAS]
+
+
+@pytest.fixture(scope="module")
+def wide_wcs():
+    """For each camera: its WCS at a few attitudes (both parities, the poles), SIP of the
+    order ``choose_sip_order`` picks (the one ``starnav solve --wcs`` writes)."""
+    attitudes = [attitude_from_radec_roll(*a) for a in _attitudes(3, seed=8)]
+    out = {}
+    for camera, _, _ in WIDE_CAMERAS:
+        order = choose_sip_order(camera)
+        out[id(camera)] = [(R, wcs_from_attitude(R, camera, sip_order=order)) for R in attitudes]
+    return out
+
+
+def _radec(catalog, rows):
+    """(n, 2) RA, Dec (degrees) of catalog rows, as astropy's array methods take them."""
+    return np.column_stack([catalog.ra_deg[rows], catalog.dec_deg[rows]])
+
+
+@pytest.mark.parametrize("camera, code, tolerance_px", WIDE_CAMERAS, ids=_IDS)
+def test_each_lens_model_projects_catalog_stars_through_its_wcs(
+    catalog, wide_wcs, camera, code, tolerance_px
+):
+    """Sky -> pixel: astropy's all_world2pix against the camera model, over the whole field
+    (past 90° from the axis for the 185° lenses)."""
+    worst, stars, widest_deg = 0.0, 0, 0.0
+    for R, wcs in wide_wcs[id(camera)]:
+        assert projection(camera) == code.removesuffix("-SIP")
+        assert wcs.wcs.ctype[0] == f"RA---{code}" and wcs.wcs.ctype[1] == f"DEC--{code}"
+        assert wcs.wcs.lonpole == 180.0
+        c = catalog.vectors @ R.T
+        rows = np.flatnonzero(camera.sees(c))
+        xy = camera.bearings_to_pixels(c[rows])
+        got = wcs.all_world2pix(_radec(catalog, rows), 0) + 0.5  # astropy 0-based -> ours
+        worst = max(worst, float(np.linalg.norm(got - xy, axis=1).max()))
+        stars += len(rows)
+        widest_deg = max(widest_deg, float(np.degrees(np.arccos(c[rows, 2].min()))))
+    assert stars > 1000
+    assert widest_deg > (90.0 if camera.fov_deg > 180.0 else 0.4 * camera.fov_deg)
+    assert worst <= tolerance_px, f"{camera.model}: {worst:.3g} px"
+
+
+@pytest.mark.parametrize("camera, code, tolerance_px", WIDE_CAMERAS, ids=_IDS)
+def test_each_lens_model_maps_pixels_to_the_camera_model_directions(
+    wide_wcs, camera, code, tolerance_px
+):
+    """Pixel -> sky: astropy's all_pix2world against ``pixels_to_bearings``, within the angle
+    of ``tolerance_px`` at the centre of the image (1 px = 1 / focal_px radians)."""
+    rng = np.random.default_rng(9)
+    xy = rng.uniform([0, 0], [camera.width, camera.height], (3000, 2))
+    bearings = camera.pixels_to_bearings(xy)
+    inside = camera.sees(bearings)  # within the image circle
+    xy, bearings = xy[inside], bearings[inside]
+    worst = 0.0
+    for R, wcs in wide_wcs[id(camera)]:
+        ra, dec = np.radians(wcs.all_pix2world(xy - 0.5, 0)).T
+        truth = bearings @ R  # rows: ICRS unit vectors (R orthogonal)
+        angle = np.linalg.norm(radec_to_unit(ra, dec) - truth, axis=1)
+        worst = max(worst, float(angle.max()) * camera.focal_px)
+    assert worst <= tolerance_px, f"{camera.model}: {worst:.3g} px"
+
+
+@pytest.mark.parametrize("camera", [c for c, code, _ in WIDE_CAMERAS if "SIP" in code])
+def test_fisheye_inverse_sip_polynomials_match_the_camera(catalog, wide_wcs, camera):
+    """AP/BP (sky -> pixel without iterating, what many viewers use) within 0.1 px."""
+    worst = 0.0
+    for R, wcs in wide_wcs[id(camera)]:
+        rows, xy = project_catalog(catalog, R, camera)
+        ideal = wcs.wcs_world2pix(_radec(catalog, rows), 1)
+        # astropy's sip_foc2pix takes focal-plane coordinates relative to CRPIX
+        fits_px = wcs.sip_foc2pix(ideal - wcs.wcs.crpix, 1)
+        worst = max(worst, float(np.linalg.norm(fits_px - 0.5 - xy, axis=1).max()))
+    assert worst <= 0.1
+
+
+def test_fisheye_sip_order_is_chosen_like_the_pinhole_s():
+    normal = KannalaBrandt.from_fov(90.0, 1200, 900, **_KB_NORMAL)
+    order = choose_sip_order(normal)
+    assert fit_sip(normal, order=order).max_error_px <= 0.01
+    assert fit_sip(normal, order=order - 1).max_error_px > 0.01
+    # past 90° from the axis the lowest good to 0.01 px may not exist: the highest then
+    wide = _circular(KannalaBrandt, 185.0, **_KB_WIDE)
+    fit = fit_sip(wide, order=choose_sip_order(wide))
+    assert fit.order == MAX_SIP_ORDER and fit.max_error_px < 0.05
+    assert fit.max_distortion_px > 10.0  # far from an ideal equidistant lens
+    assert choose_sip_order(Equidistant.from_fov(185.0, 1000)) == 4  # nothing to fit
+    with pytest.raises(CameraError, match="no distortion"):
+        fit_sip(Equidistant.from_fov(185.0, 1000))
+
+
+@pytest.mark.filterwarnings("ignore:The WCS transformation has more axes")  # NAXIS = 0
+@pytest.mark.parametrize("camera", [WIDE_CAMERAS[6][0], WIDE_CAMERAS[-1][0]], ids=["ZEA", "ARC"])
+def test_fisheye_header_written_and_read_back(tmp_path, catalog, camera):
+    """The solve --wcs path: wcs_from_attitude at the chosen SIP order, write_wcs, the file
+    read back with astropy.io.fits."""
+    R = attitude_from_radec_roll(250.0, -60.0, 300.0, -1)
+    wcs = wcs_from_attitude(R, camera, sip_order=choose_sip_order(camera))
+    path = tmp_path / "wcs.fits"
+    write_wcs(path, wcs)
+    with fits.open(path) as hdul:
+        header = hdul[0].header
+    code = projection(camera) + ("-SIP" if camera.distorted else "")
+    assert header["CTYPE1"] == f"RA---{code}" and header["CTYPE2"] == f"DEC--{code}"
+    assert (header["CRPIX1"], header["CRPIX2"]) == (camera.cx + 0.5, camera.cy + 0.5)
+    assert "CD1_1" in header and "PC1_1" not in header
+    assert header.get("A_ORDER") == header.get("AP_ORDER") == (9 if camera.distorted else None)
+    scale_deg = np.degrees(1.0 / camera.focal_px)  # the same CD matrix form as TAN's
+    cd = np.array([[header["CD1_1"], header["CD1_2"]], [header["CD2_1"], header["CD2_2"]]])
+    assert np.isclose(np.linalg.det(cd), -(scale_deg**2), rtol=1e-12)  # mirrored
+    again = WCS(header)
+    rows, xy = project_catalog(catalog, R, camera)
+    behind = (catalog.vectors[rows] @ R[2]) < 0.0
+    assert behind.sum() > 10  # stars past 90° from the axis are in the file's field too
+    got = again.all_world2pix(_radec(catalog, rows), 0) + 0.5
+    assert np.abs(got - xy).max() < (0.1 if camera.distorted else 1e-6)
+
+
+@pytest.mark.parametrize(
+    "cls, theta_of_rho",
+    [
+        (Equidistant, lambda rho: rho),
+        (Stereographic, lambda rho: 2.0 * np.arctan(0.5 * rho)),
+        (Equisolid, lambda rho: 2.0 * np.arcsin(0.5 * rho)),
+        (Orthographic, np.arcsin),
+    ],
+)
+def test_fisheye_radius_and_orientation_independent_of_the_camera_code(cls, theta_of_rho):
+    """From the domain formulas alone: a pixel r px above the principal point is θ(r / f)
+    from the boresight, due North for parity +1 and roll 0 (East left; right when mirrored)."""
+    camera = cls.from_fov(170.0, 1000, 1000)
+    centre = np.array([camera.cx - 0.5, camera.cy - 0.5])  # astropy 0-based pixels
+    for parity, east_sign in ((1, -1), (-1, 1)):
+        wcs = wcs_from_attitude(attitude_from_radec_roll(40.0, 10.0, 0.0, parity), camera)
+        r_px = np.array([50.0, 200.0, 450.0])
+        up = wcs.all_pix2world(centre - np.column_stack([0 * r_px, r_px]), 0)
+        distance = np.arccos(
+            radec_to_unit(*np.radians(up).T) @ radec_to_unit(*np.radians([40, 10]))
+        )
+        assert np.allclose(distance, theta_of_rho(r_px / camera.focal_px), rtol=0, atol=1e-12)
+        assert np.all(np.diff(up[:, 1]) > 0) and np.allclose(up[:, 0], 40.0)  # due North
+        side = wcs.all_pix2world((centre + np.array([east_sign * 100.0, 0.0]))[None], 0)[0]
+        assert 40.5 < side[0] < 90.0  # toward East: RA grows

@@ -7,13 +7,19 @@ centre, so ``fits = ours + 0.5`` on both axes and astropy's 0-based pixel coordi
 array as it is (a viewer that puts FITS y = 1 at the bottom shows it upside down compared with
 a PNG of the same array, and the sky on it correctly).
 
-The projection is gnomonic (TAN). The tangent point (CRVAL) is the camera's z axis, the
-principal point is CRPIX, and the CD matrix maps pixel offsets to the standard coordinates
-(xi toward East, eta toward North, degrees) of a pinhole camera at attitude ``R_cam_from_icrs``;
-a mirrored attitude (determinant -1) simply gives a CD matrix of the other sign of determinant.
-A camera with radial distortion (``k1``, ``k2``) gets TAN-SIP polynomials fitted by least squares
-to starnav's radial model on a grid over the image: A/B from measured (distorted) pixels to
-undistorted ones, AP/BP back (``fit_sip`` tells the fit error in pixels).
+Each lens model gets the zenithal projection whose radius is its own (``PROJECTIONS``):
+pinhole TAN, equidistant ARC, stereographic STG, equisolid ZEA, orthographic SIN, and
+Kannala-Brandt ARC with SIP polynomials. The reference point (CRVAL) is the camera's z axis,
+the principal point is CRPIX, and the CD matrix maps pixel offsets to intermediate world
+coordinates (x toward East, y toward North, degrees): a direction θ from the axis lies at
+image radius f g(θ) and at R = (180/π) g(θ) degrees in its projection (TAN: g = tan θ, ARC:
+θ, STG: 2 tan(θ/2), ZEA: 2 sin(θ/2), SIN: sin θ), so one CD matrix, (180/π)/f deg/px times the
+camera's rotation on the sky, serves them all. A mirrored attitude (determinant -1) simply
+gives a CD matrix of the other sign of determinant. A model with distortion (the pinhole's
+``k1``, ``k2``; Kannala-Brandt's ``k1``..``k4``) gets SIP polynomials fitted by least squares
+over the image (within its image circle): A/B from measured pixel offsets to those of the same
+projection without distortion (TAN-SIP, ARC-SIP), AP/BP back (``fit_sip`` tells the fit error
+in pixels).
 """
 
 from __future__ import annotations
@@ -28,16 +34,31 @@ from astropy.io import fits
 from astropy.time import Time
 from astropy.wcs import WCS
 
-from starnav.camera import Camera
+from starnav.camera import Camera, CameraModel, Equidistant
 from starnav.errors import CameraError, ImageError, StarnavError
 from starnav.geometry import north_east, unit_to_radec
 
 DEFAULT_SIP_ORDER = 4
 MAX_SIP_ORDER = 9
-SIP_AUTO_MAX_ORDER = 7  # highest order choose_sip_order goes to
+SIP_AUTO_MAX_ORDER = 7  # highest order choose_sip_order goes to for a pinhole (TAN-SIP)
 SIP_GOOD_ENOUGH_PX = 0.01  # fit error choose_sip_order asks for
 SIP_GRID_POINTS = 41  # per image axis: the grid the polynomials are fitted and checked on
 _ROUND_TRIP_TOLERANCE_PX = 1e-3
+# FITS projection code of each lens model (camera-file name): the one whose radius is the
+# model's, or, for a model with distortion, that of the model it reduces to without it
+PROJECTIONS = {
+    "pinhole": "TAN",
+    "equidistant": "ARC",
+    "equisolid": "ZEA",
+    "stereographic": "STG",
+    "orthographic": "SIN",
+    "kannala-brandt": "ARC",
+}
+# the undistorted camera the SIP polynomials of a distorted model map to
+_UNDISTORTED = {"pinhole": Camera, "kannala-brandt": Equidistant}
+# a fisheye's distortion over up to 95° from the axis needs more terms than a pinhole's over
+# its narrower field: choose_sip_order may go to the highest order for it
+_AUTO_MAX_ORDER = {"pinhole": SIP_AUTO_MAX_ORDER, "kannala-brandt": MAX_SIP_ORDER}
 
 
 @dataclass(frozen=True, eq=False)
@@ -108,31 +129,70 @@ def _check_order(order: int) -> int:
     return int(order)
 
 
-def fit_sip(camera: Camera, *, order: int = DEFAULT_SIP_ORDER) -> SipFit:
-    """SIP polynomials of degree ``order`` (2..9) for the camera's radial distortion.
+def projection(camera: CameraModel) -> str:
+    """The FITS projection code (``TAN``, ``ARC``, ``STG``, ``ZEA``, ``SIN``) of the camera's
+    lens model; SIP polynomials are added when it has distortion (``camera.distorted``)."""
+    if camera.model not in PROJECTIONS:
+        raise CameraError(f"no FITS projection for the {camera.model!r} lens model")
+    return PROJECTIONS[camera.model]
 
-    Fitted on a grid of ``SIP_GRID_POINTS`` x ``SIP_GRID_POINTS`` pixels spanning the image
-    (corners included). A radial model has odd terms only, so an even order fits as well as the
-    odd order below it; the inverse AP/BP is exact once order >= 3 (k1 only) or 5 (with k2).
-    """
-    order = _check_order(order)
+
+def _undistorted(camera: CameraModel) -> CameraModel:
+    if camera.model not in _UNDISTORTED:
+        raise CameraError(f"the {camera.model} model has no distortion to fit SIP polynomials to")
+    return _UNDISTORTED[camera.model](
+        camera.width, camera.height, camera.focal_px, camera.cx, camera.cy
+    )
+
+
+def _fit_points(camera: CameraModel) -> np.ndarray:
+    """Pixels (n, 2) the SIP polynomials are fitted and checked on: a grid of
+    ``SIP_GRID_POINTS`` x ``SIP_GRID_POINTS`` spanning the image (corners included), and for a
+    lens with an image circle only its points inside the circle, with points on its rim."""
     gx, gy = np.meshgrid(
         np.linspace(0.0, camera.width, SIP_GRID_POINTS),
         np.linspace(0.0, camera.height, SIP_GRID_POINTS),
     )
     grid = np.column_stack([gx.ravel(), gy.ravel()])
+    circle_deg = getattr(camera, "image_circle_deg", None)
+    if circle_deg is None:
+        return grid
+    theta = np.radians(0.5 * circle_deg)
+    inside = camera.pixels_to_bearings(grid)[:, 2] >= np.cos(theta)
+    phi = np.linspace(0.0, 2.0 * np.pi, 8 * SIP_GRID_POINTS, endpoint=False)
+    rim_directions = np.column_stack(
+        [np.sin(theta) * np.cos(phi), np.sin(theta) * np.sin(phi), np.full_like(phi, np.cos(theta))]
+    )
+    rim = camera.bearings_to_pixels(rim_directions)
+    return np.vstack([grid[inside], rim[camera.contains(rim)]])
+
+
+def fit_sip(camera: CameraModel, *, order: int = DEFAULT_SIP_ORDER) -> SipFit:
+    """SIP polynomials of degree ``order`` (2..9) for the distortion of a pinhole (``k1``,
+    ``k2``: TAN-SIP) or Kannala-Brandt camera (``k1``..``k4``: ARC-SIP).
+
+    They map the camera's pixel offsets from the principal point to those of the same camera
+    without distortion (pinhole: ``r = f tan θ``, Kannala-Brandt: ``r = f θ``). Fitted on the
+    pixels of ``_fit_points`` (a grid over the image, within its image circle). A radial model
+    has odd terms only, so an even order fits as well as the odd order below it; the pinhole's
+    inverse AP/BP is exact once order >= 3 (k1 only) or 5 (with k2).
+    """
+    order = _check_order(order)
+    ideal = _undistorted(camera)
+    grid = _fit_points(camera)
     bearings = camera.pixels_to_bearings(grid)
     distorted = camera.bearings_to_pixels(bearings)
     gap = float(np.max(np.linalg.norm(distorted - grid, axis=1)))
     if not gap <= _ROUND_TRIP_TOLERANCE_PX:
+        coefficients = ", ".join(f"{k}={getattr(camera, k)!r}" for k in camera.coefficients)
         raise CameraError(
-            f"radial distortion k1={camera.k1!r}, k2={camera.k2!r} cannot be inverted over the "
-            f"image (pixels -> bearings -> pixels misses by {gap:.3g} px): no SIP fit"
+            f"{camera.model} distortion {coefficients} cannot be inverted over the image "
+            f"(pixels -> bearings -> pixels misses by {gap:.3g} px): no SIP fit"
         )
     centre = np.array([camera.cx, camera.cy])
     # exact pairs: distorted offsets recomputed from the bearings by the forward model
     d = distorted - centre
-    u = camera.focal_px * bearings[:, :2] / bearings[:, 2:]
+    u = ideal.bearings_to_pixels(bearings) - centre
     scale = float(np.max(np.abs(d))) or 1.0
     a, b, error = _fit(d, u - d, order, 2, scale)
     ap, bp, inverse_error = _fit(u, d - u, order, 1, scale)
@@ -149,16 +209,19 @@ def fit_sip(camera: Camera, *, order: int = DEFAULT_SIP_ORDER) -> SipFit:
 
 
 def choose_sip_order(
-    camera: Camera,
+    camera: CameraModel,
     *,
     max_error_px: float = SIP_GOOD_ENOUGH_PX,
-    highest: int = SIP_AUTO_MAX_ORDER,
+    highest: int | None = None,
 ) -> int:
-    """The lowest SIP order from ``DEFAULT_SIP_ORDER`` up whose fit of the camera's radial
+    """The lowest SIP order from ``DEFAULT_SIP_ORDER`` up whose fit of the camera's
     distortion is good to ``max_error_px`` over the image (wide fields need more), at most
-    ``highest``; ``DEFAULT_SIP_ORDER`` for a camera without distortion."""
+    ``highest`` (None: ``SIP_AUTO_MAX_ORDER`` for a pinhole, ``MAX_SIP_ORDER`` for
+    Kannala-Brandt); ``DEFAULT_SIP_ORDER`` for a camera without distortion."""
+    if highest is None:
+        highest = _AUTO_MAX_ORDER.get(camera.model, SIP_AUTO_MAX_ORDER)
     order = DEFAULT_SIP_ORDER
-    while (camera.k1 or camera.k2) and order < highest:
+    while camera.distorted and order < highest:
         if fit_sip(camera, order=order).max_error_px <= max_error_px:
             break
         order += 1
@@ -174,35 +237,40 @@ def _date_obs(date_obs: str | _dt.datetime | Time) -> Time:
 
 def wcs_from_attitude(
     R_cam_from_icrs: np.ndarray,
-    camera: Camera,
+    camera: CameraModel,
     *,
     sip_order: int = DEFAULT_SIP_ORDER,
     date_obs: str | _dt.datetime | Time | None = None,
 ) -> WCS:
     """Celestial WCS (ICRS, degrees) of an image taken by ``camera`` at ``R_cam_from_icrs``.
 
-    TAN, or TAN-SIP of degree ``sip_order`` when the camera has radial distortion (see
-    ``fit_sip`` for the fit error). ``date_obs``: UTC time of the exposure (ISO string,
-    datetime or astropy Time), written as DATE-OBS and MJD-OBS. The WCS's ``pixel_shape`` is
-    (width, height). With astropy's 0-based pixel methods, pixel = starnav pixel - 0.5.
+    The projection of the camera's lens model (``projection``: pinhole TAN, equidistant ARC,
+    stereographic STG, equisolid ZEA, orthographic SIN, Kannala-Brandt ARC-SIP; all exact but
+    the SIP polynomials), with SIP of degree ``sip_order`` when the camera has distortion (see
+    ``fit_sip`` for the fit error; ``choose_sip_order`` picks one). ``date_obs``: UTC time of
+    the exposure (ISO string, datetime or astropy Time), written as DATE-OBS and MJD-OBS. The
+    WCS's ``pixel_shape`` is (width, height). With astropy's 0-based pixel methods, pixel =
+    starnav pixel - 0.5.
     """
     R = _check_attitude(R_cam_from_icrs)
     _check_order(sip_order)
+    code = projection(camera)
     z = R[2]
     ra_rad, dec_rad = unit_to_radec(z)
     north, east = north_east(z)
-    # standard coordinates of a direction s: xi = (s.E)/(s.Z), eta = (s.N)/(s.Z); with
-    # c = R s and s = R^T c (R orthogonal, either parity) that is xi = (R E).(u, v, 1) with
-    # u = c_x / c_z, v = c_y / c_z the undistorted pixel offsets over the focal length.
+    # intermediate world coordinates of a direction s at θ from the axis: R_θ (s.E, s.N) / sin θ
+    # (toward East, North), R_θ = (180/π) g(θ); with c = R s and s = R^T c (R orthogonal,
+    # either parity) that is (R E, R N).(c_x, c_y) / sin θ, and (c_x, c_y) / sin θ times f g(θ)
+    # is the pixel offset of the undistorted camera.
     cd = np.degrees(1.0 / camera.focal_px) * np.array(
         [[R[0] @ east, R[1] @ east], [R[0] @ north, R[1] @ north]]
     )
-    distorted = bool(camera.k1 or camera.k2)
+    distorted = camera.distorted
     suffix = "-SIP" if distorted else ""
     header = fits.Header()
     header["WCSAXES"] = 2
-    header["CTYPE1"] = "RA---TAN" + suffix
-    header["CTYPE2"] = "DEC--TAN" + suffix
+    header["CTYPE1"] = f"RA---{code}{suffix}"
+    header["CTYPE2"] = f"DEC--{code}{suffix}"
     header["CUNIT1"] = "deg"
     header["CUNIT2"] = "deg"
     header["CRPIX1"] = (float(camera.cx) + 0.5, "principal point x (FITS: first pixel centre 1)")
@@ -213,7 +281,7 @@ def wcs_from_attitude(
         for j in range(2):
             header[f"CD{i + 1}_{j + 1}"] = float(cd[i, j])
     # 180 is the zenithal default except at Dec = +90 exactly, where the CD matrix above
-    # (East and North taken at RA = CRVAL1) still needs it
+    # (East and North taken at RA = CRVAL1) still needs it; every projection here is zenithal
     header["LONPOLE"] = 180.0
     header["RADESYS"] = "ICRS"
     if date_obs is not None:

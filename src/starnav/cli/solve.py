@@ -62,7 +62,13 @@ def add_parser(subparsers: Subparsers) -> None:
         "--catalog", help="CSV catalog id,ra_deg,dec_deg,mag (default: embedded Hipparcos)"
     )
     p.add_argument("--epoch", type=finite, help="year for Hipparcos proper motion")
-    p.add_argument("--wcs", metavar="FITS", help="write a FITS WCS header (TAN or TAN-SIP) here")
+    p.add_argument(
+        "--wcs",
+        metavar="FITS",
+        help="write a FITS WCS header here (the lens model's projection: pinhole TAN or "
+        "TAN-SIP, equidistant ARC, stereographic STG, equisolid ZEA, orthographic SIN, "
+        "kannala-brandt ARC-SIP)",
+    )
     p.add_argument(
         "--annotate", metavar="PNG", type=png_path, help="draw the solved image into this PNG"
     )
@@ -107,7 +113,8 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _write_outputs(args: argparse.Namespace, pixels: np.ndarray, res: ImageSolveResult) -> None:
-    """--wcs and --annotate of a solved image, or a note on stderr that there are none."""
+    """--wcs (in the projection of the fitted camera's lens model) and --annotate of a solved
+    image, or a note on stderr that there are none."""
     s = res.solution
     if s is not None and args.wcs:
         from starnav.wcs import choose_sip_order, wcs_from_attitude, write_wcs
