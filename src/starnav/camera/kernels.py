@@ -219,7 +219,8 @@ def half_diagonal(model, p, width, height):
 @njit(cache=True)
 def field_cos(model, p, width, height):
     """Cosine of the cone about the boresight outside which nothing is in the image."""
-    return math.cos(min(half_diagonal(model, p, width, height) + MARGIN_RAD, math.pi))
+    top = math.pi if model == PINHOLE else model_theta_max(model)  # no fold-back (orthographic)
+    return math.cos(min(half_diagonal(model, p, width, height) + MARGIN_RAD, top))
 
 
 @njit(cache=True)
