@@ -57,6 +57,15 @@ WIDE_CONE_RAD = math.radians(60.0)  # cones wider than this are searched row by 
 WIDE_SCREEN_RAD = math.radians(35.0)  # wider fields screen hypotheses star by star
 
 
+@njit(cache=True, inline="always")
+def _within(vectors, r, axis, chord2):
+    """Whether row ``r`` of ``vectors`` is within chord sqrt(chord2) of ``axis``."""
+    dx = vectors[r, 0] - axis[0]
+    dy = vectors[r, 1] - axis[1]
+    dz = vectors[r, 2] - axis[2]
+    return dx * dx + dy * dy + dz * dz <= chord2
+
+
 @njit(cache=True)
 def cone(axis, chord2, sky, allowed, out):
     """Allowed rows of the sky's vectors within chord sqrt(chord2) of ``axis``, written to
@@ -66,13 +75,9 @@ def cone(axis, chord2, sky, allowed, out):
     radius = 2.0 * math.asin(min(1.0, 0.5 * math.sqrt(chord2))) + 1e-9
     if radius > WIDE_CONE_RAD:  # a wide field's cone: every row beats visiting the cells
         for r in range(len(vectors)):
-            if allowed[r]:
-                dx = vectors[r, 0] - axis[0]
-                dy = vectors[r, 1] - axis[1]
-                dz = vectors[r, 2] - axis[2]
-                if dx * dx + dy * dy + dz * dz <= chord2:
-                    out[n] = r
-                    n += 1
+            if allowed[r] and _within(vectors, r, axis, chord2):
+                out[n] = r
+                n += 1
         return n
     dec0 = math.asin(max(-1.0, min(1.0, axis[2])))
     ra0 = math.atan2(axis[1], axis[0])
@@ -92,12 +97,7 @@ def cone(axis, chord2, sky, allowed, out):
             cell = i * n_ra + jj % n_ra
             for m in range(start[cell], start[cell + 1]):
                 r = rows[m]
-                if not allowed[r]:
-                    continue
-                dx = vectors[r, 0] - axis[0]
-                dy = vectors[r, 1] - axis[1]
-                dz = vectors[r, 2] - axis[2]
-                if dx * dx + dy * dy + dz * dz <= chord2:
+                if allowed[r] and _within(vectors, r, axis, chord2):
                     out[n] = r
                     n += 1
     return n
