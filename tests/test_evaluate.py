@@ -1,15 +1,18 @@
 import csv
 import json
+import pickle
 from dataclasses import replace
 
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+from starnav.camera import Equidistant, Equisolid, save_camera
 from starnav.cli import main
 from starnav.errors import StarnavError
 from starnav.evaluate import (
     EvalConfig,
+    camera_items,
     grid_boresights,
     run_evaluation,
     runner,
@@ -17,6 +20,7 @@ from starnav.evaluate import (
     summarize,
     uniform_boresights,
 )
+from starnav.evaluate.report import describe
 
 
 def test_published_grid_has_7200_boresights_inside_the_sky():
@@ -177,3 +181,48 @@ def test_first_match_on_one_side_or_with_a_wrong_double_is_repaired(seed, index,
     r = solve_frame(config, grid_boresights(3.0, seed=seed), index)
     assert r.outcome == "correct" and r.boresight_error_arcsec < 60.0
     assert r.n_identified >= r.n_true - 1 and r.n_wrong_ids == 0
+
+
+def _allsky_config(**kwargs) -> EvalConfig:
+    camera = Equidistant.from_fov(185.0, 1024, 1024).with_circle(185.0)
+    defaults = dict(mag_limit=5.0, noise_px=0.3, false_stars=2, missing_frac=0.1, seed=6)
+    return EvalConfig(camera=camera_items(camera), **{**defaults, **kwargs})
+
+
+def test_a_fisheye_configuration_makes_its_camera_everywhere():
+    config = _allsky_config()
+    camera = config.make_camera()
+    assert isinstance(camera, Equidistant) and camera.image_circle_deg == 185.0
+    assert camera == Equidistant.from_fov(185.0, 1024, 1024).with_circle(185.0)
+    # workers and Dask get the configuration pickled: the camera travels inside it
+    assert pickle.loads(pickle.dumps(config)).make_camera() == camera
+    assert runner.config_solver(config).camera == camera
+    assert "equidistant 185° / 1024x1024 px (image circle 185°)" in describe(config, "x")
+    assert EvalConfig().make_camera().model == "pinhole"
+
+
+def test_all_sky_frames_are_simulated_and_solved_through_the_fisheye():
+    config = _allsky_config()
+    b = uniform_boresights(3, seed=6)
+    results = [solve_frame(config, b, i) for i in range(3)]
+    for r in results:
+        assert r.n_in_view > 600  # the whole sky above the lens, to Hp 5
+        assert r.outcome == "correct" and r.boresight_error_arcsec < 60.0
+        assert r.n_identified >= 0.8 * r.n_true and r.n_wrong_ids == 0
+
+
+def test_cli_evaluate_with_a_camera_file(tmp_path, capsys):
+    path = tmp_path / "allsky.json"
+    save_camera(path, Equisolid.from_fov(185.0, 1024, 1024).with_circle(185.0))
+    args = ["evaluate", "--camera", str(path), "--sampling", "uniform", "--frames", "4"]
+    args += ["--mag-limit", "5", "--workers", "1", "--seed", "2"]
+    assert main([*args, "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["config"]["camera"]["model"] == "equisolid"
+    assert out["config"]["width"] == 1024 and out["config"]["fov_deg"] == pytest.approx(185.0)
+    assert out["frames"] == 4 and out["wrong"] == 0 and out["correct"] >= 3
+    assert main(args) == 0
+    assert "equisolid 185° / 1024x1024 px (image circle 185°)" in capsys.readouterr().out
+    assert main([*args, "--fov-deg", "20"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "drop --fov-deg" in err and "\n" not in err

@@ -1,15 +1,29 @@
 """starnav.render: PSF placement in our pixel convention, noise model, saturation, hot pixels,
-frames from the catalog (with distortion), presets and writing files."""
+frames from the catalog (with distortion; fisheyes with their image circle and vignetting),
+presets, writing files and the CLI."""
 
 from __future__ import annotations
 
+import csv
 import dataclasses
+import json
 
 import numpy as np
 import pytest
+from scipy.spatial import cKDTree
 
-from starnav.camera import Camera
+from starnav.camera import (
+    Camera,
+    Equidistant,
+    Equisolid,
+    Orthographic,
+    camera_from_dict,
+    save_camera,
+)
 from starnav.catalog import load_catalog
+from starnav.cli import main
+from starnav.detect.read import read_image
+from starnav.detect.stars import detect_stars
 from starnav.errors import ImageError, StarnavError
 from starnav.geometry import attitude_from_radec_roll
 from starnav.render import (
@@ -17,6 +31,8 @@ from starnav.render import (
     RenderSettings,
     adjust_camera,
     flux_e_for_snr,
+    imaged_directions,
+    pixel_illumination,
     preset,
     render_frame,
     render_stars,
@@ -246,3 +262,111 @@ def test_write_image_rejects_bad_input(tmp_path):
         write_image(tmp_path / "a.png", image.astype(float))
     with pytest.raises(ImageError, match="cannot write"):
         write_image(tmp_path / "missing-folder" / "a.png", image)
+
+
+# ----------------------------------------------------------------------------------------------
+# fisheyes: stars where the lens projects them, black outside the image circle, vignetting
+
+
+def _allsky() -> Equidistant:
+    return Equidistant.from_fov(185.0, 512, 512).with_circle(185.0)
+
+
+def _radius_px(camera) -> np.ndarray:
+    cols, rows = np.meshgrid(np.arange(camera.width) + 0.5, np.arange(camera.height) + 0.5)
+    return np.hypot(cols - camera.cx, rows - camera.cy)
+
+
+@pytest.fixture(scope="module")
+def allsky_frame(hip7):
+    settings = RenderSettings(psf_sigma_px=1.2, background_e=100.0, mag_limit=6.0, seed=11)
+    return render_frame(hip7, _allsky(), attitude_from_radec_roll(84.0, -2.0, 30.0), settings)
+
+
+def test_fisheye_stars_land_where_the_lens_projects_them(allsky_frame, hip7):
+    frame, camera = allsky_frame, allsky_frame.camera
+    c = hip7.vectors[hip7.rows(frame.ids)] @ frame.R_cam_from_icrs.T
+    assert np.allclose(frame.xy, camera.bearings_to_pixels(c))
+    assert len(frame.xy) > 1000 and (c[:, 2] >= np.cos(np.radians(92.5)) - 1e-12).all()
+    assert c[:, 2].min() < 0.0  # stars behind the image plane are drawn too
+    found = detect_stars(frame.image, max_stars=100)
+    tree = cKDTree(frame.xy)
+    dist, nearest = tree.query(found.xy)
+    # 0.36° pixels: a third of the stars have a neighbour within 5 px, whose light moves the
+    # centroid; the isolated ones are found where they were drawn
+    isolated = (tree.query(frame.xy, k=2)[0][:, 1] > 5.0)[nearest]
+    assert isolated.sum() >= 20 and dist[isolated].max() < 0.3 and np.median(dist) < 0.1
+    assert dist.max() < 3.0  # no detection away from a star (none at the circle's edge)
+    # the detections are the bright stars, across the whole disc
+    assert np.median(frame.mag[nearest]) < 4.0
+    assert np.hypot(*(found.xy - (camera.cx, camera.cy)).T).max() > 0.85 * 256
+
+
+def test_fisheye_is_black_outside_its_image_circle(allsky_frame):
+    frame, camera = allsky_frame, allsky_frame.camera
+    r = _radius_px(camera)
+    outside = frame.image[r > 257.0].astype(float)
+    # read noise only (5 e rms, clipped at 0): no sky, no star light
+    assert outside.mean() < 3.0 and outside.max() < 35
+    assert np.median(frame.image[r < 50.0]) > 95.0  # the sky (100 e) and faint stars
+    lit = pixel_illumination(camera, 0.0)
+    assert (lit[r > 256.01] == 0).all() and (lit[r < 255.99] == 1).all()
+    assert not lit.flags.writeable
+
+
+def test_vignetting_scales_sky_and_stars(hip7):
+    camera = _allsky()
+    R = attitude_from_radec_roll(84.0, -2.0, 30.0)
+    settings = RenderSettings(background_e=400.0, read_noise_e=1.0, mag_limit=4.0, seed=12)
+    assert settings.vignetting_power_for(camera) == 2.0  # a fisheye's default
+    assert settings.vignetting_power_for(Camera.from_fov(10.0, 64)) == 0.0
+    frame = render_frame(hip7, camera, R, settings)
+    flat = render_frame(hip7, camera, R, dataclasses.replace(settings, vignetting_power=0.0))
+    r = _radius_px(camera)
+    edge = (r > 240.0) & (r < 250.0)  # θ ≈ 88°: cos²(44°) = 0.52
+    theta = r[edge] / camera.focal_px
+    expected = 400.0 * np.cos(0.5 * theta) ** 2
+    assert np.median(frame.image[edge]) == pytest.approx(np.median(expected), rel=0.02)
+    assert np.median(flat.image[edge]) == pytest.approx(400.0, rel=0.02)
+    c = hip7.vectors[hip7.rows(frame.ids)] @ R.T
+    assert frame.flux_e == pytest.approx(settings.flux_e(frame.mag) * (0.5 * (1 + c[:, 2])))
+    assert frame.to_dict()["vignetting_power"] == 2.0
+
+
+def test_a_lens_that_stops_inside_the_image_leaves_the_rest_black(hip7):
+    camera = Orthographic(400, 300, 120.0)  # r = f sin θ reaches 120 px at 90°
+    frame = render_frame(
+        hip7, camera, attitude_from_radec_roll(84.0, -2.0, 0.0), RenderSettings(seed=13)
+    )
+    r = _radius_px(camera)
+    assert frame.image[r > 121.0].mean() < 3.0
+    assert np.hypot(*(frame.xy - (200.0, 150.0)).T).max() <= 120.0
+    lit = pixel_illumination(camera, 0.0)
+    assert (lit[r > 120.01] == 0).all() and (lit[r < 119.99] == 1).all()
+    # directions past 90° would fold back inside: the lens images none of them
+    past = np.array([[np.sin(np.radians(91.0)), 0.0, np.cos(np.radians(91.0))]])
+    assert not imaged_directions(camera, past)[0]
+
+
+def test_cli_render_with_a_camera_file(tmp_path, capsys, hip7):
+    camera_path, png, truth_csv = tmp_path / "cam.json", tmp_path / "sky.png", tmp_path / "t.csv"
+    save_camera(camera_path, Equisolid.from_fov(185.0, 400, 400).with_circle(185.0))
+    args = ["render", "-o", str(png), "--camera", str(camera_path), "--truth", str(truth_csv)]
+    view = ["--ra-deg", "84", "--dec-deg", "-2", "--roll-deg", "30", "--mag-limit", "5"]
+    assert main([*args, *view, "--seed", "3", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["camera_model"] == "equisolid" and out["camera"]["image_circle_deg"] == 185.0
+    assert (out["width"], out["height"]) == (400, 400) and out["vignetting_power"] == 2.0
+    camera = camera_from_dict(out["camera"])
+    with truth_csv.open() as fh:
+        rows = list(csv.DictReader(fh))
+    assert len(rows) == out["n_stars"] > 300
+    xy = np.array([[float(r["x"]), float(r["y"])] for r in rows])
+    ids = np.array([int(r["catalog_id"]) for r in rows])
+    c = hip7.vectors[hip7.rows(ids)] @ np.array(out["R_cam_from_icrs"]).T
+    assert np.allclose(xy, camera.bearings_to_pixels(c), atol=1e-3)
+    image = read_image(png)
+    assert image.shape == (400, 400) and image[0, 0] < 30  # a corner: outside the circle
+    assert main([*args, "--fov-deg", "20"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "drop --fov-deg" in err and "\n" not in err

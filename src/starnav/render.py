@@ -10,7 +10,16 @@ but only stars centred inside are listed as the truth.
 
 Pixel convention (docs/domain.md): origin at the top-left corner of the image, x right, y down;
 the array is ``image[row=y, col=x]``, so a star at (x, y) = (10.5, 20.5) is centred on pixel
-row 20, column 10. Camera distortion (k1, k2) enters through ``starnav.simulate.project_catalog``.
+row 20, column 10. Any lens model (``starnav.camera``) places the stars: the directions it sees
+go through its ``bearings_to_pixels`` (pinhole distortion, fisheye projections alike).
+
+Fisheyes: pixels the lens forms no image on (outside its image circle, ``image_circle_deg``,
+or beyond the radius its model reaches) receive neither sky nor starlight, only read noise: a
+circular fisheye's image is a disc on black. Vignetting (``RenderSettings.vignetting_power``)
+scales the sky and each star's flux by the relative illumination cos(θ/2)^p at the angle θ from
+the optical axis. The PSF is the same Gaussian (``psf_sigma_px``) everywhere in the image, and
+the sky is flat per pixel apart from the vignetting (a fisheye's pixels do not all cover the
+same solid angle; that is not modelled).
 
 Brightness: a star of magnitude m yields ``zero_point_e_per_s * exposure_s * 10**(-0.4 m)``
 electrons. The defaults put an Hp 7 star at SNR ~ 11 (PSF sigma 1 px), so the 1024 px / 20°
@@ -19,6 +28,8 @@ reference camera sees to about Hp 7; stars brighter than Hp ~ -0.7 saturate at 1
 
 from __future__ import annotations
 
+import dataclasses
+import functools
 import math
 from dataclasses import dataclass, fields
 from pathlib import Path
@@ -26,7 +37,7 @@ from pathlib import Path
 import numpy as np
 from scipy.special import erf
 
-from starnav.camera import Camera
+from starnav.camera import Camera, CameraModel
 from starnav.catalog import Catalog
 from starnav.csvrows import write_rows
 from starnav.errors import ImageError, StarnavError
@@ -39,6 +50,10 @@ from starnav.simulate import project_catalog
 _GAUSSIAN_SKY_E = 30.0
 _STAMP_HALF_WIDTH_SIGMA = 5.0
 _FITS_SUFFIXES = (".fits", ".fit", ".fts")
+# cos(θ/2)^2 falls to 0.5 (one stop) at 90° from the axis: a typical all-sky fisheye
+FISHEYE_VIGNETTING_POWER = 2.0
+_ROUND_TRIP_PX = 1e-3  # a pixel the lens images unprojects and projects back within this
+_ROUND_TRIP_RAD = 1e-6  # and a direction it images projects and unprojects back within this
 _PILLOW_SUFFIXES = (".png", ".tif", ".tiff")
 
 
@@ -60,7 +75,11 @@ class RenderSettings:
     ``bit_depth``: 8 or 16 (uint8 / uint16 output, clipped at 2**bit_depth - 1 ADU);
     ``hot_pixels``: how many single hot pixels at random places, each ``hot_pixel_adu`` above
     its surroundings (None: the full scale, i.e. saturated); ``mag_limit``: catalog stars
-    fainter than this are not drawn (None: all); ``seed``: random seed (None: fresh entropy).
+    fainter than this are not drawn (None: all); ``seed``: random seed (None: fresh entropy);
+    ``vignetting_power``: p of the relative illumination cos(θ/2)^p that scales the sky and the
+    star flux at the angle θ from the optical axis (0: none; p = 2 gives one stop at 90°, as
+    all-sky fisheyes have; near the axis p = 16 matches the cos⁴θ law of a simple lens; None:
+    ``FISHEYE_VIGNETTING_POWER`` for a fisheye, 0 for a pinhole).
     """
 
     psf_sigma_px: float = 1.0
@@ -74,6 +93,7 @@ class RenderSettings:
     hot_pixel_adu: float | None = None
     mag_limit: float | None = None
     seed: int | None = None
+    vignetting_power: float | None = None
 
     def __post_init__(self) -> None:
         positive = ("psf_sigma_px", "exposure_s", "gain_e_per_adu")
@@ -108,6 +128,16 @@ class RenderSettings:
             )
         if self.seed is not None and not (_is_int(self.seed) and self.seed >= 0):
             raise StarnavError(f"seed must be an integer >= 0 or None, got {self.seed!r}")
+        power = self.vignetting_power
+        if power is not None and not (_is_real(power) and np.isfinite(power) and power >= 0):
+            raise StarnavError(f"vignetting_power must be a number >= 0 or None, got {power!r}")
+
+    def vignetting_power_for(self, camera: CameraModel) -> float:
+        """The vignetting power used with ``camera`` (``vignetting_power``, or its lens's
+        default when None)."""
+        if self.vignetting_power is not None:
+            return float(self.vignetting_power)
+        return 0.0 if isinstance(camera, Camera) else FISHEYE_VIGNETTING_POWER
 
     @property
     def full_scale_adu(self) -> int:
@@ -165,8 +195,8 @@ class RenderedFrame:
 
     ``image``: uint8 or uint16 array (height, width), row 0 at the top; ``xy`` (n, 2): exact
     pixel positions of the drawn stars centred inside the image, brightest first; their
-    catalog ``ids``, ``mag`` and expected ``flux_e`` (electrons); ``hot_xy`` (k, 2): centres of
-    the hot pixels; the attitude, camera and settings used.
+    catalog ``ids``, ``mag`` and expected ``flux_e`` (electrons, after vignetting); ``hot_xy``
+    (k, 2): centres of the hot pixels; the attitude, camera and settings used.
     """
 
     image: np.ndarray
@@ -176,25 +206,25 @@ class RenderedFrame:
     flux_e: np.ndarray
     hot_xy: np.ndarray
     R_cam_from_icrs: np.ndarray
-    camera: Camera
+    camera: CameraModel
     settings: RenderSettings
 
     def to_dict(self) -> dict:
-        """The truth as a JSON-ready dict: attitude, camera, ``n_stars`` listed, the matrix
-        (nested lists)."""
+        """The truth as a JSON-ready dict: attitude, the camera's size, focal length, model
+        coefficients (k1, k2 of a pinhole) and its camera file (``camera``), the vignetting
+        power used, ``n_stars`` listed, the matrix (nested lists)."""
         ra, dec, roll, parity = radec_roll_from_attitude(self.R_cam_from_icrs)
-        cam = self.camera
+        camera = self.camera.to_dict()
+        flat = ("fov_deg", "width", "height", "focal_px")
         return {
             "ra_deg": ra,
             "dec_deg": dec,
             "roll_deg": roll,
             "parity": parity,
-            "fov_deg": cam.fov_deg,
-            "width": cam.width,
-            "height": cam.height,
-            "focal_px": cam.focal_px,
-            "k1": cam.k1,
-            "k2": cam.k2,
+            "camera_model": self.camera.model,
+            **{k: v for k, v in camera.items() if k in flat or k.startswith("k")},
+            "camera": camera,
+            "vignetting_power": self.settings.vignetting_power_for(self.camera),
             "n_stars": len(self.xy),
             "R_cam_from_icrs": self.R_cam_from_icrs.tolist(),
         }
@@ -256,11 +286,13 @@ def render_stars(
 
 def render_frame(
     catalog: Catalog,
-    camera: Camera,
+    camera: CameraModel,
     R_cam_from_icrs: np.ndarray,
     settings: RenderSettings | None = None,
 ) -> RenderedFrame:
-    """Render the catalog stars that ``camera`` sees at attitude ``R_cam_from_icrs``."""
+    """Render the catalog stars that ``camera`` (any lens model) images at attitude
+    ``R_cam_from_icrs``: pixels the lens forms no image on are black (read noise only), the
+    sky and the stars are vignetted (``RenderSettings.vignetting_power``)."""
     settings = RenderSettings() if settings is None else settings
     R = np.asarray(R_cam_from_icrs, dtype=float)
     if R.shape != (3, 3):
@@ -269,19 +301,23 @@ def render_frame(
         catalog = catalog.brighter_than(settings.mag_limit)
     # a camera grown by the PSF margin on every side finds the stars whose light spills in
     margin = math.ceil(_STAMP_HALF_WIDTH_SIGMA * settings.psf_sigma_px)
-    grown = Camera(
-        camera.width + 2 * margin,
-        camera.height + 2 * margin,
-        camera.focal_px,
-        camera.cx + margin,
-        camera.cy + margin,
-        camera.k1,
-        camera.k2,
+    grown = dataclasses.replace(
+        camera,
+        width=camera.width + 2 * margin,
+        height=camera.height + 2 * margin,
+        cx=camera.cx + margin,
+        cy=camera.cy + margin,
     )
     rows, xy = project_catalog(catalog, R, grown)
-    xy = xy - margin
-    flux = settings.flux_e(catalog.mag[rows])
-    image, hot_xy = _render(xy, flux, camera.width, camera.height, settings, settings.seed)
+    c = catalog.vectors[rows] @ R.T
+    imaged = imaged_directions(camera, c)
+    rows, xy, c = rows[imaged], xy[imaged] - margin, c[imaged]
+    power = settings.vignetting_power_for(camera)
+    flux = settings.flux_e(catalog.mag[rows]) * relative_illumination(c[:, 2], power)
+    illumination = pixel_illumination(camera, power)
+    image, hot_xy = _render(
+        xy, flux, camera.width, camera.height, settings, settings.seed, illumination
+    )
     inside = camera.contains(xy)
     order = np.argsort(catalog.mag[rows][inside], kind="stable")
     pick = np.flatnonzero(inside)[order]
@@ -296,6 +332,52 @@ def render_frame(
         camera,
         settings,
     )
+
+
+def relative_illumination(cos_theta: np.ndarray, power: float) -> np.ndarray:
+    """The vignetting factor cos(θ/2)^``power`` of directions whose angle θ from the
+    optical axis has cosine ``cos_theta`` (1 on the axis; ``power`` 0: 1 everywhere)."""
+    cos_half = np.sqrt(np.clip(0.5 * (1.0 + np.asarray(cos_theta, dtype=float)), 0.0, 1.0))
+    return cos_half**power
+
+
+def imaged_directions(camera: CameraModel, c: np.ndarray) -> np.ndarray:
+    """Which unit camera-frame directions (n, 3) the lens forms an image of: inside its image
+    circle (a fisheye's ``image_circle_deg``) and projected one to one (the direction's pixel
+    unprojects back to it: an orthographic lens folds back past 90° from the axis)."""
+    c = np.asarray(c, dtype=float).reshape(-1, 3)
+    if isinstance(camera, Camera):  # one to one in front of it (``sees`` keeps those)
+        return np.ones(len(c), dtype=bool)
+    back = camera.pixels_to_bearings(camera.bearings_to_pixels(c))
+    return (np.sum((back - c) ** 2, axis=1) < _ROUND_TRIP_RAD**2) & _in_circle(camera, c)
+
+
+def _in_circle(camera: CameraModel, c: np.ndarray) -> np.ndarray:
+    circle = getattr(camera, "image_circle_deg", None)
+    if circle is None:
+        return np.ones(len(c), dtype=bool)
+    return c[:, 2] >= math.cos(math.radians(0.5 * circle))
+
+
+@functools.lru_cache(maxsize=4)  # a series of frames of one camera computes it once
+def pixel_illumination(camera: CameraModel, vignetting_power: float) -> np.ndarray | None:
+    """The relative illumination (float32, height x width, read-only) of each pixel centre:
+    0 where the lens forms no image (outside its image circle or beyond the radius its model
+    reaches), else ``relative_illumination`` of the pixel's direction; None when it is 1
+    everywhere (a pinhole without vignetting)."""
+    if isinstance(camera, Camera) and vignetting_power == 0.0:
+        return None
+    cols, rows = np.meshgrid(np.arange(camera.width) + 0.5, np.arange(camera.height) + 0.5)
+    xy = np.column_stack([cols.ravel(), rows.ravel()])
+    c = camera.pixels_to_bearings(xy)
+    values = relative_illumination(c[:, 2], vignetting_power)
+    if not isinstance(camera, Camera):  # a pinhole images its whole sensor
+        # pixels past the largest radius of the model unproject to its last angle
+        reached = np.sum((camera.bearings_to_pixels(c) - xy) ** 2, axis=1) < _ROUND_TRIP_PX**2
+        values[~(reached & _in_circle(camera, c))] = 0.0
+    out = values.reshape(camera.height, camera.width).astype(np.float32)
+    out.flags.writeable = False
+    return out
 
 
 def write_image(path: str | Path, image: np.ndarray) -> None:
@@ -343,7 +425,10 @@ def _render(
     height: int,
     settings: RenderSettings,
     rng: np.random.Generator | int | None,
+    illumination: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
+    """The image and the hot pixels' centres; ``illumination`` (height x width, see
+    ``pixel_illumination``) scales the sky and drops the starlight where it is 0."""
     if not (_is_int(width) and _is_int(height) and width > 0 and height > 0):
         raise StarnavError(
             f"width and height must be positive integers, got {width!r} x {height!r}"
@@ -355,12 +440,14 @@ def _render(
     if not (np.isfinite(xy).all() and np.isfinite(flux_e).all() and (flux_e >= 0).all()):
         raise StarnavError("star positions must be finite and fluxes finite and >= 0")
     rng = np.random.default_rng(rng)
-    sky = settings.background_e
     shape = (height, width)
-    if sky >= _GAUSSIAN_SKY_E:
+    sky = np.float32(settings.background_e)
+    if illumination is not None:
+        sky = sky * illumination
+    if settings.background_e >= _GAUSSIAN_SKY_E:
         electrons = rng.standard_normal(shape, dtype=np.float32)
-        electrons *= np.float32(math.sqrt(sky + settings.read_noise_e**2))
-        electrons += np.float32(sky)
+        electrons *= np.sqrt(sky + np.float32(settings.read_noise_e**2))
+        electrons += sky
     else:
         electrons = rng.poisson(sky, shape).astype(np.float32)
         if settings.read_noise_e:
@@ -368,6 +455,9 @@ def _render(
             noise *= np.float32(settings.read_noise_e)
             electrons += noise
     flat, values = _star_pixels(xy, flux_e, width, height, settings.psf_sigma_px)
+    if illumination is not None:
+        lit = illumination.reshape(-1)[flat] > 0.0
+        flat, values = flat[lit], values[lit]
     np.add.at(electrons.reshape(-1), flat, rng.poisson(values).astype(np.float32))
     adu = electrons
     if settings.gain_e_per_adu != 1.0:

@@ -18,6 +18,7 @@ from starnav.cli.common import (
     positive_int,
     print_json,
 )
+from starnav.errors import StarnavError
 
 
 def add_parser(subparsers: Subparsers) -> None:
@@ -33,8 +34,14 @@ def add_parser(subparsers: Subparsers) -> None:
         help="RA/Dec grid step (default 3: 7200 boresights)",
     )
     p.add_argument("--frames", type=positive_int, default=1000, help="frames of --sampling uniform")
-    p.add_argument("--fov-deg", type=finite, default=12.0, help="horizontal FOV (default 12)")
-    p.add_argument("--width", type=positive_int, default=512, help="image width (default 512)")
+    p.add_argument(
+        "--camera",
+        metavar="CAM.json",
+        help="camera file (any lens model, e.g. a fisheye) instead of the pinhole of --fov-deg, "
+        "--width, --height",
+    )
+    p.add_argument("--fov-deg", type=finite, help="horizontal FOV (default 12)")
+    p.add_argument("--width", type=positive_int, help="image width (default 512)")
     p.add_argument("--height", type=positive_int, help="image height (px; default: width)")
     p.add_argument("--mag-limit", type=finite, default=DEFAULT_MAG_LIMIT, help="Hipparcos Hp limit")
     p.add_argument(
@@ -66,13 +73,31 @@ def add_parser(subparsers: Subparsers) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Run the evaluation; print the summary, write the per-frame CSV and the sky map."""
-    from starnav.evaluate import EvalConfig, evaluate, grid_boresights, uniform_boresights
+    from starnav.camera import load_camera
+    from starnav.evaluate import (
+        EvalConfig,
+        camera_items,
+        evaluate,
+        grid_boresights,
+        uniform_boresights,
+    )
     from starnav.evaluate.report import describe, markdown, plot_sky_map, write_frames_csv
 
+    size = {k: getattr(args, k) for k in ("fov_deg", "width", "height")}
+    size = {k: v for k, v in size.items() if v is not None}
+    if args.camera is not None:
+        if size:
+            option = "--" + next(iter(size)).replace("_", "-")
+            raise StarnavError(f"--camera gives the lens and the image size: drop {option}")
+        camera = load_camera(args.camera)
+        size = {
+            "camera": camera_items(camera),
+            "fov_deg": camera.fov_deg,
+            "width": camera.width,
+            "height": camera.height,
+        }
     config = EvalConfig(
-        fov_deg=args.fov_deg,
-        width=args.width,
-        height=args.height,
+        **size,
         mag_limit=args.mag_limit,
         noise_px=args.noise_px,
         false_stars=args.false_stars,
@@ -97,7 +122,11 @@ def run(args: argparse.Namespace) -> int:
     if args.sky_map:
         plot_sky_map(results, args.sky_map, title=describe(config, sampling))
     if args.json:
-        config_dict = {**asdict(config), "algorithm_options": dict(config.algorithm_options)}
+        config_dict = {
+            **asdict(config),
+            "algorithm_options": dict(config.algorithm_options),
+            "camera": config.make_camera().to_dict(),
+        }
         print_json({**summary.to_dict(), "config": config_dict, "sampling": sampling})
     else:
         print(markdown(config, sampling, summary))

@@ -1,4 +1,5 @@
-"""``starnav render``: a realistic star image (PSF, noise, hot pixels) of a preset camera."""
+"""``starnav render``: a realistic star image (PSF, noise, hot pixels) of a preset camera or of
+a camera file (any lens model: black outside the image circle of a fisheye, vignetting)."""
 
 from __future__ import annotations
 
@@ -7,6 +8,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from starnav.camera import load_camera
 from starnav.catalog import load_catalog
 from starnav.cli.common import (
     EXIT_OK,
@@ -17,6 +19,7 @@ from starnav.cli.common import (
     positive_int,
     print_json,
 )
+from starnav.errors import StarnavError
 from starnav.geometry import attitude_from_radec_roll
 from starnav.render import PRESETS
 from starnav.simulate import draw_radec_roll
@@ -44,14 +47,26 @@ def add_parser(subparsers: Subparsers) -> None:
         default="seed-1024",
         help="camera and sensor (default %(default)s); the options below override it",
     )
+    p.add_argument(
+        "--camera",
+        metavar="CAM.json",
+        help="camera file (any lens model; size, focal length and coefficients come from it, "
+        "instead of the preset's pinhole and the five options below)",
+    )
     p.add_argument("--fov-deg", type=finite, help="horizontal FOV")
     p.add_argument("--width", type=positive_int, help="image width (px)")
     p.add_argument("--height", type=positive_int, help="image height (px; default: width)")
-    p.add_argument("--k1", type=finite, default=0.0, help="radial distortion k1")
-    p.add_argument("--k2", type=finite, default=0.0, help="radial distortion k2")
+    p.add_argument("--k1", type=finite, help="radial distortion k1 (default 0)")
+    p.add_argument("--k2", type=finite, help="radial distortion k2 (default 0)")
     add_attitude(p)
     for name in SENSOR_NUMBERS:
         p.add_argument(f"--{name.replace('_', '-')}", type=finite, help=f"sensor: {name}")
+    p.add_argument(
+        "--vignetting-power",
+        type=finite,
+        help="p of the relative illumination cos(θ/2)^p (0: none; default 2 for a fisheye, "
+        "one stop at 90° from the axis, 0 for a pinhole)",
+    )
     p.add_argument("--bit-depth", type=int, choices=(8, 16), help="8 or 16 bit output")
     p.add_argument("--hot-pixels", type=count, help="hot pixels at random places")
     p.add_argument("--mag-limit", type=finite, help="faintest Hipparcos star drawn")
@@ -66,12 +81,31 @@ def run(args: argparse.Namespace) -> int:
     from starnav.render import adjust_camera, preset, render_frame, write_image, write_truth_csv
 
     camera, settings = preset(args.preset)
-    camera = adjust_camera(
-        camera, fov_deg=args.fov_deg, width=args.width, height=args.height, k1=args.k1, k2=args.k2
-    )
+    if args.camera is not None:
+        pinhole = ("fov_deg", "width", "height", "k1", "k2")
+        given = [f"--{k.replace('_', '-')}" for k in pinhole if getattr(args, k) is not None]
+        if given:
+            raise StarnavError(f"--camera gives the lens and the image size: drop {given[0]}")
+        camera = load_camera(args.camera)
+    else:
+        camera = adjust_camera(
+            camera,
+            fov_deg=args.fov_deg,
+            width=args.width,
+            height=args.height,
+            k1=args.k1 or 0.0,
+            k2=args.k2 or 0.0,
+        )
     changes = {
         k: getattr(args, k)
-        for k in (*SENSOR_NUMBERS, "bit_depth", "hot_pixels", "mag_limit", "seed")
+        for k in (
+            *SENSOR_NUMBERS,
+            "bit_depth",
+            "hot_pixels",
+            "mag_limit",
+            "seed",
+            "vignetting_power",
+        )
         if getattr(args, k) is not None
     }
     settings = replace(settings, **changes)
@@ -89,7 +123,8 @@ def run(args: argparse.Namespace) -> int:
         print_json({"image": args.output, **truth})
     else:
         print(
-            f"wrote {args.output}: {camera.width} x {camera.height} px, FOV {camera.fov_deg:.3f}°, "
+            f"wrote {args.output}: {camera.model} {camera.width} x {camera.height} px, "
+            f"FOV {camera.fov_deg:.3f}°, "
             f"{truth['n_stars']} stars; RA {truth['ra_deg']:.5f}° Dec {truth['dec_deg']:+.5f}° "
             f"roll {truth['roll_deg']:.4f}°"
         )

@@ -30,13 +30,17 @@ def table_row(name: str, s: Summary) -> str:
 
 
 def describe(config: EvalConfig, sampling: str) -> str:
-    """One line naming the camera, the errors and the solver settings."""
-    height = config.height or config.width
+    """One line naming the camera (its lens model), the errors and the solver settings."""
+    camera = config.make_camera()
+    circle = getattr(camera, "image_circle_deg", None)
+    lens = f"{camera.model} {camera.fov_deg:g}° / {camera.width}x{camera.height} px"
+    if circle is not None:
+        lens += f" (image circle {circle:g}°)"
     algo = config.algorithm
     if config.algorithm_options:
         algo += f" ({describe_options(dict(config.algorithm_options))})"
     return (
-        f"{sampling}; {config.fov_deg:g}° / {config.width}x{height} px, Hipparcos Hp <= "
+        f"{sampling}; {lens}, Hipparcos Hp <= "
         f"{config.mag_limit:g}; noise {config.noise_px:g} px, {config.false_stars} false stars, "
         f"{config.missing_frac:.0%} missing, magnitude noise {config.mag_noise:g}; "
         f"{algo}, sigma_px {config.solver_sigma_px:g}, seed {config.seed}"

@@ -19,7 +19,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 from tqdm import tqdm
 
-from starnav.camera import Camera
+from starnav.camera import Camera, CameraModel, camera_from_dict
 from starnav.catalog import load_catalog
 from starnav.errors import StarnavError
 from starnav.evaluate.sampling import Boresights, frame_rng
@@ -45,7 +45,9 @@ _CHUNK = 40  # frames per task sent to a worker
 class EvalConfig:
     """Everything that defines the frames and how they are solved.
 
-    Camera: ``fov_deg`` (horizontal), ``width``/``height`` (px), Hipparcos ``mag_limit``.
+    Camera: ``camera``, a camera file's items ((key, value) pairs of ``CameraModel.to_dict``,
+    any lens model; see ``camera_items``), else a pinhole of ``fov_deg`` (horizontal) across
+    ``width``/``height`` (px); ``make_camera`` makes it. Stars to Hipparcos ``mag_limit``.
     Errors: ``noise_px`` (1-sigma centroid noise), ``false_stars`` per frame, ``missing_frac``
     of stars dropped, ``mag_noise`` (1-sigma, magnitudes; changes the brightness order).
     Solver: ``algorithm``, its ``algorithm_options`` ((name, value) pairs), ``sigma_px`` told to it,
@@ -65,6 +67,13 @@ class EvalConfig:
     sigma_px: float | None = None
     max_false_match_probability: float = DEFAULT_MAX_FALSE_MATCH_PROBABILITY
     seed: int = 0
+    camera: tuple[tuple[str, object], ...] = ()  # (key, value): hashable and picklable
+
+    def make_camera(self) -> CameraModel:
+        """The camera the frames are simulated and solved with."""
+        if self.camera:
+            return camera_from_dict(dict(self.camera), "the evaluation's camera")
+        return Camera.from_fov(self.fov_deg, self.width, self.height)
 
     @property
     def solver_sigma_px(self) -> float:
@@ -73,7 +82,7 @@ class EvalConfig:
 
     def check(self) -> None:
         """Raise ``StarnavError`` naming the first bad value."""
-        Camera.from_fov(self.fov_deg, self.width, self.height)
+        camera = self.make_camera()
         make_identifier(self.algorithm, **self.identifier_options)
         if not (np.isfinite(self.mag_limit) and -2.0 <= self.mag_limit <= 12.0):
             raise StarnavError(f"mag limit must be between -2 and 12, got {self.mag_limit!r}")
@@ -82,7 +91,7 @@ class EvalConfig:
         # the simulator checks noise, false stars and the missing fraction
         simulate_frame(
             load_catalog(None, mag_limit=self.mag_limit),
-            Camera.from_fov(self.fov_deg, self.width, self.height),
+            camera,
             noise_px=self.noise_px,
             false_stars=self.false_stars,
             missing_frac=self.missing_frac,
@@ -93,6 +102,11 @@ class EvalConfig:
     @property
     def identifier_options(self) -> dict:
         return dict(self.algorithm_options)
+
+
+def camera_items(camera: CameraModel) -> tuple[tuple[str, object], ...]:
+    """``EvalConfig.camera`` for ``camera``."""
+    return tuple(camera.to_dict().items())
 
 
 @dataclass(frozen=True)
@@ -130,7 +144,7 @@ def config_solver(config: EvalConfig) -> Solver:
     solver = _SOLVERS.get(config)
     if solver is None:
         solver = _SOLVERS[config] = Solver(
-            Camera.from_fov(config.fov_deg, config.width, config.height),
+            config.make_camera(),
             load_catalog(None, mag_limit=config.mag_limit),
             config.algorithm,
             SolveSettings(
@@ -227,11 +241,12 @@ def solve_frame(config: EvalConfig, boresights: Boresights, index: int) -> Frame
 def _wrong_ids(ids, true_ids, catalog, camera, noise_px: float) -> int:
     """Points given a catalog id other than their own. A star confused with a catalog
     neighbour closer than max(1 px, 3 noise sigma) is not counted: such doubles cannot be told
-    apart at that noise (the neighbour may be the one the simulator dropped)."""
+    apart at that noise (the neighbour may be the one the simulator dropped). Pixels become
+    angles at the lens's coarsest scale (the focal length of a pinhole)."""
     differ = np.flatnonzero((ids != -1) & (ids != true_ids))
     if len(differ) == 0:
         return 0
-    close_rad = max(1.0, 3.0 * noise_px) / camera.focal_px
+    close_rad = max(1.0, 3.0 * noise_px) / camera.scale_px_per_rad
     wrong = 0
     for n in differ:
         if true_ids[n] == FALSE_STAR_ID:
@@ -263,8 +278,7 @@ def prepare(config: EvalConfig) -> int:
     find them in the disk cache; returns their size in bytes."""
     config.check()
     catalog = load_catalog(None, mag_limit=config.mag_limit)
-    camera = Camera.from_fov(config.fov_deg, config.width, config.height)
-    database = get_database(catalog, camera)
+    database = get_database(catalog, config.make_camera())
     return make_identifier(config.algorithm, **config.identifier_options).database_nbytes(database)
 
 
