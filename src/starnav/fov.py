@@ -39,8 +39,10 @@ from starnav.starlist import StarList, check_star_list
 DEFAULT_FOV_RANGE_DEG = (5.0, 40.0)
 FOV_LIMITS_DEG = (1.0, 100.0)
 LENS_FOV_LIMITS_DEG = (10.0, 360.0)  # the focal scan of a fisheye model
+DEFAULT_LENS_FOV_RANGE_DEG = (120.0, 200.0)  # a fisheye's range when none is given
 SCAN_STARS = 60  # the focal scan identifies the brightest this many stars,
-SCAN_HYPOTHESES = 2000  # testing at most this many hypotheses per trial focal length
+SCAN_HYPOTHESES = 2000  # testing at most this many hypotheses per trial focal length,
+SCAN_PAIR_DEG = 20.0  # on triangles of sides up to this (so each trial covers more)
 GIVEN_FOV_TOLERANCE = 0.05  # a given FOV is searched within +-5 %
 CAMERA_FOV_TOLERANCE = 0.01  # a calibrated camera's within +-1 %
 _STARS_PER_FIELD = 40.0  # catalog depth of a band: mean stars in one of its pattern fields
@@ -223,7 +225,8 @@ def solve_fov(
     of view is unknown: searched within ``fov_range_deg`` (horizontal, degrees), or within
     5 % of ``fov_deg``, or within 1 % of a calibrated ``camera`` (whose principal point and
     distortion are then used). The solution's ``fov_deg``/``focal_px`` are fitted;
-    ``fit_distortion`` fits k1, k2 as well (with at least 12 matched stars).
+    ``fit_distortion`` fits k1, k2 as well (with at least 12 matched stars). A fisheye lens
+    given with the (pinhole's) default range searches ``DEFAULT_LENS_FOV_RANGE_DEG``.
     ``brightness``: larger is brighter (without it the rows are taken as brightest first).
     A fisheye ``lens`` model (``starnav.camera.MODELS``), or a fisheye ``camera``, is solved
     by ``scan_focal`` (``mag_limit``: its catalog's, default Hp <= 6; the pinhole search
@@ -233,6 +236,8 @@ def solve_fov(
         width, height, lens = camera.width, camera.height, camera.model
     if lens not in MODELS:
         raise StarnavError(f"unknown lens model {lens!r}; known: {', '.join(MODELS)}")
+    if lens != "pinhole" and tuple(fov_range_deg) == DEFAULT_FOV_RANGE_DEG:
+        fov_range_deg = DEFAULT_LENS_FOV_RANGE_DEG  # the default range of a fisheye
     lo, hi = search_range(fov_deg, fov_range_deg, camera, lens)
     height = width if height is None else height
     base = camera or MODELS[lens].from_fov(0.5 * (lo + hi), width, height)
@@ -265,17 +270,21 @@ def scan_focal(
     settings: SolveSettings,
 ) -> SolveResult:
     """A lens of known model but unknown focal length: the solver's identification of the
-    brightest ``SCAN_STARS`` at trial focal lengths over the horizontal ``fov_range_deg``
-    (degrees), from the middle outward, in steps small enough that the longest star triangle
-    side keeps within the pair tolerance; the first verified one's fitted focal length then
-    solves the whole list (focal length free)."""
+    brightest ``SCAN_STARS`` on triangles of sides up to ``SCAN_PAIR_DEG``, at trial focal
+    lengths over the horizontal ``fov_range_deg`` (degrees), from the middle outward, in
+    steps small enough that the longest side keeps within half the pair tolerance; the first
+    verified one's fitted focal length then solves the whole list (focal length free, pairs
+    to the usual length)."""
     t0 = time.perf_counter()
     f_lo, f_hi = (type(base).from_fov(v, base.width, base.height).focal_px for v in fov_range_deg)
     f_lo, f_hi = min(f_lo, f_hi), max(f_lo, f_hi)
     middle = base.with_focal(math.sqrt(f_lo * f_hi))
-    solver = Solver(middle, catalog, settings=replace(settings, fit_focal=True))
+    settings = replace(settings, fit_focal=True)
+    solver = Solver(middle, catalog, settings=settings, max_pair_deg=SCAN_PAIR_DEG)
     tol_px = solver.match_settings.pair_tol_rad * middle.scale_px_per_rad
-    half = math.log1p(tol_px / (solver.database.max_angle_rad * middle.focal_px))
+    # a trial covers the focal lengths whose error on the longest side takes at most half the
+    # pair tolerance (the centroid noise takes the rest), at the longest focal length
+    half = math.log1p(0.5 * tol_px / (solver.database.max_angle_rad * f_hi))
     n = math.ceil(0.5 * math.log(f_hi / f_lo) / (2.0 * half) - 1e-9)
     focals = [middle.focal_px * math.exp(2.0 * half * k) for k in sorted(range(-n, n + 1), key=abs)]
     brightest = brightness_order(stars)[:SCAN_STARS]
@@ -284,7 +293,8 @@ def scan_focal(
     for focal in focals:
         result = solver.with_camera(base.with_focal(focal), SCAN_HYPOTHESES).solve(few)
         if result.solution is not None:
-            result = solver.with_camera(base.with_focal(result.solution.focal_px)).solve(stars)
+            fitted = base.with_focal(result.solution.focal_px)
+            result = Solver(fitted, catalog, settings=settings).solve(stars)
             break
     ms = elapsed_ms(t0)
     if result.solution is not None:

@@ -180,7 +180,13 @@ def simulate_frame(
     if false_stars:
         faint = float(catalog.mag.max()) if mag_limit is None else float(mag_limit)
         bright = float(np.min(mag)) if len(mag) else faint - 2.0
-        fxy = rng.uniform([0.0, 0.0], [camera.width, camera.height], (false_stars, 2))
+        corner = [camera.width, camera.height]
+        fxy = rng.uniform([0.0, 0.0], corner, (false_stars, 2))
+        # where the lens images the sky only (inside a fisheye's image circle)
+        outside = ~camera.sees(camera.pixels_to_bearings(fxy))
+        while outside.any():
+            fxy[outside] = rng.uniform([0.0, 0.0], corner, (int(outside.sum()), 2))
+            outside = ~camera.sees(camera.pixels_to_bearings(fxy))
         fmag = rng.uniform(bright, faint, false_stars)
         xy = np.vstack([xy, fxy])
         mag = np.concatenate([mag, fmag])

@@ -219,8 +219,12 @@ def half_diagonal(model, p, width, height):
 @njit(cache=True)
 def field_cos(model, p, width, height):
     """Cosine of the cone about the boresight outside which nothing is in the image."""
-    top = math.pi if model == PINHOLE else model_theta_max(model)  # no fold-back (orthographic)
-    return math.cos(min(half_diagonal(model, p, width, height) + MARGIN_RAD, top))
+    half = half_diagonal(model, p, width, height)
+    if model == PINHOLE:
+        return math.cos(half + MARGIN_RAD)
+    if half >= p[THETA_LIMIT]:  # the image circle bounds the field: exactly
+        return math.cos(half)
+    return math.cos(min(half + MARGIN_RAD, model_theta_max(model)))  # no fold-back
 
 
 @njit(cache=True)
