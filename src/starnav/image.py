@@ -16,6 +16,7 @@ import numpy as np
 
 from starnav.camera import CameraModel, load_camera
 from starnav.catalog import Catalog
+from starnav.detect.circle import find_image_circle
 from starnav.detect.read import read_image
 from starnav.detect.stars import Detections, detect_stars
 from starnav.errors import CameraError, ImageError
@@ -95,7 +96,10 @@ def solve_image(
     is scanned, see ``starnav.fov.scan_focal``). ``max_stars``: the
     brightest this many detections are used; ``threshold_sigma``: detection threshold over
     the background noise; ``sigma_px``: centroid 1-sigma assumed by the matching
-    tolerances. Other keywords: see ``starnav.fov.solve_fov``.
+    tolerances. With a fisheye lens (any model but the pinhole), detections outside the
+    image circle found in the image (``starnav.detect.circle``) are not made: the dark frame
+    around an all-sky camera's disc often holds burned-in text. Other keywords: see
+    ``starnav.fov.solve_fov``.
     """
     if isinstance(camera, str | Path):
         camera = load_camera(camera)
@@ -117,6 +121,8 @@ def solve_image(
             f"{width} x {height} px"
         )
     t1 = time.perf_counter()
+    if (camera.model if camera is not None else lens) != "pinhole":
+        pixels = _outside_circle_masked(pixels)
     found = detect_stars(pixels, threshold_sigma=threshold_sigma, max_stars=max_stars)
     detect_ms = (time.perf_counter() - t1) * 1e3
     if len(found.xy) < 4:
@@ -155,6 +161,19 @@ def solve_image(
         result.time_ms,
         result.database.catalog,
     )
+
+
+def _outside_circle_masked(pixels: np.ndarray) -> np.ndarray:
+    """A fisheye's pixels with those outside its image circle (``starnav.detect.circle``,
+    shrunk by 1 % of its radius: the rim is lit horizon) set to NaN, which detection masks;
+    the pixels unchanged when no circle is found (a full-frame fisheye)."""
+    circle = find_image_circle(pixels)
+    if circle is None:
+        return pixels
+    height, width = pixels.shape
+    masked = np.array(pixels, dtype=np.float32)
+    masked[circle.outside(width, height, margin_px=0.01 * circle.radius_px)] = np.nan
+    return masked
 
 
 def annotate_result(path_out: str | Path, image: np.ndarray, result: ImageSolveResult) -> None:

@@ -45,6 +45,7 @@ _DEFAULT_KERNEL = np.array([[1.0, 2.0, 1.0], [2.0, 4.0, 2.0], [1.0, 2.0, 1.0]], 
 _GAUSSIAN_HALF_LIGHT = math.sqrt(2.0 * math.log(2.0))  # half-light radius / sigma (2-D)
 _PSF_STARS = 25  # brightest unsaturated stars used to measure the PSF width
 _APERTURE_SIGMAS = 3.0
+_EXTENDED_SIZE = 3.0  # a source wider than this many median sources is not a PSF star
 _NOISE_FREE_RMS = 1e-3  # rms assumed for a noise-free image, as a fraction of its range
 
 
@@ -382,6 +383,10 @@ def _measure_psf_sigma(data: np.ndarray, objects: np.ndarray, mask: np.ndarray |
     usable = np.flatnonzero(objects["npix"] >= 5)
     if len(usable) == 0:
         return 1.0
+    # extended sources (Milky Way patches, glow on the horizon, aurora) are often the
+    # brightest in a wide field: only sources no wider than a few typical ones are measured
+    moments = np.sqrt(objects["x2"][usable] + objects["y2"][usable])
+    usable = usable[moments <= _EXTENDED_SIZE * np.median(moments)]
     pick = usable[np.argsort(-objects["flux"][usable])[:_PSF_STARS]]
     size = np.sqrt(objects["x2"][pick] + objects["y2"][pick])
     rmax = np.clip(3.0 * size, 3.0, 50.0)

@@ -1,0 +1,96 @@
+"""The image circle of a circular fisheye: the bright disc of sky inside a dark frame.
+
+All-sky cameras put the sky in a disc; outside it are dark corners and often burned-in text
+(time stamps, site names), whose saturated glyphs would otherwise be taken for the brightest
+stars. ``find_image_circle`` finds the disc on a copy reduced to about 256 px a side: pixels
+brighter than halfway between the dark frame (2nd percentile) and the sky (median) form the
+largest connected region; its holes are filled (trees, buildings and stars do not matter), and
+a circle is fitted by least squares (Kasa's algebraic fit) to the region's boundary pixels
+that do not lie on the image border, so a disc cut by the frame is still found. Boundary
+pixels farther than 3 reduced pixels from the circle (a tree line, a lit horizon) are dropped
+and the circle refitted once. No disc (a full-frame fisheye, a daylight frame) gives None.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import ndimage
+
+_REDUCED_PX = 256
+_OUTLIER_REDUCED_PX = 3.0
+_MIN_RADIUS_FRACTION = 0.25  # of the shorter side
+_MIN_DARK_FRACTION = 0.05  # of the reduced image outside the disc
+
+
+@dataclass(frozen=True)
+class ImageCircle:
+    """A circular fisheye's disc of sky: centre (``cx``, ``cy``, px, our convention: top-left
+    pixel centre at (0.5, 0.5)) and ``radius_px``."""
+
+    cx: float
+    cy: float
+    radius_px: float
+
+    def outside(self, width: int, height: int, *, margin_px: float = 0.0) -> np.ndarray:
+        """Boolean (height, width) mask, True for pixels whose centre lies outside the circle
+        shrunk by ``margin_px``."""
+        y = np.arange(height, dtype=np.float64)[:, None] + 0.5
+        x = np.arange(width, dtype=np.float64)[None, :] + 0.5
+        r = self.radius_px - margin_px
+        return (x - self.cx) ** 2 + (y - self.cy) ** 2 > r * r
+
+
+def find_image_circle(image: np.ndarray) -> ImageCircle | None:
+    """The bright disc of a circular fisheye in a 2-D image (row 0 at the top), or None when
+    the image has no dark frame around a disc of radius at least a quarter of its shorter
+    side."""
+    data = np.asarray(image, dtype=np.float32)
+    height, width = data.shape
+    step = max(1, math.ceil(max(height, width) / _REDUCED_PX))
+    small = _block_mean(data, step)
+    finite = small[np.isfinite(small)]
+    if finite.size == 0:
+        return None
+    dark, sky = np.percentile(finite, [2.0, 50.0])
+    if not sky > dark:
+        return None
+    bright = np.nan_to_num(small, nan=dark) > 0.5 * (dark + sky)
+    labels, n = ndimage.label(bright)
+    if n == 0:
+        return None
+    sizes = np.bincount(labels.ravel())[1:]
+    disc = ndimage.binary_fill_holes(labels == 1 + int(np.argmax(sizes)))
+    if disc.mean() > 1.0 - _MIN_DARK_FRACTION:
+        return None
+    edge = disc & ~ndimage.binary_erosion(disc)
+    edge[0, :] = edge[-1, :] = edge[:, 0] = edge[:, -1] = False
+    ys, xs = np.nonzero(edge)
+    if len(xs) < 10:
+        return None
+    cx, cy, r = _fit_circle(xs + 0.5, ys + 0.5)
+    near = np.abs(np.hypot(xs + 0.5 - cx, ys + 0.5 - cy) - r) <= _OUTLIER_REDUCED_PX
+    if near.sum() >= 10:
+        cx, cy, r = _fit_circle(xs[near] + 0.5, ys[near] + 0.5)
+    if not (np.isfinite(r) and r * step >= _MIN_RADIUS_FRACTION * min(height, width)):
+        return None
+    return ImageCircle(float(cx * step), float(cy * step), float(r * step))
+
+
+def _block_mean(data: np.ndarray, step: int) -> np.ndarray:
+    """Mean of step x step blocks (the last partial row and column of blocks dropped)."""
+    if step == 1:
+        return data
+    h, w = (data.shape[0] // step) * step, (data.shape[1] // step) * step
+    blocks = data[:h, :w].reshape(h // step, step, w // step, step)
+    return np.nanmean(blocks, axis=(1, 3))
+
+
+def _fit_circle(x: np.ndarray, y: np.ndarray) -> tuple[float, float, float]:
+    """Kasa's fit: x² + y² + D x + E y + F = 0 by linear least squares."""
+    a = np.column_stack([x, y, np.ones_like(x)])
+    d, e, f = np.linalg.lstsq(a, -(x * x + y * y), rcond=None)[0]
+    cx, cy = -d / 2.0, -e / 2.0
+    return float(cx), float(cy), float(math.sqrt(max(cx * cx + cy * cy - f, 0.0)))
