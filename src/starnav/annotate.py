@@ -20,7 +20,7 @@ from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.path import Path as MarkerPath
 
-from starnav.camera import Camera
+from starnav.camera import CameraModel
 from starnav.catalog import Catalog
 from starnav.catalog.names import star_names
 from starnav.errors import ImageError, StarnavError
@@ -54,7 +54,7 @@ def figure_size_px(width: int, height: int, *, title_lines: int = 1) -> tuple[in
     return round(width * scale), round(height * scale) + strip
 
 
-def _gray(image: np.ndarray, camera: Camera) -> np.ndarray:
+def _gray(image: np.ndarray, camera: CameraModel) -> np.ndarray:
     data = np.asarray(image)
     if data.ndim == 3 and data.shape[2] in (3, 4):
         data = data[:, :, :3].astype(float).mean(axis=2)
@@ -108,12 +108,11 @@ def _xy(points, what: str) -> np.ndarray:
     return xy
 
 
-def _title_lines(R: np.ndarray, camera: Camera, title: str | None, counts: str) -> list[str]:
+def _title_lines(R: np.ndarray, camera: CameraModel, title: str | None, counts: str) -> list[str]:
     ra, dec, roll, parity = radec_roll_from_attitude(R)
-    fov_y = np.degrees(2.0 * np.arctan(0.5 * camera.height / camera.focal_px))
     line = (
-        f"RA {ra:.4f}°  Dec {dec:+.4f}°  roll {roll:.3f}°  FOV {camera.fov_deg:.3f}° x "
-        f"{fov_y:.3f}°  parity {parity:+d}  ({counts})"
+        f"RA {ra:.4f}°  Dec {dec:+.4f}°  roll {roll:.3f}°  FOV {camera.fov_deg:.3f}° "
+        f"({camera.model})  parity {parity:+d}  ({counts})"
     )
     return [*([] if title is None else title.splitlines()), line]
 
@@ -123,7 +122,7 @@ def annotation_figure(
     *,
     detected_xy: np.ndarray,
     R_cam_from_icrs: np.ndarray,
-    camera: Camera,
+    camera: CameraModel,
     catalog: Catalog,
     matched: Sequence[Sequence[float]] | np.ndarray,
     residual_scale: float = 50.0,
@@ -179,7 +178,7 @@ def annotation_figure(
 
 
 def _image_figure(
-    gray: np.ndarray, camera: Camera, fig_w: int, fig_h: int, title_lines: int
+    gray: np.ndarray, camera: CameraModel, fig_w: int, fig_h: int, title_lines: int
 ) -> tuple[Figure, Axes]:
     """A ``fig_w`` x ``fig_h`` px figure with the stretched image drawn in starnav's pixel
     convention below a strip for ``title_lines`` lines of title; the figure and the image
@@ -205,7 +204,7 @@ def _catalog_markers(
     match: np.ndarray,
     catalog: Catalog,
     R: np.ndarray,
-    camera: Camera,
+    camera: CameraModel,
 ) -> list:
     """Draw the catalog stars in view (``ids`` at ``xy``): orange crosses for those not in
     ``match``, green squares where the matched ones project; their legend handles."""
@@ -311,7 +310,7 @@ def annotate_image(
     *,
     detected_xy: np.ndarray,
     R_cam_from_icrs: np.ndarray,
-    camera: Camera,
+    camera: CameraModel,
     catalog: Catalog,
     matched: Sequence[Sequence[float]] | np.ndarray,
     residual_scale: float = 50.0,

@@ -240,7 +240,12 @@ def solve_fov(
         fov_range_deg = DEFAULT_LENS_FOV_RANGE_DEG  # the default range of a fisheye
     lo, hi = search_range(fov_deg, fov_range_deg, camera, lens)
     height = width if height is None else height
-    base = camera or MODELS[lens].from_fov(0.5 * (lo + hi), width, height)
+    if camera is not None:
+        base = camera
+    elif lens == "pinhole":
+        base = Camera.from_fov(0.5 * (lo + hi), width, height)
+    else:  # the scan sets the focal length
+        base = MODELS[lens](int(width), int(height), 1.0)
     stars = check_star_list(
         xy, width=base.width, height=base.height, brightness=brightness, labels=labels
     )
@@ -254,7 +259,7 @@ def solve_fov(
     )
     if lens != "pinhole":
         cat = load_catalog(catalog, mag_limit=mag_limit, epoch_year=epoch_year)
-        return scan_focal(stars, base, (lo, hi), cat, settings)
+        return scan_focal(stars, base, lens_focal_range(base, camera, (lo, hi)), cat, settings)
     if mag_limit is not None:
         raise StarnavError("mag_limit needs fov_deg (the FOV search chooses its own)")
     bands = load_bands(lo, hi, base.width, base.height, catalog, epoch_year)
@@ -262,22 +267,40 @@ def solve_fov(
         return _search_and_fit(stars, base, bands, settings, (lo, hi), pattern_stars)
 
 
+def lens_focal_range(
+    base: CameraModel, camera: CameraModel | None, fov_range_deg: tuple[float, float]
+) -> tuple[float, float]:
+    """The focal lengths (px) a fisheye's scan tries: within ``CAMERA_FOV_TOLERANCE`` of a
+    calibrated ``camera``'s, else those of the horizontal ``fov_range_deg`` through the lens
+    model of ``base`` (with its coefficients), the range cut at the widest field the model
+    maps."""
+    if camera is not None:
+        f = camera.focal_px
+        return f / (1 + CAMERA_FOV_TOLERANCE), f * (1 + CAMERA_FOV_TOLERANCE)
+    widest = math.degrees(2.0 * base.model_theta_max_rad)
+    lo, hi = (min(v, widest) for v in fov_range_deg)
+    coefficients = {name: getattr(base, name) for name in base.coefficients}
+    f_lo, f_hi = (
+        type(base).from_fov(v, base.width, base.height, **coefficients).focal_px for v in (hi, lo)
+    )
+    return f_lo, f_hi
+
+
 def scan_focal(
     stars: StarList,
     base: CameraModel,
-    fov_range_deg: tuple[float, float],
+    focal_range_px: tuple[float, float],
     catalog: Catalog,
     settings: SolveSettings,
 ) -> SolveResult:
     """A lens of known model but unknown focal length: the solver's identification of the
     brightest ``SCAN_STARS`` on triangles of sides up to ``SCAN_PAIR_DEG``, at trial focal
-    lengths over the horizontal ``fov_range_deg`` (degrees), from the middle outward, in
-    steps small enough that the longest side keeps within half the pair tolerance; the first
-    verified one's fitted focal length then solves the whole list (focal length free, pairs
-    to the usual length)."""
+    lengths over ``focal_range_px`` (``base`` with another focal length), from the middle
+    outward, in steps small enough that the longest side keeps within half the pair
+    tolerance; the first verified one's fitted camera then solves the whole list (focal
+    length free, pairs to the usual length)."""
     t0 = time.perf_counter()
-    f_lo, f_hi = (type(base).from_fov(v, base.width, base.height).focal_px for v in fov_range_deg)
-    f_lo, f_hi = min(f_lo, f_hi), max(f_lo, f_hi)
+    f_lo, f_hi = sorted(focal_range_px)
     middle = base.with_focal(math.sqrt(f_lo * f_hi))
     settings = replace(settings, fit_focal=True)
     solver = Solver(middle, catalog, settings=settings, max_pair_deg=SCAN_PAIR_DEG)
@@ -289,21 +312,24 @@ def scan_focal(
     focals = [middle.focal_px * math.exp(2.0 * half * k) for k in sorted(range(-n, n + 1), key=abs)]
     brightest = brightness_order(stars)[:SCAN_STARS]
     few = StarList(stars.xy[brightest], tuple(stars.labels[i] for i in brightest), None)
-    result = None
     for focal in focals:
-        result = solver.with_camera(base.with_focal(focal), SCAN_HYPOTHESES).solve(few)
-        if result.solution is not None:
-            fitted = base.with_focal(result.solution.focal_px)
-            result = Solver(fitted, catalog, settings=settings).solve(stars)
+        trial = solver.with_camera(base.with_focal(focal), SCAN_HYPOTHESES).solve(few)
+        if trial.solution is not None:
+            result = Solver(trial.solution.camera, catalog, settings=settings).solve(stars)
+            reason = (
+                f"the brightest {len(few.xy)} stars identified at a focal length of "
+                f"{trial.solution.focal_px:.1f} px, the whole list refused: {result.reason}"
+            )
             break
+    else:
+        reason = (
+            f"no identification at {len(focals)} focal lengths over {f_lo:.1f}-{f_hi:.1f} px "
+            f"({base.model} lens; last: {trial.reason})"
+        )
+        result = trial
     ms = elapsed_ms(t0)
     if result.solution is not None:
         return replace(result, solution=replace(result.solution, time_ms=ms), time_ms=ms)
-    lo, hi = fov_range_deg
-    reason = (
-        f"no identification at {len(focals)} focal lengths over {lo:g}-{hi:g}° "
-        f"({base.model} lens; last: {result.reason})"
-    )
     return replace(result, reason=reason, time_ms=ms)
 
 

@@ -24,6 +24,7 @@ from starnav.fov import DEFAULT_FOV_RANGE_DEG, search_range, solve_fov
 from starnav.results import Solution
 
 DEFAULT_MAX_STARS = 50
+DEFAULT_THRESHOLD_SIGMA = 5.0  # detection threshold over the background noise
 
 
 @dataclass(frozen=True, eq=False)
@@ -80,7 +81,7 @@ def solve_image(
     lens: str = "pinhole",
     fit_distortion: bool = False,
     max_stars: int = DEFAULT_MAX_STARS,
-    threshold_sigma: float = 5.0,
+    threshold_sigma: float = DEFAULT_THRESHOLD_SIGMA,
     sigma_px: float = 1.0,
     catalog: Catalog | str | Path | None = None,
     epoch_year: float | None = None,
@@ -121,9 +122,8 @@ def solve_image(
             f"{width} x {height} px"
         )
     t1 = time.perf_counter()
-    if (camera.model if camera is not None else lens) != "pinhole":
-        pixels = _outside_circle_masked(pixels)
-    found = detect_stars(pixels, threshold_sigma=threshold_sigma, max_stars=max_stars)
+    lens = camera.model if camera is not None else lens
+    found = detect_image(pixels, lens=lens, threshold_sigma=threshold_sigma, max_stars=max_stars)
     detect_ms = (time.perf_counter() - t1) * 1e3
     if len(found.xy) < 4:
         return ImageSolveResult(
@@ -163,6 +163,21 @@ def solve_image(
     )
 
 
+def detect_image(
+    pixels: np.ndarray,
+    *,
+    lens: str = "pinhole",
+    threshold_sigma: float = DEFAULT_THRESHOLD_SIGMA,
+    max_stars: int = DEFAULT_MAX_STARS,
+) -> Detections:
+    """The stars of an image array (row 0 at the top) as ``solve_image`` detects them: for a
+    fisheye ``lens`` (any model but the pinhole) only inside the image circle found in the
+    image; ``threshold_sigma`` over the background noise, the brightest ``max_stars``."""
+    if lens != "pinhole":
+        pixels = _outside_circle_masked(pixels)
+    return detect_stars(pixels, threshold_sigma=threshold_sigma, max_stars=max_stars)
+
+
 def _outside_circle_masked(pixels: np.ndarray) -> np.ndarray:
     """A fisheye's pixels with those outside its image circle (``starnav.detect.circle``,
     shrunk by 1 % of its radius: the rim is lit horizon) set to NaN, which detection masks;
@@ -197,7 +212,7 @@ def annotate_result(path_out: str | Path, image: np.ndarray, result: ImageSolveR
         catalog=cat,
         matched=np.column_stack([xy, cat.ids[rows], projected - xy]),
         title=(
-            f"rms {s.rms_px:.2f} px, false-match probability {s.false_match_probability:.1e}, "
-            f"k1 {s.k1:.4f} k2 {s.k2:.4f}"
+            f"rms {s.rms_px:.2f} px, false-match probability {s.false_match_probability:.1e}"
+            + "".join(f", {k} {getattr(s, k):.4f}" for k in cam.coefficients)
         ),
     )

@@ -9,12 +9,9 @@ from starnav.camera.fisheye import (
     Stereographic,
 )
 from starnav.camera.model import MODELS, CameraModel, camera_from_dict, load_camera, save_camera
-from starnav.camera.pinhole import PINHOLE_KEYS, Camera, focal_px_from_fov
-
-CAMERA_FILE_KEYS = PINHOLE_KEYS
+from starnav.camera.pinhole import Camera, focal_px_from_fov
 
 __all__ = [
-    "CAMERA_FILE_KEYS",
     "MODELS",
     "Camera",
     "CameraModel",

@@ -222,9 +222,8 @@ def field_cos(model, p, width, height):
     half = half_diagonal(model, p, width, height)
     if model == PINHOLE:
         return math.cos(half + MARGIN_RAD)
-    if half >= p[THETA_LIMIT]:  # the image circle bounds the field: exactly
-        return math.cos(half)
-    return math.cos(min(half + MARGIN_RAD, model_theta_max(model)))  # no fold-back
+    # not past the image circle, nor where the model folds back (orthographic: 90°)
+    return math.cos(min(half + MARGIN_RAD, model_theta_max(model), p[THETA_LIMIT]))
 
 
 @njit(cache=True)

@@ -83,6 +83,12 @@ class Lens:
         k = kernels()
         return float(k.field_cos(self.model_code, self.params, self.width, self.height))
 
+    @property
+    def model_theta_max_rad(self) -> float:
+        """The largest angle from the axis (radians) the model maps before its radius stops
+        growing (orthographic: 90°)."""
+        return float(kernels().model_theta_max(self.model_code))
+
     @functools.cached_property
     def scale_px_per_rad(self) -> float:
         """Pixels per radian of sky at the lens's coarsest over the field (the smaller of the
@@ -136,9 +142,12 @@ class Lens:
 
     def check_monotonic(self, where: str) -> None:
         """A one-line error when the image radius stops growing with the angle from the axis
-        before it reaches the farthest corner (the model would fold the image back)."""
+        before it reaches the farthest corner or the image circle (the model would fold the
+        image back)."""
         corner = math.hypot(max(self.cx, self.width - self.cx), max(self.cy, self.height - self.cy))
         top = kernels().model_theta_max(self.model_code)
+        if len(self.params) > kernels().THETA_LIMIT:  # a fisheye: up to its image circle
+            top = min(top, float(self.params[kernels().THETA_LIMIT]))
         g_slope = kernels().radial_g
         for theta in np.linspace(0.0, top, _MONOTONIC_SAMPLES, endpoint=False)[1:]:
             g, slope = g_slope(self.model_code, self.params, float(theta))

@@ -18,8 +18,6 @@ import numpy as np
 from starnav.camera.lens import Lens, check_size
 from starnav.errors import CameraError
 
-PINHOLE_KEYS = ("width", "height", "focal_px", "cx", "cy", "k1", "k2")
-
 
 def focal_px_from_fov(fov_deg: float, width: int) -> float:
     """Focal length in pixels for a horizontal field of view (degrees) across ``width`` px."""

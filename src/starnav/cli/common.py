@@ -134,8 +134,9 @@ def add_fov_search(
             "--lens",
             choices=tuple(MODELS),
             default="pinhole",
-            help="the lens model when no camera file is given (default pinhole; a fisheye "
-            "model's focal length is scanned over --fov-range, or within 5 %% of --fov-deg)",
+            help="the lens model when no camera file is given (default pinhole); without "
+            "--fov-deg a fisheye model's focal length is scanned over --fov-range (default "
+            "120 200 for a fisheye)",
         )
 
 

@@ -40,7 +40,9 @@ def add_parser(subparsers: Subparsers) -> None:
         "length searched ±1 %%)",
     )
     p.add_argument(
-        "--fit-distortion", action="store_true", help="fit radial distortion k1, k2 as well"
+        "--fit-distortion",
+        action="store_true",
+        help="fit the lens model's coefficients as well (pinhole k1, k2; kannala-brandt k1..k4)",
     )
     p.add_argument(
         "--max-stars",

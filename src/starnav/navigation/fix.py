@@ -198,7 +198,7 @@ def locate(
         cat_fix = load_catalog(None, mag_limit=mag_limit, epoch_year=float(t.decimalyear))
     else:
         cat = cat_fix = load_catalog(catalog, mag_limit=mag_limit)
-    reports, body, rows, focals = [], [], [], []
+    reports, body, rows, scales = [], [], [], []
     for view in observation.cameras:
         if len(view.xy) < 3:
             reports.append(CameraReport(view.name, len(view.xy), 0, "fewer than 3 stars"))
@@ -212,7 +212,7 @@ def locate(
         c = camera.pixels_to_bearings(np.array([[m.x, m.y] for m in matched]))
         body.append(c @ view.R_cam_from_body)  # b = R^T c, row-wise
         rows.append(cat_fix.rows([m.catalog_id for m in matched]))
-        focals.append(camera.focal_px)
+        scales.append(camera.scale_px_per_rad)  # px per rad where the lens is coarsest
         reports.append(
             CameraReport(
                 view.name, len(view.xy), len(matched), "", s.ra_deg, s.dec_deg, camera.focal_px
@@ -224,7 +224,6 @@ def locate(
             + "; ".join(f"{r.name}: {r.reason}" for r in reports)
         )
     rows_all = np.concatenate(rows)
-    focal = min(focals)
     fix = fix_from_directions(
         np.vstack(body),
         cat_fix.ra_deg[rows_all],
@@ -233,7 +232,7 @@ def locate(
         observation.gravity_body,
         pressure_hpa=observation.pressure_hpa,
         temperature_c=observation.temperature_c,
-        sigma_rad=sigma_px / focal,
+        sigma_rad=sigma_px / min(scales),
     )
     return Fix(
         **{**fix.__dict__, "cameras": tuple(reports), "time_ms": (_time.perf_counter() - t0) * 1e3}

@@ -24,11 +24,10 @@ from pathlib import Path
 from astropy.time import Time
 
 from starnav.detect.read import read_image
-from starnav.detect.stars import Detections, detect_stars
+from starnav.detect.stars import Detections
 from starnav.errors import ImageError, StarnavError
-from starnav.image import DEFAULT_MAX_STARS
+from starnav.image import detect_image
 
-DETECTION_THRESHOLD_SIGMA = 5.0  # starnav solve IMAGE's default
 _FITS_MAGIC = b"SIMPLE  ="
 _FITS_SUFFIXES = (".fits", ".fit", ".fts", ".fits.gz", ".fit.gz", ".fts.gz", ".fz")
 _EXIF_IFD = 0x8769
@@ -50,12 +49,10 @@ class ImageTime:
     time: Time
 
 
-def image_stars(path: str | Path) -> Detections:
-    """The stars detected in an image file (``ImageError`` for a missing or unreadable one)."""
-    pixels = read_image(path)
-    return detect_stars(
-        pixels, threshold_sigma=DETECTION_THRESHOLD_SIGMA, max_stars=DEFAULT_MAX_STARS
-    )
+def image_stars(path: str | Path, lens: str = "pinhole") -> Detections:
+    """The stars detected in an image file as ``starnav solve IMAGE`` detects them through a
+    ``lens`` model (``ImageError`` for a missing or unreadable file)."""
+    return detect_image(read_image(path), lens=lens)
 
 
 def image_time(path: str | Path) -> ImageTime | None:

@@ -201,7 +201,7 @@ def _camera(entry, n: int, base_dir: Path) -> CameraView:
             raise ObservationError(f"{name}: 'image' must be a file path, got {path!r}")
         file = base_dir / path
         try:
-            found = image_stars(file)
+            found = image_stars(file, "pinhole" if camera is None else camera.model)
         except StarnavError as exc:
             raise ObservationError(f"{name}: {exc}") from None
         if camera is not None and (camera.width, camera.height) != (found.width, found.height):

@@ -101,7 +101,7 @@ def get_database(
     expected_pairs = pair_stars**2 * (1.0 - np.cos(np.radians(max_angle_deg))) / 4.0
     if expected_pairs > MAX_PAIRS:
         raise CatalogError(
-            f"{len(catalog)} catalog stars in a {camera.fov_deg:.3g}° field make about "
+            f"{pair_stars} catalog stars in a {camera.fov_deg:.3g}° field make about "
             f"{expected_pairs:.2g} star pairs (limit {MAX_PAIRS:.0e}): use a brighter "
             "magnitude limit"
         )
