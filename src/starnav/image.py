@@ -24,6 +24,7 @@ from starnav.fov import DEFAULT_FOV_RANGE_DEG, search_range, solve_fov
 from starnav.results import Solution
 
 DEFAULT_MAX_STARS = 50
+FISHEYE_MAX_STARS = 100  # a whole sky's brightest detections hold horizon lights and glow
 DEFAULT_THRESHOLD_SIGMA = 5.0  # detection threshold over the background noise
 
 
@@ -80,7 +81,7 @@ def solve_image(
     camera: CameraModel | str | Path | None = None,
     lens: str = "pinhole",
     fit_distortion: bool = False,
-    max_stars: int = DEFAULT_MAX_STARS,
+    max_stars: int | None = None,
     threshold_sigma: float = DEFAULT_THRESHOLD_SIGMA,
     sigma_px: float = 1.0,
     catalog: Catalog | str | Path | None = None,
@@ -95,7 +96,8 @@ def solve_image(
     file; within 1 %) is given; the fitted one is reported either way. ``lens``: the lens
     model when no camera is given (``starnav.camera.MODELS``; a fisheye model's focal length
     is scanned, see ``starnav.fov.scan_focal``). ``max_stars``: the
-    brightest this many detections are used; ``threshold_sigma``: detection threshold over
+    brightest this many detections are used (default ``DEFAULT_MAX_STARS``, for a fisheye
+    ``FISHEYE_MAX_STARS``); ``threshold_sigma``: detection threshold over
     the background noise; ``sigma_px``: centroid 1-sigma assumed by the matching
     tolerances. With a fisheye lens (any model but the pinhole), detections outside the
     image circle found in the image (``starnav.detect.circle``) are not made: the dark frame
@@ -105,7 +107,8 @@ def solve_image(
     if isinstance(camera, str | Path):
         camera = load_camera(camera)
     search_range(fov_deg, fov_range_deg, camera, lens)  # a bad range fails before any work
-    if isinstance(max_stars, bool) or not (isinstance(max_stars, int) and max_stars >= 4):
+    bad = isinstance(max_stars, bool) or not (isinstance(max_stars, int) and max_stars >= 4)
+    if max_stars is not None and bad:
         raise ImageError(f"max_stars must be an integer >= 4, got {max_stars!r}")
     t0 = time.perf_counter()
     if isinstance(image, np.ndarray):
@@ -168,13 +171,16 @@ def detect_image(
     *,
     lens: str = "pinhole",
     threshold_sigma: float = DEFAULT_THRESHOLD_SIGMA,
-    max_stars: int = DEFAULT_MAX_STARS,
+    max_stars: int | None = None,
 ) -> Detections:
     """The stars of an image array (row 0 at the top) as ``solve_image`` detects them: for a
     fisheye ``lens`` (any model but the pinhole) only inside the image circle found in the
-    image; ``threshold_sigma`` over the background noise, the brightest ``max_stars``."""
+    image; ``threshold_sigma`` over the background noise, the brightest ``max_stars``
+    (default ``DEFAULT_MAX_STARS``, ``FISHEYE_MAX_STARS`` for a fisheye)."""
     if lens != "pinhole":
         pixels = _outside_circle_masked(pixels)
+    if max_stars is None:
+        max_stars = DEFAULT_MAX_STARS if lens == "pinhole" else FISHEYE_MAX_STARS
     return detect_stars(pixels, threshold_sigma=threshold_sigma, max_stars=max_stars)
 
 

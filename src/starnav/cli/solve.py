@@ -22,7 +22,7 @@ from starnav.cli.common import (
     print_solution,
 )
 from starnav.errors import StarnavError
-from starnav.image import DEFAULT_MAX_STARS, ImageSolveResult
+from starnav.image import DEFAULT_MAX_STARS, FISHEYE_MAX_STARS, ImageSolveResult
 
 WCS_SUFFIXES = (".fits", ".fit", ".fts", ".wcs")
 
@@ -47,8 +47,8 @@ def add_parser(subparsers: Subparsers) -> None:
     p.add_argument(
         "--max-stars",
         type=int_at_least(4),
-        default=DEFAULT_MAX_STARS,
-        help="use the brightest this many detections (default %(default)s)",
+        help=f"use the brightest this many detections (default {DEFAULT_MAX_STARS}, "
+        f"{FISHEYE_MAX_STARS} for a fisheye lens)",
     )
     p.add_argument(
         "--threshold-sigma",
