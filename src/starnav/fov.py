@@ -41,8 +41,7 @@ FOV_LIMITS_DEG = (1.0, 100.0)
 LENS_FOV_LIMITS_DEG = (10.0, 360.0)  # the focal scan of a fisheye model
 DEFAULT_LENS_FOV_RANGE_DEG = (120.0, 200.0)  # a fisheye's range when none is given
 SCAN_STARS = 60  # the focal scan identifies the brightest this many stars,
-SCAN_HYPOTHESES = 2000  # testing at most this many hypotheses per trial focal length,
-SCAN_PAIR_DEG = 20.0  # on triangles of sides up to this (so each trial covers more)
+SCAN_HYPOTHESES = 500  # testing at most this many hypotheses per trial focal length
 GIVEN_FOV_TOLERANCE = 0.05  # a given FOV is searched within +-5 %
 CAMERA_FOV_TOLERANCE = 0.01  # a calibrated camera's within +-1 %
 _STARS_PER_FIELD = 40.0  # catalog depth of a band: mean stars in one of its pattern fields
@@ -294,16 +293,17 @@ def scan_focal(
     settings: SolveSettings,
 ) -> SolveResult:
     """A lens of known model but unknown focal length: the solver's identification of the
-    brightest ``SCAN_STARS`` on triangles of sides up to ``SCAN_PAIR_DEG``, at trial focal
-    lengths over ``focal_range_px`` (``base`` with another focal length), from the middle
-    outward, in steps small enough that the longest side keeps within half the pair
-    tolerance; the first verified one's fitted camera then solves the whole list (focal
-    length free, pairs to the usual length)."""
+    brightest ``SCAN_STARS`` (at most ``SCAN_HYPOTHESES`` each) at trial focal lengths over
+    ``focal_range_px`` (``base`` with another focal length), from the middle outward, in
+    steps small enough that the longest triangle side keeps within half the pair tolerance;
+    the first verified one's fitted camera then solves the whole list (focal length free).
+    (Triangles of sides up to 20° would cover 3x the range per trial but take ~10x the
+    hypotheses to find, and missed a distorted lens seen as equidistant.)"""
     t0 = time.perf_counter()
     f_lo, f_hi = sorted(focal_range_px)
     middle = base.with_focal(math.sqrt(f_lo * f_hi))
     settings = replace(settings, fit_focal=True)
-    solver = Solver(middle, catalog, settings=settings, max_pair_deg=SCAN_PAIR_DEG)
+    solver = Solver(middle, catalog, settings=settings)
     tol_px = solver.match_settings.pair_tol_rad * middle.scale_px_per_rad
     # a trial covers the focal lengths whose error on the longest side takes at most half the
     # pair tolerance (the centroid noise takes the rest), at the longest focal length
@@ -315,7 +315,7 @@ def scan_focal(
     for focal in focals:
         trial = solver.with_camera(base.with_focal(focal), SCAN_HYPOTHESES).solve(few)
         if trial.solution is not None:
-            result = Solver(trial.solution.camera, catalog, settings=settings).solve(stars)
+            result = solver.with_camera(trial.solution.camera).solve(stars)
             reason = (
                 f"the brightest {len(few.xy)} stars identified at a focal length of "
                 f"{trial.solution.focal_px:.1f} px, the whole list refused: {result.reason}"

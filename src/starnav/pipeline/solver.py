@@ -79,19 +79,17 @@ class SolveSettings:
         )
 
 
-def get_database(
-    catalog: Catalog, camera: CameraModel, max_pair_deg: float = MAX_PAIR_DEG
-) -> PairDatabase:
+def get_database(catalog: Catalog, camera: CameraModel) -> PairDatabase:
     """The pair database for this catalog and field (memory, then disk cache, then built):
-    pairs up to the field's diagonal, or ``max_pair_deg`` for wider fields (a 180° field
+    pairs up to the field's diagonal, or ``MAX_PAIR_DEG`` for wider fields (a 180° field
     holds every pair of its half of the sky; its triangles are looked up among the nearer
     stars, and verified over the whole field). In wide fields the pairs join only the
     brightest catalog stars, as many as keep about ``WIDE_PAIR_CANDIDATES`` catalog pairs
     within the tolerance of a side measured to 1 px."""
     field_deg = float(np.degrees(2.0 * camera.half_diagonal_rad))
-    max_angle_deg = min(field_deg, max_pair_deg)
+    max_angle_deg = min(field_deg, MAX_PAIR_DEG)
     pair_stars = len(catalog)
-    if field_deg > max_pair_deg:
+    if field_deg > MAX_PAIR_DEG:
         angle = np.radians(max_angle_deg)
         window = 2.0 * MatchSettings.for_focal(1.0, camera.scale_px_per_rad).pair_tol_rad
         # pairs within the window: n^2 (1 - cos angle) / 4 spread over the angle
@@ -174,8 +172,7 @@ class Solver:
     """Star lists of one camera to verified attitudes.
 
     ``camera``: the camera model; ``catalog``: the stars to identify against; ``identifier``:
-    an identification algorithm (default Pyramid) or its name; ``settings``: ``SolveSettings``;
-    ``max_pair_deg``: the longest star pair of a wide field's database (``get_database``).
+    an identification algorithm (default Pyramid) or its name; ``settings``: ``SolveSettings``.
     The pair database is loaded (or built) here, once.
     """
 
@@ -187,7 +184,6 @@ class Solver:
         settings: SolveSettings | None = None,
         *,
         algorithm_options: dict | None = None,
-        max_pair_deg: float = MAX_PAIR_DEG,
     ) -> None:
         if isinstance(identifier, str):
             try:
@@ -199,7 +195,7 @@ class Solver:
         self.catalog = catalog
         self.identifier = identifier
         self.settings = settings or SolveSettings()
-        self.database = get_database(catalog, camera, max_pair_deg)
+        self.database = get_database(catalog, camera)
         self.match_settings = self.settings.match_settings(camera)
 
     def with_camera(self, camera: CameraModel, max_hypotheses: int | None = None) -> Solver:
