@@ -177,7 +177,7 @@ class Lens:
         naming the key)."""
         missing = [k for k in keys if k not in data]
         if missing:
-            raise CameraError(f"{where} ({cls.model} model) lacks {', '.join(missing)}")
+            raise CameraError(f"{where} lacks {', '.join(missing)} ({cls.model} model)")
         values = {}
         for key in keys:
             value = data[key]
