@@ -310,7 +310,7 @@ def render_frame(
     )
     rows, xy = project_catalog(catalog, R, grown)
     c = catalog.vectors[rows] @ R.T
-    imaged = imaged_directions(camera, c)
+    imaged = imaged_directions(grown, c)  # the margin's stars spill light in too
     rows, xy, c = rows[imaged], xy[imaged] - margin, c[imaged]
     power = settings.vignetting_power_for(camera)
     flux = settings.flux_e(catalog.mag[rows]) * relative_illumination(c[:, 2], power)
@@ -342,21 +342,14 @@ def relative_illumination(cos_theta: np.ndarray, power: float) -> np.ndarray:
 
 
 def imaged_directions(camera: CameraModel, c: np.ndarray) -> np.ndarray:
-    """Which unit camera-frame directions (n, 3) the lens forms an image of: inside its image
-    circle (a fisheye's ``image_circle_deg``) and projected one to one (the direction's pixel
-    unprojects back to it: an orthographic lens folds back past 90° from the axis)."""
+    """Which unit camera-frame directions (n, 3) the lens forms an image of: those it ``sees``
+    (inside the image and a fisheye's image circle) projected one to one (the direction's
+    pixel unprojects back to it: an orthographic lens folds back past 90° from the axis)."""
     c = np.asarray(c, dtype=float).reshape(-1, 3)
     if isinstance(camera, Camera):  # one to one in front of it (``sees`` keeps those)
         return np.ones(len(c), dtype=bool)
     back = camera.pixels_to_bearings(camera.bearings_to_pixels(c))
-    return (np.sum((back - c) ** 2, axis=1) < _ROUND_TRIP_RAD**2) & _in_circle(camera, c)
-
-
-def _in_circle(camera: CameraModel, c: np.ndarray) -> np.ndarray:
-    circle = getattr(camera, "image_circle_deg", None)
-    if circle is None:
-        return np.ones(len(c), dtype=bool)
-    return c[:, 2] >= math.cos(math.radians(0.5 * circle))
+    return (np.sum((back - c) ** 2, axis=1) < _ROUND_TRIP_RAD**2) & camera.sees(c)
 
 
 @functools.lru_cache(maxsize=4)  # a series of frames of one camera computes it once
@@ -374,7 +367,7 @@ def pixel_illumination(camera: CameraModel, vignetting_power: float) -> np.ndarr
     if not isinstance(camera, Camera):  # a pinhole images its whole sensor
         # pixels past the largest radius of the model unproject to its last angle
         reached = np.sum((camera.bearings_to_pixels(c) - xy) ** 2, axis=1) < _ROUND_TRIP_PX**2
-        values[~(reached & _in_circle(camera, c))] = 0.0
+        values[~(reached & camera.sees(c))] = 0.0
     out = values.reshape(camera.height, camera.width).astype(np.float32)
     out.flags.writeable = False
     return out
