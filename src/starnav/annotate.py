@@ -37,6 +37,7 @@ TITLE_PAD_PX = 12
 STRETCH_UPPER_PERCENTILE = 99.99
 LINEAR_SIGMAS = 10.0
 _STATISTICS_SAMPLES = 250_000
+_RANKS_SHOWN = 30  # detections numbered by rank in an unsolved image's picture
 _OUTLINE = [patheffects.withStroke(linewidth=2.0, foreground="black")]
 # a cross with an open centre, so that the star it marks stays visible
 _OPEN_CROSS = MarkerPath(
@@ -54,7 +55,7 @@ def figure_size_px(width: int, height: int, *, title_lines: int = 1) -> tuple[in
     return round(width * scale), round(height * scale) + strip
 
 
-def _gray(image: np.ndarray, camera: CameraModel) -> np.ndarray:
+def _gray(image: np.ndarray, width: int, height: int) -> np.ndarray:
     data = np.asarray(image)
     if data.ndim == 3 and data.shape[2] in (3, 4):
         data = data[:, :, :3].astype(float).mean(axis=2)
@@ -62,10 +63,9 @@ def _gray(image: np.ndarray, camera: CameraModel) -> np.ndarray:
         raise ImageError(
             f"image must be 2-D (height, width) or colour (height, width, 3|4), got {data.shape}"
         )
-    if data.shape != (camera.height, camera.width):
+    if data.shape != (height, width):
         raise ImageError(
-            f"image shape {data.shape} does not match the camera "
-            f"(height {camera.height}, width {camera.width})"
+            f"image shape {data.shape} does not match the camera (height {height}, width {width})"
         )
     if data.dtype.kind not in "uifb":
         raise ImageError(f"image must hold numbers, got dtype {data.dtype}")
@@ -132,7 +132,7 @@ def annotation_figure(
     """The annotated image as a matplotlib Figure (see ``annotate_image`` for the arguments)."""
     if not (np.isfinite(residual_scale) and residual_scale > 0):
         raise StarnavError(f"residual_scale must be a positive number, got {residual_scale!r}")
-    gray = _gray(image, camera)
+    gray = _gray(image, camera.width, camera.height)
     detected = _xy(detected_xy, "detected_xy")
     match = _matched_rows(matched)
     R = np.asarray(R_cam_from_icrs, dtype=float)
@@ -144,7 +144,7 @@ def annotation_figure(
 
     lines = _title_lines(R, camera, title, f"{len(detected)} detected, {len(match)} matched")
     fig_w, fig_h = figure_size_px(camera.width, camera.height, title_lines=len(lines))
-    fig, ax = _image_figure(gray, camera, fig_w, fig_h, len(lines))
+    fig, ax = _image_figure(gray, fig_w, fig_h, len(lines))
     rows, xy = project_catalog(catalog, R, camera)
     ids = catalog.ids[rows]
     handles = _catalog_markers(ax, xy, ids, match, catalog, R, camera)
@@ -165,6 +165,11 @@ def annotation_figure(
     _name_labels(ax, ids, xy, names)
     if handles:
         _legend(ax, handles)
+    _title(fig, lines, fig_h)
+    return fig
+
+
+def _title(fig: Figure, lines: list[str], fig_h: int) -> None:
     fig.text(
         0.5,
         1.0 - (TITLE_PAD_PX / 2) / fig_h,
@@ -174,16 +179,71 @@ def annotation_figure(
         fontsize=10,
         linespacing=1.3,
     )
+
+
+def unsolved_figure(
+    image: np.ndarray, *, detected_xy: np.ndarray, used: int, lines: Sequence[str]
+) -> Figure:
+    """An image that was not solved, to see why: the detections handed to the solver
+    (``detected_xy``, brightest first), the first ``used`` (those the star patterns are made
+    of) as cyan circles numbered by rank, the others as dim circles, and the title ``lines``
+    (the reason, what was tried)."""
+    height, width = np.asarray(image).shape[:2]
+    gray = _gray(image, width, height)
+    detected = _xy(detected_xy, "detected_xy")
+    lines = list(lines)
+    fig_w, fig_h = figure_size_px(width, height, title_lines=len(lines))
+    fig, ax = _image_figure(gray, fig_w, fig_h, len(lines))
+    handles = []
+    given, rest = detected[:used], detected[used:]
+    if len(rest):
+        handles.append(
+            ax.scatter(
+                *rest.T,
+                marker="o",
+                s=30,
+                facecolors="none",
+                edgecolors="#557788",
+                linewidths=0.7,
+                label="detected (verification only)",
+            )
+        )
+    if len(given):
+        handles.append(
+            ax.scatter(
+                *given.T,
+                marker="o",
+                s=40,
+                facecolors="none",
+                edgecolors="cyan",
+                linewidths=0.9,
+                label=f"brightest {len(given)} (patterns)",
+            )
+        )
+        for rank, (x, y) in enumerate(given[:_RANKS_SHOWN], start=1):
+            ax.annotate(str(rank), (x, y), xytext=(5, 5), textcoords="offset points",
+                        color="cyan", fontsize=7, path_effects=_OUTLINE)  # fmt: skip
+    if handles:
+        _legend(ax, handles)
+    _title(fig, lines, fig_h)
     return fig
 
 
+def save_figure(fig: Figure, path_out: str | Path) -> None:
+    """Write ``fig`` as a PNG, or a one-line error."""
+    try:
+        fig.savefig(path_out, format="png", dpi=DPI)
+    except OSError as exc:
+        raise StarnavError(f"cannot write image {str(path_out)!r}: {exc}") from None
+
+
 def _image_figure(
-    gray: np.ndarray, camera: CameraModel, fig_w: int, fig_h: int, title_lines: int
+    gray: np.ndarray, fig_w: int, fig_h: int, title_lines: int
 ) -> tuple[Figure, Axes]:
     """A ``fig_w`` x ``fig_h`` px figure with the stretched image drawn in starnav's pixel
     convention below a strip for ``title_lines`` lines of title; the figure and the image
     axes."""
-    width, height = camera.width, camera.height
+    height, width = gray.shape
     # 0.01 px of slack: matplotlib truncates figsize * dpi to whole pixels
     fig = Figure(figsize=((fig_w + 0.01) / DPI, (fig_h + 0.01) / DPI), dpi=DPI, facecolor="white")
     image_h = fig_h - (TITLE_PAD_PX + TITLE_LINE_PX * title_lines)
@@ -340,7 +400,4 @@ def annotate_image(
         title=title,
         names=names,
     )
-    try:
-        fig.savefig(path_out, format="png", dpi=DPI)
-    except OSError as exc:
-        raise StarnavError(f"cannot write image {str(path_out)!r}: {exc}") from None
+    save_figure(fig, path_out)

@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
+from starnav.budget import KNOWN_BUDGET_S, Deadline, check_budget
 from starnav.camera import MODELS, CameraModel, load_camera
 from starnav.catalog import Catalog, load_catalog
 from starnav.errors import CameraError, StarnavError
@@ -118,6 +119,7 @@ def solve_verbose(
     algorithm_options: Mapping[str, object] | None = None,
     prior: Solution | np.ndarray | None = None,
     prior_sigma_deg: float = 1.0,
+    time_budget_s: float | None = None,
 ) -> SolveResult:
     """Like ``solve`` but always returns a ``SolveResult`` with the reason when unsolved.
 
@@ -136,8 +138,11 @@ def solve_verbose(
     ``{"selection": "brightest"}`` for ``triangle``); ``prior``: the previous attitude (a
     ``Solution`` or ``R_cam_from_icrs``), good to ``prior_sigma_deg`` (1-sigma): tracking mode
     matches the catalog stars near it only, and falls back to ``algorithm`` when that fails
-    (``Solution.algorithm`` says which answered).
+    (``Solution.algorithm`` says which answered); ``time_budget_s``: give up after this many
+    seconds of identification, "time budget spent" (default ``budget.KNOWN_BUDGET_S``;
+    ``math.inf``: no limit; preparing the catalog and database is not counted).
     """
+    budget_s = check_budget(time_budget_s, KNOWN_BUDGET_S)
     cam = make_camera(width=width, height=height, fov_deg=fov_deg, camera=camera, lens=lens)
     stars = check_star_list(
         xy, width=cam.width, height=cam.height, brightness=brightness, labels=labels
@@ -156,7 +161,8 @@ def solve_verbose(
         algorithm=algorithm,
         algorithm_options=algorithm_options,
     )
-    return solver.solve(stars, prior=R_prior, prior_sigma_deg=prior_sigma_deg)
+    deadline = Deadline.after(budget_s)
+    return solver.solve(stars, prior=R_prior, prior_sigma_deg=prior_sigma_deg, deadline=deadline)
 
 
 def prepare_solver(
@@ -280,6 +286,7 @@ def solve_batch(
     """
     prior = options.pop("prior", None)
     prior_sigma_deg = options.pop("prior_sigma_deg", 1.0)
+    budget_s = check_budget(options.pop("time_budget_s", None), KNOWN_BUDGET_S)
     R_prior = check_prior(prior, prior_sigma_deg)
     solver = prepare_solver(**options)
     lights = brightness if brightness is not None else [None] * len(frames)
@@ -291,4 +298,5 @@ def solve_batch(
         progress=progress,
         prior=R_prior,
         prior_sigma_deg=prior_sigma_deg,
+        time_budget_s=budget_s,
     )

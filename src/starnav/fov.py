@@ -16,10 +16,12 @@ from pathlib import Path
 
 import numpy as np
 
+from starnav.budget import SEARCH_BUDGET_S, Deadline, check_budget, default_budget_s, expired
 from starnav.camera import MODELS, Camera, CameraModel, focal_px_from_fov
 from starnav.catalog import Catalog, load_catalog
 from starnav.errors import CatalogError, StarnavError
 from starnav.fov_search import BAND_FACTOR, Band, search_fov
+from starnav.geometry import radec_to_unit
 from starnav.identify.base import MatchSettings
 from starnav.identify.database import PairDatabase, catalog_only
 from starnav.identify.pattern4 import FIELD_RADIUS_FRACTION, build_pattern_table
@@ -30,6 +32,7 @@ from starnav.pipeline.solver import (
     Solver,
     SolveSettings,
     brightness_order,
+    check_prior,
     first_use,
     fit_identification,
 )
@@ -47,6 +50,9 @@ CAMERA_FOV_TOLERANCE = 0.01  # a calibrated camera's within +-1 %
 _STARS_PER_FIELD = 40.0  # catalog depth of a band: mean stars in one of its pattern fields
 _MAX_MAG = 8.0  # Hipparcos is complete to about here
 MAX_DIAGONAL_FOV_DEG = 150.0
+DEFAULT_PATTERN_STARS = 15  # the brightest this many stars make the 4-star patterns
+POSITION_HINT_RADIUS_DEG = 10.0  # a position hint's boresight is searched first within this
+HINT_BUDGET_SHARE = 0.25  # of the time budget, for the search near a position hint
 _SLIVER = 0.05  # a band narrower than this (relative) is merged into the next wider one
 _DATABASES: dict[tuple, PairDatabase] = {}  # per process: catalog vectors and KD-tree
 _BANDS: dict[tuple, list[Band]] = {}  # per process: the bands of a catalog, range and shape
@@ -217,8 +223,12 @@ def solve_fov(
     sigma_px: float = 1.0,
     max_false_match_probability: float = DEFAULT_MAX_FALSE_MATCH_PROBABILITY,
     min_matched_fraction: float = DEFAULT_MIN_MATCHED_FRACTION,
-    pattern_stars: int = 15,
+    pattern_stars: int = DEFAULT_PATTERN_STARS,
     mag_limit: float | None = None,
+    time_budget_s: float | None = None,
+    prior: np.ndarray | None = None,
+    prior_sigma_deg: float = 1.0,
+    position_hint_deg: tuple[float, float] | None = None,
 ) -> SolveResult:
     """Identify stars at ``xy`` (n, 2, px) in an image ``width`` x ``height`` px whose field
     of view is unknown: searched within ``fov_range_deg`` (horizontal, degrees), or within
@@ -229,7 +239,14 @@ def solve_fov(
     ``brightness``: larger is brighter (without it the rows are taken as brightest first).
     A fisheye ``lens`` model (``starnav.camera.MODELS``), or a fisheye ``camera``, is solved
     by ``scan_focal`` (``mag_limit``: its catalog's, default Hp <= 6; the pinhole search
-    picks a depth per band and takes none). Other options as ``starnav.solve_verbose``.
+    picks a depth per band and takes none). ``time_budget_s``: stop searching after this
+    many seconds (``starnav.budget.default_budget_s`` by default; counted once the tables are
+    loaded). ``prior``: the attitude of the previous frame
+    of a sequence (``R_cam_from_icrs``, good to ``prior_sigma_deg``), with a ``camera`` (the
+    previous frame's fitted one): tracking, falling back to lost in space with that camera
+    (``tracking_solver``). ``position_hint_deg``: (RA, Dec) of the boresight, roughly (e.g.
+    a FITS header's): the catalog within ``POSITION_HINT_RADIUS_DEG`` of it is searched first,
+    then the whole sky (the pinhole search). Other options as ``starnav.solve_verbose``.
     """
     if camera is not None:
         width, height, lens = camera.width, camera.height, camera.model
@@ -238,6 +255,9 @@ def solve_fov(
     if lens != "pinhole" and tuple(fov_range_deg) == DEFAULT_FOV_RANGE_DEG:
         fov_range_deg = DEFAULT_LENS_FOV_RANGE_DEG  # the default range of a fisheye
     lo, hi = search_range(fov_deg, fov_range_deg, camera, lens)
+    known = fov_deg is not None or camera is not None
+    default_s = default_budget_s(known=known, scan=lens != "pinhole")
+    budget_s = check_budget(time_budget_s, default_s)
     height = width if height is None else height
     if camera is not None:
         base = camera
@@ -256,14 +276,60 @@ def solve_fov(
         max_false_match_probability=max_false_match_probability,
         min_matched_fraction=min_matched_fraction,
     )
+    R = check_prior(prior, prior_sigma_deg)
+    if R is not None:
+        if camera is None:
+            raise StarnavError("tracking (a prior) needs the camera, e.g. the previous frame's")
+        solver = tracking_solver(camera, catalog, epoch_year, mag_limit, settings)
+        deadline = Deadline.after(budget_s)
+        return solver.solve(stars, prior=R, prior_sigma_deg=prior_sigma_deg, deadline=deadline)
     if lens != "pinhole":
         cat = load_catalog(catalog, mag_limit=mag_limit, epoch_year=epoch_year)
-        return scan_focal(stars, base, lens_focal_range(base, camera, (lo, hi)), cat, settings)
+        focal_range = lens_focal_range(base, camera, (lo, hi))
+        solver = Solver(
+            base.with_focal(math.sqrt(focal_range[0] * focal_range[1])), cat, settings=settings
+        )
+        return scan_focal(stars, base, focal_range, solver, Deadline.after(budget_s))
     if mag_limit is not None:
         raise StarnavError("mag_limit needs fov_deg (the FOV search chooses its own)")
     bands = load_bands(lo, hi, base.width, base.height, catalog, epoch_year)
+    near = None
+    if position_hint_deg is not None:
+        ra, dec = (math.radians(float(v)) for v in position_hint_deg)
+        near = (radec_to_unit(ra, dec), math.radians(POSITION_HINT_RADIUS_DEG))
+    deadline = Deadline.after(budget_s)
     with first_use("solve"):
-        return _search_and_fit(stars, base, bands, settings, (lo, hi), pattern_stars)
+        return _search_and_fit(
+            stars, base, bands, settings, (lo, hi), pattern_stars, deadline, near
+        )
+
+
+_TRACKING: dict[tuple, Solver] = {}  # per process: the solvers of the cameras tracked
+
+
+def tracking_solver(
+    camera: CameraModel,
+    catalog: Catalog | str | Path | None,
+    epoch_year: float | None,
+    mag_limit: float | None,
+    settings: SolveSettings,
+) -> Solver:
+    """The solver of a sequence's frames once a frame is solved: ``camera`` known, the catalog
+    as deep as the FOV search's band of that field (a pinhole; a fisheye's: ``mag_limit``,
+    default Hp <= 6), its pair database built on first use. Kept per process."""
+    cat_key = catalog.fingerprint if isinstance(catalog, Catalog) else str(catalog)
+    key = (camera, cat_key, epoch_year, mag_limit, settings)
+    if key not in _TRACKING:
+        if camera.model == "pinhole" and mag_limit is None:
+            full = search_catalog(catalog, epoch_year)
+            diagonal = math.degrees(2.0 * camera.half_diagonal_rad)
+            cat = full.brighter_than(band_mag_limit(diagonal, np.sort(full.mag)))
+        else:
+            cat = load_catalog(catalog, mag_limit=mag_limit, epoch_year=epoch_year)
+        if len(_TRACKING) >= 8:
+            _TRACKING.clear()
+        _TRACKING[key] = Solver(camera, cat, settings=settings)
+    return _TRACKING[key]
 
 
 def lens_focal_range(
@@ -289,22 +355,22 @@ def scan_focal(
     stars: StarList,
     base: CameraModel,
     focal_range_px: tuple[float, float],
-    catalog: Catalog,
-    settings: SolveSettings,
+    solver: Solver,
+    deadline: Deadline | None = None,
 ) -> SolveResult:
-    """A lens of known model but unknown focal length: the solver's identification of the
+    """A lens of known model but unknown focal length: the ``solver``'s (made for the
+    geometric middle of ``focal_range_px``, focal length fitted) identification of the
     brightest ``SCAN_STARS`` (at most ``SCAN_HYPOTHESES`` each) at trial focal lengths over
     ``focal_range_px`` (``base`` with another focal length), from the middle outward, in
     steps small enough that the longest triangle side keeps within half the pair tolerance;
     the first verified one's fitted camera then solves the whole list (focal length free).
+    ``deadline``: the scan stops when it passes (looked at in and between trials).
     (Triangles of sides up to 20° would cover 3x the range per trial but take ~10x the
     hypotheses to find, and missed a distorted lens seen as equidistant; 500 hypotheses per
     trial missed an equisolid sky at a 1 px tolerance.)"""
     t0 = time.perf_counter()
     f_lo, f_hi = sorted(focal_range_px)
-    middle = base.with_focal(math.sqrt(f_lo * f_hi))
-    settings = replace(settings, fit_focal=True)
-    solver = Solver(middle, catalog, settings=settings)
+    middle = solver.camera
     tol_px = solver.match_settings.pair_tol_rad * middle.scale_px_per_rad
     # a trial covers the focal lengths whose error on the longest side takes at most half the
     # pair tolerance (the centroid noise takes the rest), at the longest focal length
@@ -313,14 +379,25 @@ def scan_focal(
     focals = [middle.focal_px * math.exp(2.0 * half * k) for k in sorted(range(-n, n + 1), key=abs)]
     brightest = brightness_order(stars)[:SCAN_STARS]
     few = StarList(stars.xy[brightest], tuple(stars.labels[i] for i in brightest), None)
+    tried = 0
     for focal in focals:
-        trial = solver.with_camera(base.with_focal(focal), SCAN_HYPOTHESES).solve(few)
+        trial = solver.with_camera(base.with_focal(focal), SCAN_HYPOTHESES).solve(
+            few, deadline=deadline
+        )
+        tried += 1
         if trial.solution is not None:
-            result = solver.with_camera(trial.solution.camera).solve(stars)
+            result = solver.with_camera(trial.solution.camera).solve(stars, deadline=deadline)
             reason = (
                 f"the brightest {len(few.xy)} stars identified at a focal length of "
                 f"{trial.solution.focal_px:.1f} px, the whole list refused: {result.reason}"
             )
+            break
+        if expired(deadline):
+            reason = deadline.reason(
+                f"{tried} of {len(focals)} focal lengths over {f_lo:.1f}-{f_hi:.1f} px tried "
+                f"({base.model} lens)"
+            )
+            result = trial
             break
     else:
         reason = (
@@ -334,28 +411,59 @@ def scan_focal(
     return replace(result, reason=reason, time_ms=ms)
 
 
-def _search_and_fit(stars, base: Camera, bands, settings: SolveSettings, fov_range, pattern_stars):
-    """The FOV search's identifications, each fitted by the solver until one is accepted."""
-    lo, hi = fov_range
+def _search_and_fit(
+    stars, base: Camera, bands, settings: SolveSettings, fov_range, pattern_stars, deadline, near
+):
+    """The FOV search's identifications, each fitted by the solver until one is accepted or
+    the ``deadline`` passes; with a position hint (``near``: unit vector, radius in rad) the
+    catalog near it is searched first, then the whole sky."""
     t0 = time.perf_counter()
     order = brightness_order(stars)
     xy_sorted = stars.xy[order]
     if base.distorted:  # take the known distortion out: the search assumes a pinhole
         pinhole = Camera(base.width, base.height, base.focal_px, base.cx, base.cy)
         xy_sorted = pinhole.bearings_to_pixels(base.pixels_to_bearings(xy_sorted))
-    candidates = search_fov(
-        xy_sorted[: MatchSettings.max_screen_stars],
-        bands,
-        width=base.width,
-        height=base.height,
-        cx=base.cx,
-        cy=base.cy,
-        sigma_px=settings.sigma_px,
-        focal_range_px=(focal_px_from_fov(hi, base.width), focal_px_from_fov(lo, base.width)),
-        parity=settings.parity,
-        max_false_match_probability=settings.max_false_match_probability,
-        pattern_stars=pattern_stars,
-    )
+    lo, hi = fov_range
+    for where in [near, None] if near is not None else [None]:
+        # the search near a position hint takes at most a share of the budget (of the
+        # default one when there is none)
+        share = deadline
+        if where is not None:
+            whole = deadline or Deadline.after(SEARCH_BUDGET_S)
+            share = replace(whole, budget_s=HINT_BUDGET_SHARE * whole.budget_s)
+        result = _fit_candidates(
+            search_fov(
+                xy_sorted[: MatchSettings.max_screen_stars],
+                bands,
+                width=base.width,
+                height=base.height,
+                cx=base.cx,
+                cy=base.cy,
+                sigma_px=settings.sigma_px,
+                focal_range_px=(
+                    focal_px_from_fov(hi, base.width),
+                    focal_px_from_fov(lo, base.width),
+                ),
+                parity=settings.parity,
+                max_false_match_probability=settings.max_false_match_probability,
+                pattern_stars=pattern_stars,
+                deadline=share,
+                near=where,
+            ),
+            stars,
+            order,
+            base,
+            bands,
+            settings,
+            t0,
+        )
+        if result.solution is not None or expired(deadline):
+            break
+    return result
+
+
+def _fit_candidates(candidates, stars, order, base, bands, settings, t0) -> SolveResult:
+    """The first of the search's ``candidates`` the solver's fit accepts, or why none was."""
     # a verified identification that the fit then refuses (too few of the stars it predicts
     # agree, ...) does not end the search: the next hypothesis may be the right one
     refused: SolveResult | None = None

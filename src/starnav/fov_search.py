@@ -22,11 +22,13 @@ first few patterns, whatever their field of view.
 from __future__ import annotations
 
 import math
+import time
 from collections.abc import Iterator
 from dataclasses import dataclass, replace
 
 import numpy as np
 
+from starnav.budget import Deadline, expired
 from starnav.camera import Camera, focal_px_from_fov
 from starnav.catalog import Catalog
 from starnav.identify.base import Identification, MatchSettings
@@ -35,6 +37,7 @@ from starnav.identify.pattern4 import (
     PatternTable,
     breadth_first_combinations,
     catalog_nbytes,
+    concat_matches,
     match_patterns,
     pattern_edges,
 )
@@ -43,6 +46,8 @@ from starnav.identify.verify import AMBIGUOUS_PARITY, HypothesisTester, Tally
 BAND_FACTOR = math.sqrt(2.0)
 _LOOKUP_REL_TOL = 0.005  # ratio slack of the loose look-up (projection distortion of a cell)
 _MAX_CELL_HALF_WIDTH = 0.2  # relative focal-length half-width of a cell at most
+_FIRST_LOOKUP = 16  # observed patterns of a band's first look-up when there is a deadline
+_LOOKUP_OF_BUDGET = 0.05  # with a deadline, a look-up takes about this part of the budget
 _FOCAL_STEPS = 3  # Gauss-Newton steps of a pattern's focal length
 
 
@@ -161,12 +166,17 @@ def search_fov(
     max_false_match_probability: float = 1e-4,
     pattern_stars: int = 15,
     max_hypotheses: int = 20000,
+    deadline: Deadline | None = None,
+    near: tuple[np.ndarray, float] | None = None,
 ) -> Iterator[FovMatch]:
     """Identify the stars at ``xy`` (n, 2, px, distortion removed, brightest first) with the
     focal length unknown within ``focal_range_px`` (px), searching ``bands``. Yields every
     verified identification as it is found (the caller fits it and stops, or asks for the
     next); the last match yielded has no identification (``final``) and says why the search
-    ended."""
+    ended. ``deadline``: the search ends when it passes (looked at before each band's
+    look-up and after each hypothesis). ``near``: (unit vector, radius in rad): only catalog
+    patterns whose first star lies within the radius plus the band's half diagonal of the
+    vector (a position hint) are hypotheses."""
     n = len(xy)
     if n < 4:
         yield FovMatch(None, "fewer than 4 stars", 0, float("nan"), None)
@@ -190,9 +200,21 @@ def search_fov(
         rows = combos[start:end]
         start = end
         for band, cells in plans:
+            if expired(deadline):
+                tried = f"{tally.hypotheses} hypotheses from up to {start} 4-star patterns"
+                yield FovMatch(None, deadline.reason(tried), tally.hypotheses, math.nan, None)
+                return
             obs_rows, cat_rows, parities, f_fit = _band_hypotheses(
-                xy, rows, band, cells, sigma_px, parity, focal_range_px, (cx, cy)
+                xy, rows, band, cells, sigma_px, parity, focal_range_px, (cx, cy), deadline
             )
+            if near is not None:
+                keep = _near(band, cat_rows, near)
+                obs_rows, cat_rows, parities, f_fit = (
+                    obs_rows[keep],
+                    cat_rows[keep],
+                    parities[keep],
+                    f_fit[keep],
+                )
             tally.hypotheses += len(f_fit)  # every hypothesis of the batch, before testing
             for h in range(len(f_fit)):
                 f = float(f_fit[h])
@@ -200,14 +222,8 @@ def search_fov(
                 tester = HypothesisTester(
                     pinhole_bearings(xy, cx, cy, f),
                     band.database,
-                    replace(
-                        MatchSettings.for_focal(
-                            sigma_px,
-                            f,
-                            max_false_match_probability=max_false_match_probability,
-                            parity=parity,
-                        ),
-                        max_hypotheses=max_hypotheses,
+                    _settings(
+                        sigma_px, f, max_false_match_probability, parity, max_hypotheses, deadline
                     ),
                     tally,
                     work=work[id(band)],
@@ -234,29 +250,62 @@ def search_fov(
     yield FovMatch(None, tester.outcome().reason, tally.hypotheses, float("nan"), None)
 
 
-def _band_hypotheses(xy, rows, band, cells, sigma_px, parity, focal_range_px, principal):
+def _settings(sigma_px, focal_px, max_false_match_probability, parity, max_hypotheses, deadline):
+    """The verification settings of one hypothesis's focal length."""
+    settings = MatchSettings.for_focal(
+        sigma_px, focal_px, max_false_match_probability=max_false_match_probability, parity=parity
+    )
+    return replace(settings, max_hypotheses=max_hypotheses, deadline=deadline)
+
+
+def _near(band: Band, cat_rows: np.ndarray, near: tuple[np.ndarray, float]) -> np.ndarray:
+    """Which hypotheses' first catalog star lies within the hint's radius plus the band's
+    half diagonal of its direction (``near``: unit vector, radius in rad)."""
+    reach = math.cos(min(near[1] + 0.5 * band.database.max_angle_rad, math.pi))
+    return band.catalog.vectors[cat_rows[:, 0]] @ near[0] >= reach
+
+
+def _band_hypotheses(xy, rows, band, cells, sigma_px, parity, focal_range_px, principal, deadline):
     """The hypotheses of one band for the observed patterns ``rows`` (4-subsets of ``xy``):
     every cell of the band in one look-up (the patterns with the bearings of each guessed
     focal length, stacked), a pairing found by two overlapping cells counted once, each
     given the focal length its six edges fit, kept when they then agree to the pixel
-    tolerance within the focal range. Returns (rows of xy (h, 4), catalog rows (h, 4),
-    parities (h,), focal lengths (h,), px)."""
+    tolerance within the focal range; none when the ``deadline`` passes. Returns (rows of xy
+    (h, 4), catalog rows (h, 4), parities (h,), focal lengths (h,), px)."""
     cx, cy = principal
     f_cells = np.array([f for f, _, _ in cells])
     delta, rel_tol = cells[0][1], cells[0][2]
     settings = MatchSettings.for_focal(sigma_px, float(f_cells.min()), parity=parity)
     bearings = pinhole_bearings(xy[None], cx, cy, f_cells[:, None])  # (cells, n, 3)
-    hyp = match_patterns(
-        bearings[:, rows].reshape(-1, 4, 3),
-        band.table,
-        band.catalog.vectors,
-        settings.pair_tol_rad,
-        band.database.max_angle_rad,
-        parity,
-        scale_range=(1.0 / (1.0 + 1.2 * delta), 1.0 / (1.0 - 1.2 * delta)),
-        rel_tol=rel_tol,
-    )
-    if len(hyp.pattern) == 0:
+    observed = bearings[:, rows].reshape(-1, 4, 3)
+    parts, offsets = [], []
+    # without a deadline in one look-up; with one in consecutive batches that each take
+    # about a twentieth of the budget (the same matches, in the same order)
+    start, size = 0, len(observed) if deadline is None else _FIRST_LOOKUP
+    while start < len(observed):
+        if expired(deadline):
+            parts, offsets = [], []  # the caller stops on the deadline
+            break
+        clock = time.perf_counter()
+        parts.append(
+            match_patterns(
+                observed[start : start + size],
+                band.table,
+                band.catalog.vectors,
+                settings.pair_tol_rad,
+                band.database.max_angle_rad,
+                parity,
+                scale_range=(1.0 / (1.0 + 1.2 * delta), 1.0 / (1.0 - 1.2 * delta)),
+                rel_tol=rel_tol,
+            )
+        )
+        offsets.append(start)
+        start += size
+        if deadline is not None:
+            per_pattern = max(time.perf_counter() - clock, 1e-6) / size
+            size = int(np.clip(_LOOKUP_OF_BUDGET * deadline.budget_s / per_pattern, 1, 1 << 20))
+    hyp = concat_matches(parts, offsets) if parts else None
+    if hyp is None or len(hyp.pattern) == 0:
         empty = np.empty((0, 4), dtype=np.intp)
         return empty, empty, np.empty(0, dtype=np.int64), np.empty(0)
     cell, pattern = np.divmod(hyp.pattern, len(rows))

@@ -8,22 +8,32 @@ calibrated camera: size, focal length, principal point and radial distortion.
 
 from __future__ import annotations
 
+import functools
 import time
-from dataclasses import dataclass
+from collections.abc import Mapping
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 
+from starnav.budget import check_budget, default_budget_s
 from starnav.camera import CameraModel, load_camera
 from starnav.catalog import Catalog
 from starnav.detect.circle import find_image_circle
+from starnav.detect.header import ImageHints, fits_hints, is_fits
 from starnav.detect.read import read_image
 from starnav.detect.stars import Detections, detect_stars
 from starnav.errors import CameraError, ImageError
-from starnav.fov import DEFAULT_FOV_RANGE_DEG, search_range, solve_fov
+from starnav.fov import (
+    DEFAULT_FOV_RANGE_DEG,
+    DEFAULT_PATTERN_STARS,
+    search_range,
+    solve_fov,
+)
 from starnav.results import Solution
 
 DEFAULT_MAX_STARS = 50
+NO_HINTS = ImageHints()
 FISHEYE_MAX_STARS = 100  # a whole sky's brightest detections hold horizon lights and glow
 DEFAULT_THRESHOLD_SIGMA = 5.0  # detection threshold over the background noise
 
@@ -32,9 +42,9 @@ DEFAULT_THRESHOLD_SIGMA = 5.0  # detection threshold over the background noise
 class ImageSolveResult:
     """One image solved: the ``solution`` (None with the ``reason`` when unsolved), the
     ``detections``, the fitted ``camera`` (focal length, principal point, distortion; None
-    when unsolved), the ``catalog`` the stars were matched in, and the time (ms) spent
-    decoding the file (``read_ms``, 0 for an array), detecting stars (``detect_ms``) and
-    identifying + fitting (``solve_ms``)."""
+    when unsolved), the ``catalog`` the stars were matched in, the time (ms) spent decoding
+    the file (``read_ms``, 0 for an array), detecting stars (``detect_ms``) and identifying
+    + fitting (``solve_ms``), and the ``hints`` the file's header gave (``ImageHints``)."""
 
     solution: Solution | None
     reason: str
@@ -44,6 +54,7 @@ class ImageSolveResult:
     detect_ms: float
     solve_ms: float
     catalog: Catalog | None = None
+    hints: ImageHints = NO_HINTS
 
     @property
     def total_ms(self) -> float:
@@ -66,6 +77,7 @@ class ImageSolveResult:
             cy=cam.cy if cam else None,
             **{k: getattr(self.solution, k) if cam else None for k in ("k1", "k2", "k3", "k4")},
             n_detected=len(det.xy),
+            hints=self.hints.to_dict() if self.hints.sources else None,
             read_ms=self.read_ms,
             detect_ms=self.detect_ms,
             solve_ms=self.solve_ms,
@@ -87,6 +99,8 @@ def solve_image(
     catalog: Catalog | str | Path | None = None,
     epoch_year: float | None = None,
     parity: int | None = None,
+    hints: ImageHints | None = None,
+    time_budget_s: float | None = None,
     **options,
 ) -> ImageSolveResult:
     """Solve an image file (FITS, PNG, JPEG, TIFF) or a 2-D array (row 0 at the top).
@@ -101,8 +115,14 @@ def solve_image(
     the background noise; ``sigma_px``: centroid 1-sigma assumed by the matching
     tolerances. With a fisheye lens (any model but the pinhole), detections outside the
     image circle found in the image (``starnav.detect.circle``) are not made: the dark frame
-    around an all-sky camera's disc often holds burned-in text. Other keywords: see
-    ``starnav.fov.solve_fov``.
+    around an all-sky camera's disc often holds burned-in text. ``hints``: what the file's
+    header says (``starnav.detect.header.fits_hints``; read from a FITS file when None, none
+    for an array): its FOV is searched (±5 %) when neither ``fov_deg``, ``camera`` nor another
+    ``fov_range_deg`` is given and it lies within the default range, its epoch used when
+    ``epoch_year`` is not, its position searched first; a solve that fails with the hinted
+    FOV is tried again without it.
+    ``time_budget_s``: the solve's (``starnav.budget``; detection is not counted). Other
+    keywords: see ``starnav.fov.solve_fov``.
     """
     if isinstance(camera, str | Path):
         camera = load_camera(camera)
@@ -110,6 +130,9 @@ def solve_image(
     bad = isinstance(max_stars, bool) or not (isinstance(max_stars, int) and max_stars >= 4)
     if max_stars is not None and bad:
         raise ImageError(f"max_stars must be an integer >= 4, got {max_stars!r}")
+    lens = camera.model if camera is not None else lens
+    known = fov_deg is not None or camera is not None
+    budget_s = check_budget(time_budget_s, default_budget_s(known=known, scan=lens != "pinhole"))
     t0 = time.perf_counter()
     if isinstance(image, np.ndarray):
         pixels, read_ms = image, 0.0
@@ -118,6 +141,9 @@ def solve_image(
     else:
         pixels = read_image(image)
         read_ms = (time.perf_counter() - t0) * 1e3
+        if hints is None:
+            hints = fits_hints(image)
+    hints = hints or NO_HINTS
     height, width = pixels.shape
     if camera is not None and (camera.width, camera.height) != (width, height):
         raise CameraError(
@@ -125,34 +151,28 @@ def solve_image(
             f"{width} x {height} px"
         )
     t1 = time.perf_counter()
-    lens = camera.model if camera is not None else lens
     found = detect_image(pixels, lens=lens, threshold_sigma=threshold_sigma, max_stars=max_stars)
     detect_ms = (time.perf_counter() - t1) * 1e3
     if len(found.xy) < 4:
-        return ImageSolveResult(
-            None,
-            f"{len(found.xy)} stars detected, at least 4 are needed",
-            found,
-            None,
-            read_ms,
-            detect_ms,
-            0.0,
-        )
-    result = solve_fov(
+        reason = f"{len(found.xy)} stars detected, at least 4 are needed"
+        return ImageSolveResult(None, reason, found, None, read_ms, detect_ms, 0.0, hints=hints)
+    solve = functools.partial(
+        solve_fov,
         found.xy,
         width=width,
         height=height,
-        fov_deg=fov_deg,
         fov_range_deg=fov_range_deg,
         camera=camera,
         lens=lens,
         fit_distortion=fit_distortion,
         sigma_px=sigma_px,
         catalog=catalog,
-        epoch_year=epoch_year,
+        epoch_year=epoch_year if epoch_year is not None else hints.epoch_year,
         parity=parity,
-        **options,
     )
+    searched = not known and lens == "pinhole"
+    result = _solve_hinted(solve, hints if searched else NO_HINTS, fov_deg, fov_range_deg,
+                           budget_s, options)  # fmt: skip
     sol = result.solution
     return ImageSolveResult(
         sol,
@@ -163,7 +183,35 @@ def solve_image(
         detect_ms,
         result.time_ms,
         result.database.catalog,
+        hints,
     )
+
+
+def _solve_hinted(solve, hints: ImageHints, fov_deg, fov_range_deg, budget_s: float, options):
+    """``solve`` (``solve_fov`` of the detections) with the ``hints`` of a pinhole search:
+    the position searched first; the FOV, when in the default range searched, tried first
+    and, if that fails, the whole range on what is left of the budget."""
+    options = dict(options)
+    if hints.ra_deg is not None and hints.dec_deg is not None:
+        options.setdefault("position_hint_deg", (hints.ra_deg, hints.dec_deg))
+    hinted = None
+    lo, hi = DEFAULT_FOV_RANGE_DEG
+    if (
+        tuple(fov_range_deg) == DEFAULT_FOV_RANGE_DEG
+        and hints.fov_deg
+        and lo <= hints.fov_deg <= hi
+    ):
+        hinted = hints.fov_deg  # else ignored: outside what the search is for
+    result = solve(fov_deg=fov_deg if hinted is None else hinted, time_budget_s=budget_s, **options)
+    left_s = budget_s - result.time_ms / 1e3
+    if result.solution is None and hinted is not None and left_s > 0:
+        again = solve(fov_deg=None, time_budget_s=left_s, **options)  # the FOV may be wrong
+        result = replace(
+            again,
+            reason=f"{again.reason} (and with the header's FOV {hinted:.3f}°: {result.reason})",
+            time_ms=result.time_ms + again.time_ms,
+        )
+    return result
 
 
 def detect_image(
@@ -198,13 +246,24 @@ def _outside_circle_masked(pixels: np.ndarray) -> np.ndarray:
 
 
 def annotate_result(path_out: str | Path, image: np.ndarray, result: ImageSolveResult) -> None:
-    """Draw a solved image into a PNG: detections, catalog stars, ids, names of bright stars
-    and the residuals (``starnav.annotate``)."""
-    from starnav.annotate import annotate_image
+    """Draw an image into a PNG. Solved: detections, catalog stars, ids, names of bright stars
+    and the residuals (``starnav.annotate``); not solved: the detections by rank and the
+    reason (``starnav.annotate.unsolved_figure``)."""
+    from starnav.annotate import annotate_image, save_figure, unsolved_figure
 
     s, cam, cat = result.solution, result.camera, result.catalog
     if s is None or cam is None or cat is None:
-        raise ImageError("only a solved image can be annotated")
+        det = result.detections
+        lines = [
+            f"not solved: {result.reason}",
+            f"{len(det.xy)} stars detected ({det.n_saturated} saturated, {det.n_hot} hot "
+            f"pixels removed), PSF sigma {det.psf_sigma_px:.2f} px, background rms "
+            f"{det.background_rms:.3g}; detect {result.detect_ms:.0f} ms, solve "
+            f"{result.solve_ms:.0f} ms",
+        ]
+        used = min(len(det.xy), DEFAULT_PATTERN_STARS)
+        save_figure(unsolved_figure(image, detected_xy=det.xy, used=used, lines=lines), path_out)
+        return
     matched = [m for m in s.stars if m.catalog_id is not None]
     rows = cat.rows([m.catalog_id for m in matched])
     xy = np.array([(m.x, m.y) for m in matched]).reshape(-1, 2)
@@ -222,3 +281,50 @@ def annotate_result(path_out: str | Path, image: np.ndarray, result: ImageSolveR
             + "".join(f", {k} {getattr(s, k):.4f}" for k in cam.coefficients)
         ),
     )
+
+
+def write_outputs(
+    paths: Mapping[str, Path | None],
+    source: str | Path | None,
+    pixels: np.ndarray,
+    result: ImageSolveResult,
+) -> dict[str, str]:
+    """Write what ``paths`` asks for (a kind's path None: not written): "wcs", a FITS WCS
+    header in the projection of the fitted camera (solved only); "new_fits", the image as
+    FITS with that WCS in its header, like astrometry.net's ``.new`` (solved only; a FITS
+    ``source`` keeps its own 2-D data and header cards, others get the luminance that was
+    solved); "annotate", the picture (``annotate_result``, solved or not). Returns the
+    paths written, by kind."""
+    written: dict[str, str] = {}
+    s = result.solution
+    if s is not None and (paths.get("wcs") or paths.get("new_fits")):
+        from starnav.wcs import choose_sip_order, wcs_from_attitude, write_wcs
+
+        wcs = wcs_from_attitude(
+            s.R_cam_from_icrs, result.camera, sip_order=choose_sip_order(result.camera)
+        )
+        if paths.get("wcs"):
+            write_wcs(paths["wcs"], wcs)
+            written["wcs"] = str(paths["wcs"])
+        if paths.get("new_fits"):
+            data, header = _source_fits(source, pixels)
+            write_wcs(paths["new_fits"], wcs, image=data, extra_header=header)
+            written["new_fits"] = str(paths["new_fits"])
+    if paths.get("annotate"):
+        annotate_result(paths["annotate"], pixels, result)
+        written["annotate"] = str(paths["annotate"])
+    return written
+
+
+def _source_fits(source: str | Path | None, pixels: np.ndarray):
+    """The data and header of a FITS ``source``'s first 2-D image of the solved shape (row 0
+    first, as ``read_image`` takes it), else the solved luminance ``pixels`` and no header."""
+    if source is not None and is_fits(source):
+        from astropy.io import fits
+
+        with fits.open(source, memmap=False) as hdul:
+            for hdu in hdul:
+                data = hdu.data if hdu.header.get("NAXIS") == 2 else None
+                if data is not None and data.shape == pixels.shape:
+                    return np.array(data), hdu.header.copy()
+    return pixels, None

@@ -46,6 +46,7 @@ def solve_star_list(
     algorithm_options: Mapping[str, object] | None = None,
     prior: np.ndarray | None = None,
     prior_sigma_deg: float = 1.0,
+    time_budget_s: float | None = None,
 ) -> SolveResult:
     """Solve one star list: with ``fov_deg`` or a ``camera`` (model or file) by
     ``solve_verbose`` (options as there), without them by ``solve_fov``, which searches
@@ -79,6 +80,7 @@ def solve_star_list(
             parity=parity,
             sigma_px=sigma_px,
             max_false_match_probability=max_false_match_probability,
+            time_budget_s=time_budget_s,
         )
     return solve_verbose(
         stars.xy,
@@ -100,6 +102,7 @@ def solve_star_list(
         algorithm_options=algorithm_options,
         prior=prior,
         prior_sigma_deg=prior_sigma_deg,
+        time_budget_s=time_budget_s,
     )
 
 

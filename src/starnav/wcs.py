@@ -25,6 +25,7 @@ in pixels).
 from __future__ import annotations
 
 import datetime as _dt
+import re
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
@@ -319,12 +320,29 @@ def _fits_image(image: np.ndarray, wcs: WCS) -> np.ndarray:
     return data
 
 
-def write_wcs(path: str | Path, wcs: WCS, *, image: np.ndarray | None = None) -> None:
+# cards of an image's own header that the WCS written replaces, or that the data written
+# sets (its structure and scaling)
+_REPLACED = re.compile(
+    r"^(SIMPLE|BITPIX|NAXIS\d*|EXTEND|BSCALE|BZERO|BLANK|PCOUNT|GCOUNT|XTENSION|WCSAXES|"
+    r"CRPIX\d|CRVAL\d|CDELT\d|CTYPE\d|CUNIT\d|CROTA\d|CD\d_\d|PC\d_\d|LONPOLE|LATPOLE|"
+    r"RADESYS|RADECSYS|EQUINOX|EPOCH|IMAGEW|IMAGEH|(A|B|AP|BP)_(ORDER|\d+_\d+|DMAX)|"
+    r"PV\d_\d+|MJDREF|DATEREF)$"
+)
+
+
+def write_wcs(
+    path: str | Path,
+    wcs: WCS,
+    *,
+    image: np.ndarray | None = None,
+    extra_header: fits.Header | None = None,
+) -> None:
     """Write the WCS as a FITS file (overwriting ``path``).
 
     Without ``image``: a header-only file like astrometry.net's ``wcs.fits`` (with IMAGEW and
     IMAGEH, the image size in pixels). With ``image`` (2-D numpy array, row 0 = FITS y = 1):
-    the image as the primary data unit under the same header.
+    the image as the primary data unit under the same header. ``extra_header``: the image's
+    own header, whose cards (but its WCS, structure and scaling) are kept after the WCS.
     """
     header = wcs.to_header(relax=True)
     if wcs.wcs.has_cd() and "PC1_1" in header:
@@ -343,6 +361,11 @@ def write_wcs(path: str | Path, wcs: WCS, *, image: np.ndarray | None = None) ->
     if wcs.pixel_shape is not None:
         header["IMAGEW"] = (int(wcs.pixel_shape[0]), "image width (px)")
         header["IMAGEH"] = (int(wcs.pixel_shape[1]), "image height (px)")
+    for card in extra_header.cards if extra_header is not None else ():
+        if card.keyword in ("HISTORY", "COMMENT", ""):
+            header.append(card)
+        elif not _REPLACED.match(card.keyword) and card.keyword not in header:
+            header.append(card)
     header["HISTORY"] = "WCS written by starnav"
     data = None if image is None else _fits_image(image, wcs)
     hdu = fits.PrimaryHDU(data=data, header=header)

@@ -10,6 +10,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import IO, Any, Protocol
 
+from starnav.budget import KNOWN_BUDGET_S, SCAN_BUDGET_S, SEARCH_BUDGET_S
 from starnav.camera import MODELS
 from starnav.catalog import DEFAULT_MAG_LIMIT
 from starnav.errors import StarnavError
@@ -65,6 +66,22 @@ def int_at_least(minimum: int) -> Callable[[str], int]:
 
 positive_int = int_at_least(1)
 count = int_at_least(0)
+
+
+def seconds(text: str) -> float:
+    """Argument type: seconds > 0, or "none" (``math.inf``: no limit)."""
+    value = math.inf if text.strip().lower() == "none" else finite(text)
+    if value <= 0:
+        raise argparse.ArgumentTypeError(f"must be a positive number of seconds, got {text}")
+    return value
+
+
+def add_time_budget(p: argparse.ArgumentParser) -> None:
+    """--time-budget (``starnav.budget``)."""
+    defaults = f"{KNOWN_BUDGET_S:g} s FOV given, {SEARCH_BUDGET_S:g} s searched, {SCAN_BUDGET_S:g}"
+    p.add_argument("--time-budget", type=seconds, metavar="SECONDS",
+                   help=f"give up after this many seconds of searching (default {defaults} s "
+                   "a fisheye's focal scan; 'none': no limit)")  # fmt: skip
 
 
 def png_path(text: str) -> str:
@@ -142,21 +159,14 @@ def add_fov_search(
 
 def add_catalog(p: argparse.ArgumentParser) -> None:
     """--catalog, --mag-limit, --epoch."""
-    p.add_argument(
-        "--catalog",
-        help="CSV catalog id,ra_deg,dec_deg,mag (default: embedded Hipparcos)",
-    )
+    p.add_argument("--catalog", help="CSV catalog id,ra_deg,dec_deg,mag (default: Hipparcos)")
     p.add_argument(
         "--mag-limit",
         type=finite,
         help=f"faintest catalog magnitude used (default {DEFAULT_MAG_LIMIT:g} for Hipparcos, "
         "all stars for a CSV)",
     )
-    p.add_argument(
-        "--epoch",
-        type=finite,
-        help="year to apply Hipparcos proper motion to (default: this year)",
-    )
+    p.add_argument("--epoch", type=finite, help="year of Hipparcos proper motion (default: now)")
 
 
 def add_algorithm(p: argparse.ArgumentParser) -> None:

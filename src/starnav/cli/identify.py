@@ -18,6 +18,7 @@ from starnav.cli.common import (
     add_algorithm,
     add_catalog,
     add_fov_search,
+    add_time_budget,
     algorithm_options,
     finite,
     png_path,
@@ -78,6 +79,7 @@ def add_parser(subparsers: Subparsers) -> None:
     p.add_argument(
         "--plot", metavar="PNG", type=png_path, help="draw the identified map into this PNG file"
     )
+    add_time_budget(p)
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(run=run)
 
@@ -115,6 +117,7 @@ def solve_options(args: argparse.Namespace) -> dict:
         max_false_match_probability=args.max_false_match_probability,
         algorithm=args.algorithm,
         algorithm_options=algorithm_options(args),
+        time_budget_s=args.time_budget,
     )
 
 

@@ -1,5 +1,7 @@
-"""``starnav solve``: an image file (FITS, PNG, JPEG, TIFF) to a verified attitude, with the
-field of view unknown, roughly known or calibrated; optionally a WCS header and a picture."""
+"""``starnav solve``: image files (FITS, PNG, JPEG, TIFF) to verified attitudes, with the field
+of view unknown, roughly known or calibrated; optionally WCS headers, FITS copies with the WCS
+and pictures. One file prints its answer; many files (or a directory, ``--jsonl``, ``--track``)
+are a batch (``starnav.image_batch``): one line per file, a progress bar and a summary."""
 
 from __future__ import annotations
 
@@ -7,19 +9,22 @@ import argparse
 import sys
 import time
 from dataclasses import replace
-
-import numpy as np
+from pathlib import Path
 
 from starnav.cli.common import (
+    EXIT_BAD_INPUT,
     EXIT_NOT_SOLVED,
     EXIT_OK,
     Subparsers,
     add_fov_search,
+    add_time_budget,
+    check_parent_dir,
     finite,
     int_at_least,
-    png_path,
+    positive_int,
     print_json,
     print_solution,
+    to_json,
 )
 from starnav.errors import StarnavError
 from starnav.image import DEFAULT_MAX_STARS, FISHEYE_MAX_STARS, ImageSolveResult
@@ -30,9 +35,9 @@ WCS_SUFFIXES = (".fits", ".fit", ".fts", ".wcs")
 def add_parser(subparsers: Subparsers) -> None:
     """The ``solve`` command and its options."""
     p = subparsers.add_parser(
-        "solve", help="solve an image file (FITS, PNG, JPEG, TIFF): FOV may be unknown"
+        "solve", help="solve image files (FITS, PNG, JPEG, TIFF): FOV may be unknown"
     )
-    p.add_argument("image", help="image file")
+    p.add_argument("images", nargs="+", metavar="IMAGE", help="image files or directories of them")
     add_fov_search(
         p,
         "horizontal FOV, roughly (searched ±5 %%)",
@@ -69,30 +74,53 @@ def add_parser(subparsers: Subparsers) -> None:
         metavar="FITS",
         help="write a FITS WCS header here (the lens model's projection: pinhole TAN or "
         "TAN-SIP, equidistant ARC, stereographic STG, equisolid ZEA, orthographic SIN, "
-        "kannala-brandt ARC-SIP)",
+        "kannala-brandt ARC-SIP); a directory for a batch (NAME.wcs per file)",
     )
     p.add_argument(
-        "--annotate", metavar="PNG", type=png_path, help="draw the solved image into this PNG"
+        "--new-fits",
+        metavar="FITS",
+        help="write the solved image as FITS with the WCS in its header (like astrometry.net's "
+        ".new; a FITS image keeps its data and header cards); a directory for a batch "
+        "(NAME.new.fits)",
     )
-    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.add_argument(
+        "--annotate",
+        metavar="PNG",
+        help="draw the image into this PNG: solved, the stars identified; not solved, the "
+        "detections and the reason; a directory for a batch (NAME.png)",
+    )
+    p.add_argument(
+        "--no-hints",
+        action="store_true",
+        help="ignore a FITS header's RA/DEC, pixel scale and DATE-OBS (used by default when "
+        "the options do not say otherwise)",
+    )
+    add_time_budget(p)
+    batch = p.add_argument_group("many files")
+    batch.add_argument(
+        "--workers", type=positive_int, help="processes for a batch (default: all cores)"
+    )
+    batch.add_argument(
+        "--dask",
+        metavar="ADDRESS",
+        help="run the batch on this Dask scheduler (e.g. tcp://host:8786), or 'local'",
+    )
+    batch.add_argument("--jsonl", metavar="FILE", help="write one JSON line per file here")
+    batch.add_argument(
+        "--track",
+        action="store_true",
+        help="the files are a sequence: each solved frame's attitude and camera are the next "
+        "one's prior (tracking), falling back to lost in space",
+    )
+    p.add_argument("--json", action="store_true", help="print JSON (one line per file in a batch)")
     p.set_defaults(run=run)
 
 
-def run(args: argparse.Namespace) -> int:
-    """Read, detect, solve; write the WCS and the picture; print the answer."""
-    from starnav.detect.read import read_image
-    from starnav.image import solve_image
+def _options(args: argparse.Namespace) -> dict:
+    """The ``solve_image`` options of the command line."""
+    from starnav.detect.header import ImageHints
 
-    if args.wcs and not args.wcs.lower().endswith(WCS_SUFFIXES):
-        raise StarnavError(
-            f"--wcs writes a FITS file: give a name ending in .fits (or .fit, .fts, .wcs), "
-            f"got {args.wcs!r}"
-        )
-    t0 = time.perf_counter()
-    pixels = read_image(args.image)
-    read_ms = (time.perf_counter() - t0) * 1e3
-    res = solve_image(
-        pixels,
+    return dict(
         fov_deg=args.fov_deg,
         fov_range_deg=tuple(args.fov_range),
         camera=args.camera,
@@ -104,31 +132,95 @@ def run(args: argparse.Namespace) -> int:
         catalog=args.catalog,
         epoch_year=args.epoch,
         parity=args.parity,
+        time_budget_s=args.time_budget,
+        **({"hints": ImageHints()} if args.no_hints else {}),
     )
-    res = replace(res, read_ms=read_ms)  # read here, so the picture can be annotated
-    _write_outputs(args, pixels, res)
+
+
+def run(args: argparse.Namespace) -> int:
+    """One file: read, detect, solve, write the outputs, print. Many: ``run_batch``."""
+    paths = [Path(p) for p in args.images]
+    if len(paths) > 1 or paths[0].is_dir() or args.jsonl or args.track or args.dask:
+        return run_batch(args, paths)
+    _check_file_outputs(args)
+    from starnav.detect.header import fits_hints
+    from starnav.detect.read import read_image
+    from starnav.image import solve_image, write_outputs
+
+    t0 = time.perf_counter()
+    pixels = read_image(paths[0])
+    read_ms = (time.perf_counter() - t0) * 1e3
+    options = _options(args)
+    options.setdefault("hints", fits_hints(paths[0]))
+    res = solve_image(pixels, **options)
+    res = replace(res, read_ms=read_ms)
+    outputs = {"wcs": args.wcs, "new_fits": args.new_fits, "annotate": args.annotate}
+    write_outputs({k: v and Path(v) for k, v in outputs.items()}, paths[0], pixels, res)
+    if res.solution is None and (args.wcs or args.new_fits):
+        print("starnav solve: not solved, no WCS written", file=sys.stderr)
     if args.json:
-        print_json(res.to_dict(args.image))
+        print_json(res.to_dict(args.images[0]))
     else:
         _print_text(res)
     return EXIT_OK if res.solution else EXIT_NOT_SOLVED
 
 
-def _write_outputs(args: argparse.Namespace, pixels: np.ndarray, res: ImageSolveResult) -> None:
-    """--wcs (in the projection of the fitted camera's lens model) and --annotate of a solved
-    image, or a note on stderr that there are none."""
-    s = res.solution
-    if s is not None and args.wcs:
-        from starnav.wcs import choose_sip_order, wcs_from_attitude, write_wcs
+def _check_file_outputs(args: argparse.Namespace) -> None:
+    """The output files of one image: names and directories, before any work."""
+    checks = (
+        ("wcs", WCS_SUFFIXES, "a FITS file: give a name ending in .fits (or .fit, .fts, .wcs)"),
+        ("new_fits", WCS_SUFFIXES[:3], "a FITS file: give a name ending in .fits (.fit, .fts)"),
+        ("annotate", (".png",), "a PNG file: give a name ending in .png"),
+    )
+    for option, suffixes, what in checks:
+        value = getattr(args, option)
+        flag = f"--{option.replace('_', '-')}"
+        if value and not value.lower().endswith(suffixes):
+            raise StarnavError(f"{flag} writes {what}, got {value!r}")
+        check_parent_dir(flag, value)
 
-        order = choose_sip_order(res.camera)
-        write_wcs(args.wcs, wcs_from_attitude(s.R_cam_from_icrs, res.camera, sip_order=order))
-    if s is not None and args.annotate:
-        from starnav.image import annotate_result
 
-        annotate_result(args.annotate, pixels, res)
-    if s is None and (args.wcs or args.annotate):
-        print("starnav solve: not solved, no WCS or picture written", file=sys.stderr)
+def run_batch(args: argparse.Namespace, inputs: list[Path]) -> int:
+    """Many files in one process (``starnav.image_batch``): a progress bar, one line per
+    file (text, or JSON with --json; --jsonl writes them to a file as well), a summary."""
+    from tqdm import tqdm
+
+    from starnav.image_batch import ImageOutputs, image_paths, solve_files, summarize
+
+    paths = image_paths(inputs)
+    outputs = ImageOutputs.make(wcs=args.wcs, new_fits=args.new_fits, annotate=args.annotate)
+    jsonl = None
+    if args.jsonl:
+        check_parent_dir("--jsonl", args.jsonl)
+        try:
+            jsonl = open(args.jsonl, "w")
+        except OSError as exc:
+            raise StarnavError(f"cannot write {args.jsonl!r}: {exc.strerror or exc}") from None
+    t0 = time.perf_counter()
+    with tqdm(total=len(paths), desc="solve", unit="file", file=sys.stderr) as bar:
+        results = solve_files(
+            paths,
+            _options(args),
+            outputs=outputs,
+            workers=args.workers,
+            dask_address=args.dask,
+            track=args.track,
+            progress=bar.update,
+        )
+    summary = summarize(results, time.perf_counter() - t0)
+    for r in results:
+        if jsonl is not None:
+            jsonl.write(to_json(r.record) + "\n")
+        if args.json:
+            print_json(r.record)
+        else:
+            print(r.line())
+    if jsonl is not None:
+        jsonl.close()
+    print(summary.line(), file=sys.stderr)
+    if summary.errors:
+        return EXIT_BAD_INPUT
+    return EXIT_OK if summary.solved == summary.files else EXIT_NOT_SOLVED
 
 
 def _print_text(res: ImageSolveResult) -> None:

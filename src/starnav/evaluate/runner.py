@@ -31,6 +31,7 @@ from starnav.pipeline import (
     SolveSettings,
     get_database,
 )
+from starnav.pipeline.cluster import dask_client, one_blas_thread
 from starnav.simulate import FALSE_STAR_ID, simulate_frame
 from starnav.starlist import check_star_list
 
@@ -291,16 +292,8 @@ def _serial(config, boresights, chunks) -> Iterator[list[FrameResult]]:
         yield solve_chunk(config, boresights, chunk)
 
 
-def _one_blas_thread() -> None:
-    """Worker processes each run one frame at a time: a multi-threaded BLAS in every one of
-    them only fights over the cores (small products became 10-20x slower). Set before the
-    workers start, so their numpy reads it."""
-    for name in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
-        os.environ.setdefault(name, "1")
-
-
 def _processes(config, boresights, chunks, workers) -> Iterator[list[FrameResult]]:
-    _one_blas_thread()
+    one_blas_thread()
     context = multiprocessing.get_context("spawn")  # fresh interpreters read the setting
     with ProcessPoolExecutor(max_workers=workers, mp_context=context) as pool:
         futures = [pool.submit(solve_chunk, config, boresights, c) for c in chunks]
@@ -309,38 +302,13 @@ def _processes(config, boresights, chunks, workers) -> Iterator[list[FrameResult
 
 
 def _dask(config, boresights, chunks, address, workers) -> Iterator[list[FrameResult]]:
-    try:
-        from distributed import Client, LocalCluster
-        from distributed import as_completed as dask_completed
-    except ImportError:
-        raise StarnavError(
-            "--dask needs the distributed package: pip install 'starnav[dask]'"
-        ) from None
-    cluster = None
-    try:
-        if address == "local":
-            _one_blas_thread()
-            cluster = LocalCluster(
-                n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None
-            )
-            client = Client(cluster)
-        else:
-            client = Client(address, timeout="10s")
-    except OSError as exc:
-        if cluster is not None:
-            cluster.close()
-        raise StarnavError(f"cannot reach the Dask scheduler at {address!r}: {exc}") from None
-    try:
+    with dask_client(address, workers) as (client, dask_completed):
         # the workers build their own tables from their disk cache (or once, if remote)
         futures = client.map(
             solve_chunk, [config] * len(chunks), [boresights] * len(chunks), chunks, pure=False
         )
         for future in dask_completed(futures):
             yield future.result()
-    finally:
-        client.close()
-        if cluster is not None:
-            cluster.close()
 
 
 def run_evaluation(

@@ -9,6 +9,7 @@ from typing import Protocol
 
 import numpy as np
 
+from starnav.budget import Deadline
 from starnav.identify.database import PairDatabase
 
 # a measured angle carries two centroid errors: PAIR_TOL_SIGMAS sigma of their sum, at least
@@ -32,7 +33,7 @@ class MatchSettings:
     ``parity``: +1 or -1 when known, None to find it; ``max_stars``: triangles are made of
     the first (brightest) this many stars; ``max_screen_stars``: identification uses the
     first this many (the attitude fit then takes in the rest); ``max_hypotheses``: give up
-    after testing this many.
+    after testing this many; ``deadline``: give up when it passes (``starnav.budget``).
     """
 
     pair_tol_rad: float
@@ -43,6 +44,7 @@ class MatchSettings:
     max_screen_stars: int = 50
     max_hypotheses: int = 20000
     pixel_rad: float | None = None
+    deadline: Deadline | None = None
 
     @classmethod
     def for_focal(

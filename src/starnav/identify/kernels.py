@@ -539,10 +539,14 @@ def _orientations(tri, triples, vectors, tol, longest, parity_known):
 
 @njit(cache=True)
 def triangle_search(bearings, triangles, pair_a, pair_b, pair_angle, max_angle, sky, allowed,
-                    tol, radii, max_p, parity_known, max_hypotheses):  # fmt: skip
+                    tol, radii, max_p, parity_known, max_hypotheses, hypotheses, proposed,
+                    best_p, head, mark, work, cam):  # fmt: skip
     """Try the measured ``triangles`` (rows of ``bearings``, (t, 3)) in order: look up the
     catalog triangles of each, screen all their hypotheses, verify the best (by the screen)
-    until one is accepted, nothing left can be, or ``max_hypotheses`` are spent."""
+    until one is accepted, nothing left can be, or ``max_hypotheses`` are spent.
+    ``hypotheses``, ``proposed``, ``best_p``: the tally of earlier triangles of the same
+    search (a search may run in chunks of triangles); ``head`` (-1), ``mark`` (False),
+    ``work``, ``cam`` (n, 3): work space of one entry per catalog star, left as found."""
     vectors = sky[0]
     n_total = len(bearings)
     radius = radii.max()
@@ -551,11 +555,6 @@ def triangle_search(bearings, triangles, pair_a, pair_b, pair_angle, max_angle, 
     # catalog star): a screen count that cannot beat the threshold even so is not verified
     p_floor = (1.0 - math.cos(radii.min())) / (1.0 - math.cos(field_rad))
     screen2 = chord(radius) ** 2
-    work = np.empty(len(vectors), dtype=np.int64)
-    head = np.full(len(vectors), -1, dtype=np.int64)
-    mark = np.zeros(len(vectors), dtype=np.bool_)
-    cam = np.empty((len(vectors), 3))
-    hypotheses, proposed, best_p = 0, 0, 1.0
     empty = np.empty(0, dtype=np.int64)
     tri = np.empty((3, 3))
     for t in range(len(triangles)):

@@ -369,7 +369,9 @@ def _no_matches() -> PatternMatches:
     return PatternMatches(e, np.empty((0, 4), dtype=np.intp), np.empty((0, 4), dtype=np.intp), e)
 
 
-def _concat(parts: list[PatternMatches], offsets: list[int]) -> PatternMatches:
+def concat_matches(parts: list[PatternMatches], offsets: list[int]) -> PatternMatches:
+    """The matches of consecutive batches of observed patterns as one batch's (``offsets``:
+    where each batch starts)."""
     return PatternMatches(
         np.concatenate([h.pattern + o for h, o in zip(parts, offsets, strict=True)]),
         np.concatenate([h.obs_local for h in parts]),
@@ -409,7 +411,7 @@ def match_patterns(
             match_patterns(obs[sub], table, vectors, tol_rad, max_angle_rad, parity, **scaled)
             for sub in (slice(None, half), slice(half, None))
         ]
-        return _concat(parts, [0, half])
+        return concat_matches(parts, [0, half])
     cand_pat, cand_row = _table_candidates(table, lo, hi, n_prefix)
     if len(cand_pat) == 0:
         return _no_matches()

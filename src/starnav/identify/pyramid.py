@@ -15,6 +15,7 @@ differ only in the triangles they give it (and tracking in the catalog stars it 
 from __future__ import annotations
 
 import functools
+import time
 
 import numpy as np
 
@@ -24,6 +25,8 @@ from starnav.identify.verify import HypothesisTester, Tally, kernels
 
 NO_TRIANGLE = "no star triangle matches the catalog"  # the reason when nothing matched
 FEWER_THAN_3 = "fewer than 3 stars"
+_CHUNK_OF_BUDGET = 0.05  # with a deadline, a kernel call takes about this part of the budget
+_MAX_CHUNK = 4096  # triangles per kernel call at most
 
 
 @functools.cache
@@ -79,28 +82,51 @@ def match_triangles(
     or the hypothesis budget is spent. ``allowed``: a mask of the catalog rows the search may
     use (default all)."""
     bearings = np.ascontiguousarray(bearings, dtype=np.float64)
+    triangles = np.ascontiguousarray(triangles, dtype=np.int64).reshape(-1, 3)
     tester = HypothesisTester(bearings, database, settings, Tally(), allowed)
-    r = kernels().triangle_search(
-        bearings,
-        np.ascontiguousarray(triangles, dtype=np.int64).reshape(-1, 3),
-        database.pair_a,
-        database.pair_b,
-        database.pair_angle_rad,
-        database.max_angle_rad,
-        database.sky,
-        tester.allowed,
-        settings.pair_tol_rad,
-        np.asarray(settings.match_radii_rad, dtype=np.float64),
-        settings.max_false_match_probability,
-        settings.parity or 0,
-        settings.max_hypotheses,
+    n = len(database.catalog)
+    work = (
+        np.full(n, -1, dtype=np.int64),
+        np.zeros(n, dtype=np.bool_),
+        np.empty(n, dtype=np.int64),
+        np.empty((n, 3)),
     )
-    tester.tally.hypotheses, tester.tally.proposed = int(r.hypotheses), int(r.proposed)
-    tester.tally.best_p = float(r.best_p)
-    if r.status == kernels().NOT_FOUND:
-        return tester.outcome(NO_TRIANGLE)
-    outcome = tester.tested(r.status, r.obs, r.cat, r.R, int(r.parity), float(r.p))
-    return outcome or tester.outcome(NO_TRIANGLE)
+    t = tester.tally
+    deadline = settings.deadline
+    # without a deadline in one call; with one in chunks that each take about a twentieth
+    # of the budget (measured as they go: triangles differ), the deadline looked at between
+    start, size = 0, len(triangles) if deadline is None else 1
+    while True:
+        clock = time.perf_counter()
+        r = kernels().triangle_search(
+            bearings,
+            triangles[start : start + size],
+            database.pair_a,
+            database.pair_b,
+            database.pair_angle_rad,
+            database.max_angle_rad,
+            database.sky,
+            tester.allowed,
+            settings.pair_tol_rad,
+            np.asarray(settings.match_radii_rad, dtype=np.float64),
+            settings.max_false_match_probability,
+            settings.parity or 0,
+            settings.max_hypotheses,
+            t.hypotheses,
+            t.proposed,
+            t.best_p,
+            *work,
+        )
+        t.hypotheses, t.proposed, t.best_p = int(r.hypotheses), int(r.proposed), float(r.best_p)
+        if r.status != kernels().NOT_FOUND:
+            outcome = tester.tested(r.status, r.obs, r.cat, r.R, int(r.parity), float(r.p))
+            return outcome or tester.outcome(NO_TRIANGLE)
+        start += size
+        if start >= len(triangles) or tester.exhausted:
+            break
+        per_triangle = max(time.perf_counter() - clock, 1e-6) / size
+        size = int(np.clip(_CHUNK_OF_BUDGET * deadline.budget_s / per_triangle, 1, _MAX_CHUNK))
+    return tester.outcome(NO_TRIANGLE)
 
 
 class Pyramid:

@@ -20,6 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from starnav.budget import expired
 from starnav.identify.base import Identification, IdentifyOutcome, MatchSettings
 from starnav.identify.database import PairDatabase
 
@@ -173,8 +174,10 @@ class HypothesisTester:
 
     @property
     def exhausted(self) -> bool:
-        """Whether the hypothesis budget of the settings is spent."""
-        return self.tally.hypotheses >= self.settings.max_hypotheses
+        """Whether the hypothesis budget or the time budget of the settings is spent."""
+        return self.tally.hypotheses >= self.settings.max_hypotheses or expired(
+            self.settings.deadline
+        )
 
     def test(
         self, obs_rows: np.ndarray, cat_rows: np.ndarray, parity: int
@@ -236,6 +239,8 @@ def not_found_reason(
     ``nothing_matched`` when no hypothesis was generated."""
     if hypotheses >= settings.max_hypotheses:
         return f"gave up after {hypotheses} hypotheses"
+    if expired(settings.deadline):
+        return settings.deadline.reason(f"{hypotheses} hypotheses, {proposed} verified")
     if hypotheses == 0:
         return nothing_matched
     if proposed == 0:

@@ -30,9 +30,10 @@ import numpy as np
 from astropy.time import Time, TimeDelta
 
 from starnav.camera import CameraModel, camera_from_dict, load_camera
+from starnav.detect.header import ImageTime, image_time
 from starnav.errors import StarnavError
 from starnav.navigation.frames import parse_utc
-from starnav.navigation.images import ImageTime, image_stars, image_time
+from starnav.navigation.images import image_stars
 
 STANDARD_PRESSURE_HPA = 1013.25
 STANDARD_TEMPERATURE_C = 15.0

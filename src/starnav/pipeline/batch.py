@@ -7,6 +7,7 @@ A frame with bad input gets its one-line error as the reason; it never stops the
 
 from __future__ import annotations
 
+import math
 import multiprocessing
 import os
 from collections.abc import Callable, Sequence
@@ -14,6 +15,7 @@ from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
 
+from starnav.budget import Deadline
 from starnav.errors import StarnavError
 from starnav.pipeline.solver import Solver
 from starnav.results import Solution
@@ -23,8 +25,12 @@ Frame = tuple[np.ndarray, np.ndarray | None]  # centroids (n, 2, px) and brightn
 _WORKER: dict[str, object] = {}  # the solver and prior of a worker process
 
 
-def _init(solver: Solver, prior: np.ndarray | None, prior_sigma_deg: float) -> None:
-    _WORKER.update(solver=solver, prior=prior, prior_sigma_deg=prior_sigma_deg)
+def _init(
+    solver: Solver, prior: np.ndarray | None, prior_sigma_deg: float, time_budget_s: float
+) -> None:
+    _WORKER.update(
+        solver=solver, prior=prior, prior_sigma_deg=prior_sigma_deg, time_budget_s=time_budget_s
+    )
 
 
 def _solve_one(frame: Frame) -> tuple[Solution | None, str, float]:
@@ -35,7 +41,12 @@ def _solve_one(frame: Frame) -> tuple[Solution | None, str, float]:
         stars = check_star_list(xy, width=camera.width, height=camera.height, brightness=brightness)
     except StarnavError as exc:
         return None, f"error: {exc}", 0.0
-    r = solver.solve(stars, prior=_WORKER["prior"], prior_sigma_deg=_WORKER["prior_sigma_deg"])
+    r = solver.solve(
+        stars,
+        prior=_WORKER["prior"],
+        prior_sigma_deg=_WORKER["prior_sigma_deg"],
+        deadline=Deadline.after(_WORKER["time_budget_s"]),
+    )
     return r.solution, r.reason, r.time_ms
 
 
@@ -47,11 +58,12 @@ def solve_many(
     progress: Callable[[int], None] | None = None,
     prior: np.ndarray | None = None,
     prior_sigma_deg: float = 1.0,
+    time_budget_s: float = math.inf,
 ) -> list[tuple[Solution | None, str, float]]:
     """``(solution or None, reason, time_ms)`` of each frame, in order, on ``workers``
     processes (default: all cores; 1: here); ``progress`` is called with the number of frames
-    finished."""
-    _init(solver, prior, prior_sigma_deg)
+    finished; ``time_budget_s``: each frame's (``starnav.budget``)."""
+    _init(solver, prior, prior_sigma_deg, time_budget_s)
     workers = workers or os.cpu_count() or 1
     out = []
     todo = list(frames)
@@ -70,7 +82,7 @@ def solve_many(
         max_workers=workers,
         mp_context=context,
         initializer=_init,
-        initargs=(solver, prior, prior_sigma_deg),
+        initargs=(solver, prior, prior_sigma_deg, time_budget_s),
     ) as pool:
         chunk = max(1, len(todo) // (8 * workers))
         for result in pool.map(_solve_one, todo, chunksize=chunk):

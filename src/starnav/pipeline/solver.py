@@ -19,6 +19,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from starnav.budget import Deadline, expired
 from starnav.camera import CameraModel
 from starnav.catalog import Catalog
 from starnav.errors import CatalogError, StarnavError
@@ -215,17 +216,22 @@ class Solver:
         *,
         prior: np.ndarray | None = None,
         prior_sigma_deg: float = 1.0,
+        deadline: Deadline | None = None,
     ) -> SolveResult:
         """Identify checked ``stars`` and fit the attitude. ``prior``: the previous attitude
         (``R_cam_from_icrs``), good to ``prior_sigma_deg`` (1-sigma): tracking mode matches
         the catalog stars near it only, and falls back to lost in space when that fails
-        (``Solution.algorithm`` says which answered)."""
+        (``Solution.algorithm`` says which answered). ``deadline``: stop identifying when it
+        passes (``starnav.budget``; None: no time limit)."""
         with first_use("solve"):
             t0 = time.perf_counter()
             bearings = self.camera.pixels_to_bearings(stars.xy)
             order = brightness_order(stars)
             t1 = time.perf_counter()
-            outcome, algorithm = self._identify(bearings, order, prior, prior_sigma_deg)
+            settings = self.match_settings
+            if deadline is not None:
+                settings = replace(settings, deadline=deadline)
+            outcome, algorithm = self._identify(bearings, order, prior, prior_sigma_deg, settings)
             t2 = time.perf_counter()
             stages = {"bearings": (t1 - t0) * 1e3, "identify": (t2 - t1) * 1e3}
             found = outcome.identification
@@ -236,14 +242,19 @@ class Solver:
             return self.fit(found, stars, t0=t0, t_fit=t2, algorithm=algorithm, stages=stages)
 
     def _identify(
-        self, bearings: np.ndarray, order: np.ndarray, prior, prior_sigma_deg: float
+        self,
+        bearings: np.ndarray,
+        order: np.ndarray,
+        prior,
+        prior_sigma_deg: float,
+        settings: MatchSettings,
     ) -> tuple[IdentifyOutcome, str]:
         if prior is not None:
             tracker = Tracking(R_prior=prior, sigma_deg=prior_sigma_deg)
-            outcome = tracker.identify(bearings, order, self.database, self.match_settings)
-            if outcome.identification is not None:
+            outcome = tracker.identify(bearings, order, self.database, settings)
+            if outcome.identification is not None or expired(settings.deadline):
                 return outcome, Tracking.name
-        outcome = self.identifier.identify(bearings, order, self.database, self.match_settings)
+        outcome = self.identifier.identify(bearings, order, self.database, settings)
         return outcome, self.identifier.name
 
     def fit(

@@ -1,0 +1,121 @@
+"""Time budgets: every solve stops when its budget is spent and says so.
+
+A ``Deadline`` is made when a solve starts (after the catalog, tables and solver are
+prepared: a one-time cost per process) and travels in the identification's ``MatchSettings``;
+the searches look at it between units of work (a chunk of star triangles, one hypothesis of
+the FOV search, one trial focal length of a fisheye scan), so a call overruns its budget by at
+most one such unit. When it is spent the answer is "not solved" with the reason
+"time budget spent (...)" and what was tried.
+
+Time spent compiling the machine code (once per installation, 1-2 min) is not counted: the
+first solve after installing would otherwise always run out. numba announces compilations as
+"numba:compile" events, listened to from the first deadline on; loading already compiled code
+(~0.2 s, once per process) is counted.
+
+Defaults (seconds), chosen as what a user waits for and measured not to cost a solve on the
+benchmarks (docs/performance.md, "Time budgets"):
+``KNOWN_BUDGET_S`` star lists or images with the camera (focal length) known;
+``SEARCH_BUDGET_S`` the field of view searched (pinhole);
+``SCAN_BUDGET_S`` a fisheye's focal length scanned.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+from dataclasses import dataclass
+
+from starnav.errors import StarnavError
+
+KNOWN_BUDGET_S = 2.0
+SEARCH_BUDGET_S = 10.0
+SCAN_BUDGET_S = 60.0
+
+_COMPILING = threading.local()  # per thread: nesting depth and start of the outermost compile
+_COMPILE_S = [0.0]  # seconds spent compiling in this process
+_CLOCK: list[bool] = []  # whether the compile clock is installed
+
+
+def _install_compile_clock() -> None:
+    """Count the seconds of numba compilations (outermost events only: a kernel compiles the
+    kernels it calls inside its own event)."""
+    if _CLOCK:
+        return
+    _CLOCK.append(True)
+    try:
+        from numba.core import event
+    except ImportError:  # no numba event API: compilations are counted in budgets
+        return
+
+    class _Clock(event.Listener):
+        def on_start(self, _event) -> None:
+            depth = getattr(_COMPILING, "depth", 0)
+            if depth == 0:
+                _COMPILING.t0 = time.perf_counter()
+            _COMPILING.depth = depth + 1
+
+        def on_end(self, _event) -> None:
+            _COMPILING.depth -= 1
+            if _COMPILING.depth == 0:
+                _COMPILE_S[0] += time.perf_counter() - _COMPILING.t0
+
+    event.register("numba:compile", _Clock())
+
+
+def default_budget_s(*, known: bool, scan: bool) -> float:
+    """The default budget (s) of a solve: a fisheye's focal ``scan``, or the camera or FOV
+    ``known``, or the FOV searched."""
+    if scan:
+        return SCAN_BUDGET_S
+    return KNOWN_BUDGET_S if known else SEARCH_BUDGET_S
+
+
+def check_budget(time_budget_s: float | None, default_s: float) -> float:
+    """A budget in seconds: ``default_s`` for None, ``math.inf`` for no limit, or a one-line
+    error for anything but a positive number."""
+    if time_budget_s is None:
+        return default_s
+    ok = isinstance(time_budget_s, int | float) and not isinstance(time_budget_s, bool)
+    if not ok or math.isnan(time_budget_s) or time_budget_s <= 0:
+        raise StarnavError(
+            f"time_budget_s must be a positive number of seconds, got {time_budget_s!r}"
+        )
+    return float(time_budget_s)
+
+
+@dataclass(frozen=True)
+class Deadline:
+    """When a solve's budget ends. ``budget_s``: the budget (s); ``start``: its start
+    (``time.perf_counter()``, s); ``compile_s``: seconds compiled in this process before it
+    (compilation after the start extends the deadline)."""
+
+    budget_s: float
+    start: float
+    compile_s: float
+
+    @classmethod
+    def after(cls, budget_s: float) -> Deadline | None:
+        """A deadline ``budget_s`` seconds from now (None for an infinite budget)."""
+        if math.isinf(budget_s):
+            return None
+        _install_compile_clock()  # numba is imported by the solve anyway
+        return cls(budget_s, time.perf_counter(), _COMPILE_S[0])
+
+    @property
+    def spent_s(self) -> float:
+        """Seconds of the budget used so far (compilation left out)."""
+        return time.perf_counter() - self.start - (_COMPILE_S[0] - self.compile_s)
+
+    def expired(self) -> bool:
+        """Whether the budget is spent."""
+        return self.spent_s >= self.budget_s
+
+    def reason(self, tried: str) -> str:
+        """The reason of a solve stopped by this deadline, with what was ``tried``."""
+        return f"time budget spent ({self.budget_s:g} s): {tried}"
+
+
+def expired(deadline: Deadline | None) -> bool:
+    """Whether ``deadline`` (None: no limit) has passed."""
+    return deadline is not None and deadline.expired()
