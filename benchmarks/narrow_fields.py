@@ -110,9 +110,13 @@ class Outcome:
     ms: float
 
 
-def one_frame(hip, camera: Camera, seed: int, fov_range) -> Outcome:
+def one_frame(hip, camera: Camera, seed: int, fov_range, min_abs_b_deg: float = 0.0) -> Outcome:
+    """Render and solve one frame; the boresight uniform on the sky at galactic latitudes of
+    at least ``min_abs_b_deg`` (degrees, either side of the plane)."""
     rng = np.random.default_rng(seed)
     R = Rotation.random(random_state=rng).as_matrix()
+    while abs(R[2] @ NGP) < math.sin(math.radians(min_abs_b_deg)):
+        R = Rotation.random(random_state=rng).as_matrix()
     boresight = R[2]
     radius = math.degrees(math.atan(math.hypot(camera.width, camera.height) / 2 / camera.focal_px))
     sky = joined(hip, missing_stars(hip, boresight, radius + 0.2, rng))
@@ -166,6 +170,13 @@ def main() -> None:
         default=(2.5, 2.0),
         help="FOVs below the search's limit, solved with the limit lifted (1024 x 1024)",
     )
+    parser.add_argument(
+        "--poles",
+        nargs="*",
+        type=float,
+        default=(3.0, 4.0),
+        help="FOVs solved again with the boresights at galactic latitudes beyond ±60°",
+    )
     parser.add_argument("--seed", type=int, default=2026)
     parser.add_argument("--out", default=str(DOC), help="markdown file ('-': print only)")
     parser.add_argument("--block", default="narrow-fields")
@@ -180,6 +191,9 @@ def main() -> None:
     starnav.solve_image(
         render_frame(hip, cameras[0][1], np.eye(3), SETTINGS).image, fov_range_deg=fov_range
     )
+    cameras += [
+        (f"{f:g}°, 1024 x 1024, \\|b\\| >= 60°", Camera.from_fov(f, 1024)) for f in args.poles
+    ]
     probes = [
         (f"{f:g}°, 1024 x 1024 (below the limit)", Camera.from_fov(f, 1024)) for f in args.probe
     ]
@@ -188,8 +202,9 @@ def main() -> None:
         searched = fov_range if k < len(cameras) else (min(args.probe), fov_range[1])
         if k >= len(cameras):  # lifted for the probes only, after every counted row
             starnav.fov.FOV_LIMITS_DEG = (min(args.probe), starnav.fov.FOV_LIMITS_DEG[1])
+        pole = 60.0 if "60°" in label else 0.0
         outs = [
-            one_frame(hip, camera, args.seed * 1000 + 100 * k + i, searched)
+            one_frame(hip, camera, args.seed * 1000 + 100 * k + i, searched, pole)
             for i in tqdm(range(args.frames), desc=label, file=sys.stderr, leave=False)
         ]
         rows.append(row(label, outs))

@@ -110,7 +110,7 @@ def band_stars_per_field(diagonal_deg: float) -> int:
     narrow band's table within 30-50 MB, and its patterns are of the brightest stars, those
     the Hipparcos catalog holds most completely."""
     steps = math.log(_FEWER_STARS_BELOW_DEG / diagonal_deg) / math.log(BAND_FACTOR)
-    return _PATTERN_STARS_PER_FIELD - max(0, math.ceil(steps - 1e-6))
+    return _PATTERN_STARS_PER_FIELD - max(0, math.ceil(steps - 1e-3))  # grid tops: whole steps
 
 
 def load_band(table_diagonal_deg: float, lo: float, hi: float, catalog: Catalog) -> Band | None:
