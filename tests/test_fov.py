@@ -11,9 +11,18 @@ from starnav.camera import Camera, load_camera, save_camera
 from starnav.catalog import load_catalog
 from starnav.cli import main
 from starnav.errors import CameraError, StarnavError
-from starnav.fov import band_grid, load_bands, solve_fov
-from starnav.geometry import attitude_difference_deg
+from starnav.fov import (
+    DEFAULT_FOV_RANGE_DEG,
+    FOV_LIMITS_DEG,
+    band_grid,
+    band_stars_per_field,
+    load_bands,
+    solve_fov,
+)
+from starnav.geometry import attitude_difference_deg, attitude_from_radec_roll
 from starnav.identify.pattern4 import catalog_nbytes
+from starnav.image import solve_image
+from starnav.render import RenderSettings, render_frame
 from starnav.simulate import simulate_frame
 
 
@@ -206,3 +215,46 @@ def test_more_bad_input_is_one_line_exit_2(tmp_path, capsys, args):
     code = main([a.format(tmp=tmp_path) for a in args])
     err = capsys.readouterr().err
     assert code == 2 and err.count("\n") == 1 and "Traceback" not in err
+
+
+def test_narrow_bands_take_fewer_stars_per_field_and_the_default_range_none_of_them():
+    """Issue 15: tables below 10° take one pattern star fewer per grid step, so each stays
+    within 30-50 MB; the default range reaches none of them (no narrow table is built)."""
+    assert [band_stars_per_field(d) for d in (56.57, 20.0, 10.0, 7.0711, 5.0, 3.5355)] == [
+        10,
+        10,
+        10,
+        9,
+        8,
+        7,
+    ]
+    lo, hi = DEFAULT_FOV_RANGE_DEG
+    diag = [v * 2**0.5 for v in (lo, hi)]  # a square image, small-angle diagonal
+    assert min(top for _, _, top in band_grid(*diag)) == pytest.approx(10.0)
+
+
+def test_a_3_degree_rendered_field_is_solved_with_the_fov_unknown():
+    """Issue 15: a 3° field (1024 px, stars detected to about Hp 9.5, fainter than the band
+    catalog's Hp 8.5) solved with the FOV searched over 3-3.5° (the 5° grid band)."""
+    camera = Camera.from_fov(3.0, 1024)
+    R = attitude_from_radec_roll(84.0, -2.0, 30.0)  # Orion, galactic latitude -17°
+    settings = RenderSettings(exposure_s=0.5, seed=3)
+    frame = render_frame(load_catalog(None, mag_limit=9.5), camera, R, settings)
+    res = solve_image(frame.image, fov_range_deg=(FOV_LIMITS_DEG[0], 3.5))
+    s = res.solution
+    assert s is not None, res.reason
+    bore, roll = attitude_difference_deg(s.R_cam_from_icrs, R)
+    assert bore * 3600 < 5.0 and roll < 0.05, (bore, roll)
+    assert s.fov_deg == pytest.approx(3.0, rel=1e-3)
+    assert s.parity == 1 and len(s.stars) >= 8
+
+
+def test_a_field_below_the_limit_is_a_one_line_error_saying_why(capsys):
+    code = main(["identify", MAP1, "--width", "512", "--fov-range", "2", "10"])
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1, err
+    assert "narrower than 3°" in err and "Hipparcos" in err
+    xy = np.zeros((5, 2)) + 10
+    for fov in ({"fov_range_deg": (2.9, 10)}, {"fov_deg": 2.5}):
+        with pytest.raises(StarnavError, match="too few stars of the embedded Hipparcos"):
+            solve_fov(xy, width=100, **fov)

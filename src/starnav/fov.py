@@ -40,7 +40,10 @@ from starnav.results import SolveResult
 from starnav.starlist import StarList, check_star_list
 
 DEFAULT_FOV_RANGE_DEG = (5.0, 40.0)
-FOV_LIMITS_DEG = (1.0, 100.0)
+# the narrowest horizontal field searched: a 3° field holds about 12 Hipparcos stars to the
+# deepest band catalog (Hp 8.5; ~8 towards the galactic poles), narrower ones too few to
+# identify and verify on (README, "Field range")
+FOV_LIMITS_DEG = (3.0, 100.0)
 LENS_FOV_LIMITS_DEG = (10.0, 360.0)  # the focal scan of a fisheye model
 DEFAULT_LENS_FOV_RANGE_DEG = (120.0, 200.0)  # a fisheye's range when none is given
 SCAN_STARS = 60  # the focal scan identifies the brightest this many stars,
@@ -48,7 +51,11 @@ SCAN_HYPOTHESES = 2000  # testing at most this many hypotheses per trial focal l
 GIVEN_FOV_TOLERANCE = 0.05  # a given FOV is searched within +-5 %
 CAMERA_FOV_TOLERANCE = 0.01  # a calibrated camera's within +-1 %
 _STARS_PER_FIELD = 40.0  # catalog depth of a band: mean stars in one of its pattern fields
-_MAX_MAG = 8.0  # Hipparcos is complete to about here
+# the deepest band catalog: Hipparcos is complete to Hp 7.3-9 (by galactic latitude), and
+# its 56863 stars to Hp 8.5 keep a table's catalog rows 16-bit (below 65536)
+_MAX_MAG = 8.5
+_PATTERN_STARS_PER_FIELD = 10  # brightest stars of a lattice field making its patterns,
+_FEWER_STARS_BELOW_DEG = 10.0  # one fewer per grid step below a 10° table (9, 8, 7)
 MAX_DIAGONAL_FOV_DEG = 150.0
 DEFAULT_PATTERN_STARS = 15  # the brightest this many stars make the 4-star patterns
 POSITION_HINT_RADIUS_DEG = 10.0  # a position hint's boresight is searched first within this
@@ -93,11 +100,23 @@ def horizontal_fov_deg(diagonal_deg: float, width: int, height: int) -> float:
 def band_mag_limit(diagonal_deg: float, sorted_mags: np.ndarray) -> float:
     """Magnitude limit of a band's catalog: about ``_STARS_PER_FIELD`` stars on average in
     a pattern field of the band's widest diagonal FOV, counted in the catalog's own sorted
-    magnitudes (rounded up to 0.25 mag, at most 8; the whole catalog when it is sparser)."""
+    magnitudes (rounded up to 0.25 mag, at most ``_MAX_MAG``, 8.5; the whole catalog when it
+    is sparser)."""
     radius = FIELD_RADIUS_FRACTION * math.radians(diagonal_deg) / 2.0
     needed = _STARS_PER_FIELD * 2.0 / (1.0 - math.cos(radius))  # 4 pi / field solid angle
     mag = sorted_mags[min(int(needed), len(sorted_mags) - 1)]
     return float(min(math.ceil(mag * 4.0) / 4.0, _MAX_MAG))
+
+
+def band_stars_per_field(diagonal_deg: float) -> int:
+    """Catalog stars per lattice field whose 4-subsets make the patterns of a table built
+    for a ``diagonal_deg`` field: 10 down to the 10° table, one fewer per grid step below
+    (9 at 7.07°, 8 at 5°, 7 at 3.54°). Each step halves a field's area and so doubles the
+    fields; C(k, 4) patterns per field falls about as fast (210, 126, 70, 35), which keeps a
+    narrow band's table within 30-50 MB, and its patterns are of the brightest stars, those
+    the Hipparcos catalog holds most completely."""
+    steps = math.log(_FEWER_STARS_BELOW_DEG / diagonal_deg) / math.log(BAND_FACTOR)
+    return _PATTERN_STARS_PER_FIELD - max(0, math.ceil(steps - 1e-3))  # grid tops: whole steps
 
 
 def load_band(table_diagonal_deg: float, lo: float, hi: float, catalog: Catalog) -> Band | None:
@@ -112,15 +131,19 @@ def load_band(table_diagonal_deg: float, lo: float, hi: float, catalog: Catalog)
     if key not in _DATABASES:  # the search verifies only: no pair table
         _DATABASES[key] = catalog_only(cat, math.radians(table_diagonal_deg))
     database = _DATABASES[key]
-    table = build_pattern_table(database, field_radius_fraction=FIELD_RADIUS_FRACTION)
+    table = build_pattern_table(
+        database,
+        stars_per_field=band_stars_per_field(table_diagonal_deg),
+        field_radius_fraction=FIELD_RADIUS_FRACTION,
+    )
     # the database's catalog, not ``cat``: one copy of each band's catalog however many
     # ranges and image shapes share it
     return Band(lo, hi, database.catalog, database, table) if len(table) else None
 
 
 def search_catalog(catalog: Catalog | str | Path | None, epoch_year: float | None) -> Catalog:
-    """The catalog the bands are cut from: Hipparcos to Hp 8 (Hipparcos is complete to about
-    there), or the whole CSV / ``Catalog`` given."""
+    """The catalog the bands are cut from: Hipparcos to Hp 8.5 (``_MAX_MAG``: Hipparcos is
+    complete to Hp 7.3-9), or the whole CSV / ``Catalog`` given."""
     if catalog is None or (isinstance(catalog, str | Path) and str(catalog).lower() == "hipparcos"):
         return load_catalog(None, mag_limit=_MAX_MAG, epoch_year=epoch_year)
     return load_catalog(catalog, epoch_year=epoch_year)
@@ -179,8 +202,20 @@ def check_fov_range(
     if not (a <= lo < hi <= b):
         raise StarnavError(
             f"fov range must satisfy {a:g} <= low < high <= {b:g} degrees, got {lo:g} {hi:g}"
+            + _narrower_why(lo, limits_deg)
         )
     return lo, hi
+
+
+def _narrower_why(fov_deg: float, limits_deg: tuple[float, float]) -> str:
+    """Why the pinhole search stops at ``FOV_LIMITS_DEG[0]``, for an error about a
+    narrower ``fov_deg`` (degrees); empty otherwise."""
+    if limits_deg != FOV_LIMITS_DEG or not fov_deg < limits_deg[0]:
+        return ""
+    return (
+        f" (a field narrower than {limits_deg[0]:g}° holds too few stars of the embedded "
+        "Hipparcos catalog, complete to Hp 7.3-9, to identify)"
+    )
 
 
 def search_range(
@@ -200,6 +235,7 @@ def search_range(
         if not (np.isfinite(fov_deg) and limits[0] <= fov_deg <= limits[1]):
             raise StarnavError(
                 f"fov_deg must be within {limits[0]:g}..{limits[1]:g} degrees, got {fov_deg!r}"
+                + _narrower_why(fov_deg, limits)
             )
         return fov_deg * (1 - GIVEN_FOV_TOLERANCE), fov_deg * (1 + GIVEN_FOV_TOLERANCE)
     return check_fov_range(fov_range_deg, limits)

@@ -143,7 +143,8 @@ def add_fov_search(
         type=finite,
         metavar=("LO", "HI"),
         default=DEFAULT_FOV_RANGE_DEG,
-        help="horizontal FOV range searched when the FOV is unknown (degrees; default 5 40)",
+        help="horizontal FOV range searched when the FOV is unknown (degrees, within 3-100; "
+        "default 5 40)",
     )
     if camera_help:
         fov.add_argument("--camera", help=camera_help)
