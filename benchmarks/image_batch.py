@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import re
 import subprocess
 import sys
@@ -34,8 +35,9 @@ from starnav.geometry import attitude_difference_deg, attitude_from_radec_roll
 from starnav.render import RenderSettings, render_frame, write_image
 
 ROOT = Path(__file__).resolve().parents[1]
+LOAD = os.getloadavg()[0]
 DOC = ROOT / "docs" / "performance.md"
-STARNAV = [sys.executable, "-m", "starnav.cli"]
+STARNAV = [sys.executable, "-m", "starnav.cli", "solve"]
 
 
 def render_set(folder: Path, n: int, seed: int) -> dict[str, np.ndarray]:
@@ -118,7 +120,9 @@ def main() -> None:
         run([str(root / "set" / "img000.png")])  # machine code and tables on disk, once
         singles = []
         for k in range(args.single):
-            wall, out, _ = run([str(root / "set" / f"img{k:03d}.png"), "--json"])
+            wall, out, err = run([str(root / "set" / f"img{k:03d}.png"), "--json"])
+            if not out.strip():
+                raise SystemExit(f"starnav solve printed nothing: {err}")
             singles.append((wall, json.loads(out)))
         single_wall = float(np.median([w for w, _ in singles]))
         single_solve = float(np.median([r["solve_ms"] for _, r in singles]))
@@ -144,7 +148,8 @@ def main() -> None:
             "|---|---|---|---|---|---|---|",
             *rows,
             "",
-            f"{machine()}; `python benchmarks/image_batch.py --files {args.files}`, "
+            f"{machine()} (load average {LOAD:.1f} when it started); "
+            f"`python benchmarks/image_batch.py --files {args.files}`, "
             f"{time.perf_counter() - t_start:.0f} s.",
         ]
     )

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 import sys
 import time
 from pathlib import Path
@@ -39,6 +40,7 @@ from starnav.render import RenderSettings, render_frame
 from starnav.simulate import simulate_frame
 
 ROOT = Path(__file__).resolve().parents[1]
+LOAD = os.getloadavg()[0]
 DOC = ROOT / "docs" / "performance.md"
 NOISY = {"noise_px": 0.5, "false_stars": 3, "missing_frac": 0.1}
 
@@ -250,7 +252,8 @@ def main() -> None:
             "|---|---|---|---|---|---|",
             *refusals,
             "",
-            f"{machine()}; `python benchmarks/time_budget.py --frames {args.frames} --trials "
+            f"{machine()} (load average {LOAD:.1f} when it started); "
+            f"`python benchmarks/time_budget.py --frames {args.frames} --trials "
             f"{args.trials}`, {time.perf_counter() - t0:.0f} s.",
         ]
     )

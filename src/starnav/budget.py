@@ -32,6 +32,8 @@ KNOWN_BUDGET_S = 2.0
 SEARCH_BUDGET_S = 10.0
 SCAN_BUDGET_S = 60.0
 
+UNIT_SHARE = 0.05  # a search's unit of work lasts about this part of its budget
+
 _COMPILING = threading.local()  # per thread: nesting depth and start of the outermost compile
 _COMPILE_S = [0.0]  # seconds spent compiling in this process
 _CLOCK: list[bool] = []  # whether the compile clock is installed
@@ -114,6 +116,14 @@ class Deadline:
     def reason(self, tried: str) -> str:
         """The reason of a solve stopped by this deadline, with what was ``tried``."""
         return f"time budget spent ({self.budget_s:g} s): {tried}"
+
+
+def next_chunk(deadline: Deadline, elapsed_s: float, size: int, most: int) -> int:
+    """The items of a search's next chunk of work, for it to last about ``UNIT_SHARE`` of the
+    ``deadline``'s budget, from the last chunk's: ``size`` items in ``elapsed_s`` seconds
+    (1 to ``most``)."""
+    per_item = max(elapsed_s, 1e-6) / size
+    return int(min(max(UNIT_SHARE * deadline.budget_s / per_item, 1.0), most))
 
 
 def expired(deadline: Deadline | None) -> bool:

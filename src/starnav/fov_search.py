@@ -28,7 +28,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from starnav.budget import Deadline, expired
+from starnav.budget import Deadline, expired, next_chunk
 from starnav.camera import Camera, focal_px_from_fov
 from starnav.catalog import Catalog
 from starnav.identify.base import Identification, MatchSettings
@@ -47,7 +47,6 @@ BAND_FACTOR = math.sqrt(2.0)
 _LOOKUP_REL_TOL = 0.005  # ratio slack of the loose look-up (projection distortion of a cell)
 _MAX_CELL_HALF_WIDTH = 0.2  # relative focal-length half-width of a cell at most
 _FIRST_LOOKUP = 16  # observed patterns of a band's first look-up when there is a deadline
-_LOOKUP_OF_BUDGET = 0.05  # with a deadline, a look-up takes about this part of the budget
 _FOCAL_STEPS = 3  # Gauss-Newton steps of a pattern's focal length
 
 
@@ -279,8 +278,8 @@ def _band_hypotheses(xy, rows, band, cells, sigma_px, parity, focal_range_px, pr
     bearings = pinhole_bearings(xy[None], cx, cy, f_cells[:, None])  # (cells, n, 3)
     observed = bearings[:, rows].reshape(-1, 4, 3)
     parts, offsets = [], []
-    # without a deadline in one look-up; with one in consecutive batches that each take
-    # about a twentieth of the budget (the same matches, in the same order)
+    # without a deadline in one look-up; with one in consecutive batches lasting about
+    # ``budget.UNIT_SHARE`` of the budget (the same matches, in the same order)
     start, size = 0, len(observed) if deadline is None else _FIRST_LOOKUP
     while start < len(observed):
         if expired(deadline):
@@ -302,8 +301,7 @@ def _band_hypotheses(xy, rows, band, cells, sigma_px, parity, focal_range_px, pr
         offsets.append(start)
         start += size
         if deadline is not None:
-            per_pattern = max(time.perf_counter() - clock, 1e-6) / size
-            size = int(np.clip(_LOOKUP_OF_BUDGET * deadline.budget_s / per_pattern, 1, 1 << 20))
+            size = next_chunk(deadline, time.perf_counter() - clock, size, len(observed))
     hyp = concat_matches(parts, offsets) if parts else None
     if hyp is None or len(hyp.pattern) == 0:
         empty = np.empty((0, 4), dtype=np.intp)

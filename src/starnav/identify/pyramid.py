@@ -19,13 +19,13 @@ import time
 
 import numpy as np
 
+from starnav.budget import next_chunk
 from starnav.identify.base import IdentifyOutcome, MatchSettings, screen_stars_only
 from starnav.identify.database import PairDatabase
 from starnav.identify.verify import HypothesisTester, Tally, kernels
 
 NO_TRIANGLE = "no star triangle matches the catalog"  # the reason when nothing matched
 FEWER_THAN_3 = "fewer than 3 stars"
-_CHUNK_OF_BUDGET = 0.05  # with a deadline, a kernel call takes about this part of the budget
 _MAX_CHUNK = 4096  # triangles per kernel call at most
 
 
@@ -93,7 +93,7 @@ def match_triangles(
     )
     t = tester.tally
     deadline = settings.deadline
-    # without a deadline in one call; with one in chunks that each take about a twentieth
+    # without a deadline in one call; with one in chunks lasting about ``budget.UNIT_SHARE``
     # of the budget (measured as they go: triangles differ), the deadline looked at between
     start, size = 0, len(triangles) if deadline is None else 1
     while True:
@@ -124,8 +124,7 @@ def match_triangles(
         start += size
         if start >= len(triangles) or tester.exhausted:
             break
-        per_triangle = max(time.perf_counter() - clock, 1e-6) / size
-        size = int(np.clip(_CHUNK_OF_BUDGET * deadline.budget_s / per_triangle, 1, _MAX_CHUNK))
+        size = next_chunk(deadline, time.perf_counter() - clock, size, _MAX_CHUNK)
     return tester.outcome(NO_TRIANGLE)
 
 
