@@ -197,3 +197,14 @@ def test_outputs_of_a_batch_are_named_per_file():
         "new_fits": None,
         "annotate": Path("p/m31.png"),
     }
+
+
+def test_a_batch_on_a_local_dask_cluster_tracks_in_runs(sequence):
+    pytest.importorskip("distributed")
+    folder, truth = sequence
+    results = solve_files(image_paths([folder]), {}, workers=2, dask_address="local", track=True)
+    assert [r.record["file"] for r in results] == [str(p) for p in image_paths([folder])]
+    for r, R in zip(results, truth, strict=True):
+        _check(r.solution, R)
+    # two runs, one per worker, each tracked after its first frame
+    assert [r.record["tracked"] for r in results] == [False, True, True, False, True]
