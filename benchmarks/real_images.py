@@ -147,12 +147,13 @@ def cell(r: dict) -> str:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, default=DOC, help="markdown file ('-': none)")
+    parser.add_argument("only", nargs="*", help="only these files (a trial run)")
     args = parser.parse_args()
     t_start = time.time()
     fetch = load_fetch()
     folder = fetch.find_corpus_dir()
     references = json.loads((DATA / "reference.json").read_text())["images"]
-    names = [e["name"] for e in fetch.sources()]
+    names = [e["name"] for e in fetch.sources() if not args.only or e["name"] in args.only]
     present = [n for n in names if folder is not None and (folder / n).exists()]
     runs, installs = solvers(cache_dir())
     results: dict[str, dict[str, dict]] = {s.label: {} for s in runs}

@@ -19,6 +19,7 @@ from __future__ import annotations
 import hashlib
 import importlib.util
 import json
+import os
 from pathlib import Path
 
 import numpy as np
@@ -50,12 +51,41 @@ BORESIGHT_TOL_OF_FIELD = 0.001  # 0.1 % of the horizontal field
 TWIST_TOL_DEG = 0.1
 FOV_TOL = 0.01  # relative; a pinhole fit against astrometry.net's TAN-SIP edge-to-edge field
 MAX_REDISTRIBUTABLE_BYTES = 25_000_000
-# an answer on an image astrometry.net did not solve: its catalog stars must fall on detections
+# an answer on an image astrometry.net did not solve: the brightest catalog stars in view must
+# fall on detected stars
 UNREFERENCED_MIN_STARS = 6
-UNREFERENCED_MIN_FRACTION = 0.6
+UNREFERENCED_MIN_FRACTION = 0.7
 
-# measured with starnav on this corpus (FOV unknown, default options); reason per image
-KNOWN_FAILURES: dict[str, str] = {}
+# most catalog stars in view are hidden here (or there are only 4): the catalog check of the
+# reference is the weak one (3 times more stars on detections than any flipped attitude)
+OCCLUDED = {
+    "granasat_IMG_007985.jpg": "lit ground over the lower half",
+    "cedar_roof.jpg": "a roof across the frame",
+    "openstartracker_science_cam_img0.png": "4 stars Hp <= 6.5 in its 6° field",
+}
+
+# measured with starnav at dc96d17 on this corpus (FOV unknown, default options), per image
+KNOWN_FAILURES = {
+    "granasat_IMG_007985.jpg": "not solved: lit ground over the lower half; 'only 13 of 50"
+    " stars agree with the best attitude (need 50%)'",
+    "openstartracker_science_cam_img0.png": "not solved: 6° field of very faint stars on a"
+    " fixed-pattern background; 'no hypothesis agreed with enough stars'",
+    "cedar_roof.jpg": "not solved: detections along the roof edge; 'only 18 of 50 stars agree"
+    " with the best attitude (need 50%)'",
+    "cedar_tree.jpg": "not solved: the tree's detections outrank the stars (the 50 brightest"
+    " are mostly branches); 'no hypothesis agreed with enough stars', after 68 s",
+    "cedar_test_5mp_g100_e20ms.jpg": "not solved: 20 ms exposure, 46 detections; 'only 19 of"
+    " 45 stars agree with the best attitude (need 50%)'",
+    "astrometrynet_apod2.jpg": "not solved: its 4.5° field is outside the default FOV range"
+    " (5-40°); 'no hypothesis agreed with enough stars'",
+    "astrometrynet_apod3.jpg": "not solved: bright nebulosity (Vela) among the detections;"
+    " 'only 19 of 50 stars agree with the best attitude (need 50%)'",
+    "oresat_img_7660.png": "solved, but the boresight is 123″ off (tolerance 91″): a 25° colour"
+    " photograph whose lens distortion the pinhole fit (no distortion terms) leaves in",
+}
+# images whose solve takes over a minute on a busy 2-core machine (pifinder_empty: 175 s to
+# refuse an overcast frame; cedar_tree: 68 s to give up): run with STARNAV_REAL_CORPUS_ALL=1
+SLOW = {"pifinder_empty.png": 175, "cedar_tree.jpg": 68}
 
 
 def _params() -> list:
@@ -117,21 +147,26 @@ def test_references_put_catalog_stars_on_detected_stars():
     """The conversion from astrometry.net's WCS is checked by make_reference.py without the
     WCS: the Hipparcos stars projected with the converted attitude and field land on detected
     stars; turned by 180°, mirrored or with the rows flipped they do not."""
-    solved = [r for r in REFERENCE.values() if r["solved_by_reference"]]
-    assert len(solved) >= 20
-    for ref in solved:
+    solved = {n: r for n, r in REFERENCE.items() if r["solved_by_reference"]}
+    assert len(solved) >= 30
+    for name, ref in solved.items():
         check = ref["check"]
-        good = check["reference"]
-        assert good["n_catalog"] >= 3
-        assert good["n_matched"] >= 0.75 * good["n_catalog"]
-        assert good["median_px"] < 1.5
-        for wrong in ("roll_plus_180", "mirrored", "rows_flipped"):
-            assert check[wrong]["n_matched"] <= 0.35 * good["n_catalog"] + 1, wrong
+        good, brightest = check["reference"], check["reference_brightest"]
+        others = max(check[k]["n_matched"] for k in ("roll_plus_180", "mirrored", "rows_flipped"))
+        assert good["n_matched"] >= max(3, 3 * others), f"{name}: {good} vs {others}"
+        if name in OCCLUDED:
+            continue
+        assert good["n_matched"] >= 0.7 * good["n_catalog"], f"{name}: {good}"
+        assert brightest["n_matched"] >= 0.7 * brightest["n_catalog"], f"{name}: {brightest}"
+        assert good["median_px"] < 2.0, f"{name}: {good}"
 
 
 def test_references_agree_with_the_peer_references_of_tests_data_images():
     """Four images are also in tests/data/images, whose references are the mean of
-    cedar-solve and tetra3rs: an independent check of the roll and pixel conventions."""
+    cedar-solve and tetra3rs: an independent check of the roll and pixel conventions. On the
+    tetra3 frames (no visible distortion) they agree within 3.2″; on the GranaSAT JPEGs,
+    whose lens distorts, the peers' pinhole fits and astrometry.net's TAN-SIP put the centre
+    51-56″ (0.7 px) apart, so the bound there is 1 px."""
     old = json.loads((OLD / "reference.json").read_text())["images"]
     pairs = {
         "tetra3_Alt40_Azi-135_Try1.tiff": "tetra3_2019-07-29T204726_Alt40_Azi-135_Try1.tif",
@@ -142,8 +177,9 @@ def test_references_agree_with_the_peer_references_of_tests_data_images():
     for new, previous in pairs.items():
         a, b = REFERENCE[new], old[previous]
         boresight, twist = attitude_difference_deg(reference_attitude(a), reference_attitude(b))
-        assert boresight * 3600 < 15, f"{new}: {boresight * 3600:.1f}″"
-        assert twist < 0.02, f"{new}: {twist:.4f}°"
+        bound = 10.0 if new.startswith("tetra3") else a["scale_arcsec_per_px"]
+        assert boresight * 3600 < bound, f"{new}: {boresight * 3600:.1f}″"
+        assert twist < 0.03, f"{new}: {twist:.4f}°"
         assert a["parity"] == b["parity"] == 1
         assert abs(a["fov_deg"] / b["fov_deg"] - 1) < 0.004
 
@@ -152,9 +188,9 @@ def test_references_agree_with_the_peer_references_of_tests_data_images():
 
 
 def catalog_check(solution, path: Path) -> dict:
-    """How the catalog stars (Hp <= 6.5) projected with an answer's attitude and field fall
-    on the detected stars (``make_reference.star_check``): the test of an answer that has no
-    reference."""
+    """How the brightest 10 catalog stars in view, projected with an answer's attitude and
+    field, fall on the detected stars (``make_reference.star_check``): the test of an answer
+    that has no reference (by chance, about one of the ten would)."""
     from starnav.catalog import load_catalog
     from starnav.detect.read import read_image
     from starnav.image import detect_image
@@ -163,12 +199,17 @@ def catalog_check(solution, path: Path) -> dict:
     detections = detect_image(pixels, max_stars=make_reference.CHECK_MAX_DETECTIONS).xy
     catalog = load_catalog(None, mag_limit=make_reference.CHECK_MAG_LIMIT)
     R = np.asarray(solution.R_cam_from_icrs)
-    return make_reference.star_check(R, solution.fov_deg, pixels, detections, catalog)
+    brightest = make_reference.CHECK_BRIGHTEST
+    return make_reference.star_check(
+        R, solution.fov_deg, pixels, detections, catalog, brightest=brightest
+    )
 
 
 @pytest.mark.parametrize("name", _params())
 def test_solve_fov_unknown(name):
     path = _path(name)
+    if name in SLOW and not os.environ.get("STARNAV_REAL_CORPUS_ALL"):
+        pytest.skip(f"{name}: {SLOW[name]} s to solve; set STARNAV_REAL_CORPUS_ALL=1 to run it")
     ref = REFERENCE[name]
     result = starnav.solve_image(path)
     sol = result.solution

@@ -27,11 +27,13 @@ are not all handled by its converters). astrometry.net (Debian package ``astrome
 ``reference`` converts each WCS with astropy.wcs (TAN + SIP as astrometry.net fitted it):
 
 * boresight: the sky position of starnav's image centre (W/2, H/2);
-* the camera axes: the sky directions of a small step (1 px) along +x and +y from the centre;
-  parity +1 (the sky as seen: a proper camera frame x right, y down, z out) when
-  (x_dir × y_dir) · boresight > 0, else -1; the attitude ``R_cam_from_icrs`` has rows x, y, z
-  (orthonormalised, y kept), and roll is the position angle of image up (-y) from North
-  through East (``starnav.geometry.radec_roll_from_attitude``);
+* the camera axes: the sky directions of a small step (1 px) along +x and +y from the centre,
+  in the tangent plane, made orthonormal by the polar decomposition (the rotation part of the
+  local Jacobian: a fitted skew or unequal scales are split evenly between the axes, as in
+  astrometry.net's own orientation); parity +1 (the sky as seen: a proper camera frame x
+  right, y down, z out) when (x × y) · boresight > 0, else -1; the attitude
+  ``R_cam_from_icrs`` has rows x, y, z, and roll is the position angle of its image up (-y)
+  from North through East (``starnav.geometry.radec_roll_from_attitude``);
 * ``fov_deg``: the angle between the sky directions of the left and right edge midpoints
   (0, H/2) and (W, H/2), i.e. the horizontal field (2 atan(W / 2f) for a pinhole);
 * ``scale_arcsec_per_px``: sqrt(|det CD|) in arcseconds.
@@ -69,7 +71,9 @@ WORK = Path(os.environ.get("STARNAV_CORPUS_WORK", "/work/corpus/astrometry"))
 CPU_LIMIT_S = 40
 SCALE_DEG = (0.5, 100.0)  # loose width hint (degrees)
 CHECK_MAG_LIMIT = 6.5
-CHECK_MAX_DETECTIONS = 200
+CHECK_MAX_DETECTIONS = 1000
+CHECK_VARIANTS = ("roll_plus_180", "mirrored", "rows_flipped")  # wrong on purpose
+CHECK_BRIGHTEST = 10  # the answer test without a reference: the brightest stars in view
 
 
 def sources() -> list[dict]:
@@ -99,7 +103,7 @@ def astrometry_version() -> str:
     return out.stdout.strip() or out.stderr.strip()
 
 
-def solve_one(entry: dict, folder: Path) -> dict:
+def solve_one(entry: dict, folder: Path, cpu_limit_s: int = CPU_LIMIT_S) -> dict:
     """Run solve-field on one file; returns what it reported (and writes the .wcs)."""
     from astropy.io import fits
 
@@ -130,11 +134,11 @@ def solve_one(entry: dict, folder: Path) -> dict:
             "--scale-high",
             str(SCALE_DEG[1]),
             "--cpulimit",
-            str(CPU_LIMIT_S),
+            str(cpu_limit_s),
         ]
         if width > 2000:
             cmd += ["--downsample", "2"]
-        proc = subprocess.run(["nice", "-n", "10", *cmd], capture_output=True, text=True)
+        proc = subprocess.run(cmd, capture_output=True, text=True)  # run this script under nice
         wcs = Path(tmp) / f"{stem}.wcs"
         out["command"] = " ".join(["solve-field", "FILE.fits", *cmd[2:]]).replace(tmp, "TMP")
         out["solved"] = wcs.exists()
@@ -165,7 +169,7 @@ def cmd_solve(args) -> None:
             continue
         if name in status and not args.again:
             continue
-        status[name] = solve_one(entry, folder)
+        status[name] = solve_one(entry, folder, args.cpulimit)
         print(name, json.dumps(status[name]), flush=True)
         status_file.write_text(json.dumps(status, indent=1))
     status_file.write_text(json.dumps(status, indent=1))
@@ -202,11 +206,13 @@ def convert(wcs, width: int, height: int) -> dict:
     cx, cy, step = width / 2.0, height / 2.0, 1.0
     xs, ys = np.array([cx, cx + step, cx]), np.array([cy, cy, cy + step])
     centre, right, down = sky_unit(wcs, xs, ys)
-    x_dir, y_dir = right - centre, down - centre
-    parity = 1 if np.cross(x_dir, y_dir) @ centre > 0 else -1
-    y_axis = y_dir - (y_dir @ centre) * centre
-    y_axis /= np.linalg.norm(y_axis)
-    x_axis = np.cross(y_axis, centre) if parity > 0 else np.cross(centre, y_axis)
+    # the local sky directions of +x and +y, in the tangent plane; the nearest pair of
+    # orthonormal axes to them (polar decomposition: the rotation part of the WCS's local
+    # Jacobian, free of its skew and unequal scales), as astrometry.net's orientation
+    tangent = np.column_stack([right - centre, down - centre])
+    tangent -= np.outer(centre, centre @ tangent)
+    u, _, vt = np.linalg.svd(tangent, full_matrices=False)
+    x_axis, y_axis = (u @ vt).T
     R = np.vstack([x_axis, y_axis, centre])
     ra, dec, roll, parity_r = radec_roll_from_attitude(R)
     left_edge, right_edge = sky_unit(wcs, np.array([0.0, width]), np.array([cy, cy]))
@@ -262,22 +268,32 @@ def cmd_reference(args) -> None:
             ref = convert(wcs, solved["width"], solved["height"])
             up = solved.get("up_deg_e_of_n")
             record.update(ref)
+            log = (WORK / f"{Path(name).stem}.log").read_text()
+            odds = re.findall(r"log-odds ratio ([\d.]+) \([^)]*\), (\d+) match", log)
             record["astrometry_net"] = {
                 "index": (solved.get("index") or "").rstrip("."),
+                "log_odds": float(odds[-1][0]) if odds else None,
+                "n_match": int(odds[-1][1]) if odds else None,
                 "up_deg_e_of_n": up,
                 "parity": solved.get("parity_text"),
                 "command": solved.get("command"),
                 "wcs": raw_wcs(header),
             }
-            if up is not None and solved.get("parity_text") == "neg":
+            centred = (
+                abs(header["CRPIX1"] - (solved["width"] + 1) / 2) < 0.5
+                and abs(header["CRPIX2"] - (solved["height"] + 1) / 2) < 0.5
+            )
+            record["astrometry_net"]["crpix_at_centre"] = centred
+            # its "up" is the position angle at CRVAL: comparable when that is the centre
+            if centred and up is not None and solved.get("parity_text") == "neg":
                 gap = (ref["roll_deg"] - (up + 180.0) + 180.0) % 360.0 - 180.0
                 record["astrometry_net"]["roll_minus_up_plus_180_deg"] = round(gap, 4)
-                # near a celestial pole the position angle of the centre and of astrometry.net's
-                # CRVAL tangent frame agree only roughly; elsewhere to rounding
-                if abs(gap) > 0.05 and abs(ref["dec_deg"]) < 80:
+                # CRVAL is the centre (--crpix-center): the same point, the same North
+                if abs(gap) > 0.01:
                     raise SystemExit(f"{name}: roll {ref['roll_deg']} but up {up} E of N")
-        if name in old and "check" in old[name] and not args.drop_checks:
+        if name in old and "check" in old[name] and not args.drop_checks and "ra_deg" in record:
             record["check"] = old[name]["check"]
+            reject_failed_check(record)
         out["images"][name] = record
         print(
             name,
@@ -303,16 +319,23 @@ def project(R: np.ndarray, parity_flip: bool, fov_deg: float, width: int, height
     return np.column_stack([x, y]), front
 
 
-def star_check(R, fov_deg, pixels, detections, catalog, parity_flip=False) -> dict:
-    """How the catalog stars projected with an attitude fall on the detections."""
+def star_check(
+    R, fov_deg, pixels, detections, catalog, parity_flip=False, brightest: int | None = None
+) -> dict:
+    """How the catalog stars projected with an attitude fall on the detections (within
+    3 px or 0.4 % of the width): all in view, or only the ``brightest`` ones in view."""
     from scipy.spatial import cKDTree
 
     height, width = pixels.shape
     xy, front = project(R, parity_flip, fov_deg, width, height, catalog.vectors)
     inside = front & (xy[:, 0] > 0) & (xy[:, 0] < width) & (xy[:, 1] > 0) & (xy[:, 1] < height)
+    if brightest is not None:
+        keep = np.flatnonzero(inside)[np.argsort(catalog.mag[inside], kind="stable")[:brightest]]
+        inside = np.zeros_like(inside)
+        inside[keep] = True
     if len(detections) == 0 or not inside.any():
         return {"n_catalog": int(inside.sum()), "n_matched": 0, "median_px": None}
-    tol = max(3.0, 0.01 * width)
+    tol = max(3.0, 0.004 * width)
     dist, _ = cKDTree(detections).query(xy[inside], distance_upper_bound=tol)
     hit = np.isfinite(dist)
     return {
@@ -321,6 +344,20 @@ def star_check(R, fov_deg, pixels, detections, catalog, parity_flip=False) -> di
         "median_px": round(float(np.median(dist[hit])), 3) if hit.any() else None,
         "tolerance_px": round(tol, 1),
     }
+
+
+def reject_failed_check(ref: dict) -> None:
+    """An answer of astrometry.net that puts fewer catalog stars on detections than three
+    times what a turned, mirrored or flipped attitude does is wrong: not a reference."""
+    check = ref["check"]
+    others = max(check[k]["n_matched"] for k in CHECK_VARIANTS)
+    if check["reference"]["n_matched"] < max(3, 3 * others):
+        ref["solved_by_reference"] = False
+        ref["rejected"] = (
+            f"astrometry.net's answer fails the catalog check: {check['reference']['n_matched']}"
+            f" of {check['reference']['n_catalog']} catalog stars on detections, a turned,"
+            f" mirrored or flipped attitude {others}"
+        )
 
 
 def cmd_check(args) -> None:
@@ -333,8 +370,10 @@ def cmd_check(args) -> None:
     folder = corpus_dir()
     data = json.loads(REFERENCE.read_text())
     for name, ref in data["images"].items():
-        if not ref["solved_by_reference"] or (args.only and name not in args.only):
+        if "ra_deg" not in ref or (args.only and name not in args.only):
             continue
+        ref["solved_by_reference"] = True
+        ref.pop("rejected", None)
         pixels = read_image(folder / name)
         xy = detect_image(pixels, max_stars=CHECK_MAX_DETECTIONS).xy
         R = attitude_from_radec_roll(ref["ra_deg"], ref["dec_deg"], ref["roll_deg"], ref["parity"])
@@ -347,12 +386,16 @@ def cmd_check(args) -> None:
                 f" onto starnav's brightest {CHECK_MAX_DETECTIONS} detections"
             ),
             "reference": star_check(R, ref["fov_deg"], pixels, xy, catalog),
+            "reference_brightest": star_check(
+                R, ref["fov_deg"], pixels, xy, catalog, brightest=CHECK_BRIGHTEST
+            ),
             "roll_plus_180": star_check(turned, ref["fov_deg"], pixels, xy, catalog),
             "mirrored": star_check(R, ref["fov_deg"], pixels, xy, catalog, parity_flip=True),
             "rows_flipped": star_check(
                 R, ref["fov_deg"], pixels[::-1], xy * [1, -1] + [0, pixels.shape[0]], catalog
             ),
         }
+        reject_failed_check(ref)
         print(name, json.dumps(ref["check"]["reference"]), flush=True)
     REFERENCE.write_text(json.dumps(data, indent=1, ensure_ascii=False) + "\n")
 
@@ -370,7 +413,8 @@ def cmd_table(args) -> None:
         size = f"{ref['width']} x {ref['height']}" if ref.get("width") else ""
         head = f"| `{entry['name']}` | {entry['licence']} | {entry['bytes']} | {size} |"
         if not ref["solved_by_reference"]:
-            lines.append(head + " not solved |  |  |  |  |  |  |  |")
+            what = "rejected: fails the catalog check" if "rejected" in ref else "not solved"
+            lines.append(head + f" {what} |  |  |  |  |  |  |  |")
             continue
         good = ref.get("check", {}).get("reference", {})
         check = f"{good.get('n_matched')}/{good.get('n_catalog')}, {good.get('median_px')} px"
@@ -392,6 +436,7 @@ def main() -> None:
     sub = parser.add_subparsers(dest="cmd", required=True)
     p = sub.add_parser("solve", help="run astrometry.net on every file")
     p.add_argument("--again", action="store_true", help="solve files solved before too")
+    p.add_argument("--cpulimit", type=int, default=CPU_LIMIT_S, help="CPU seconds per image")
     p.add_argument("only", nargs="*", help="only these files")
     p = sub.add_parser("reference", help="convert the WCS files into reference.json")
     p.add_argument("--drop-checks", action="store_true", help="forget the earlier checks")
