@@ -21,7 +21,8 @@ are not all handled by its converters). astrometry.net (Debian package ``astrome
         --scale-units degwidth --scale-low 0.5 --scale-high 100 --cpulimit 40 \
         [--downsample 2 when the image is wider than 2000 px]
 
-(a loose scale hint only: 0.5°-100° wide) and its ``.wcs`` header is kept in
+(a loose scale hint only: 0.5°-100° wide; ``solve --again --cpulimit 150 FILE...`` retries
+the unsolved ones with more time, as was done here) and its ``.wcs`` header is kept in
 ``STARNAV_CORPUS_WORK`` (default ``/work/corpus/astrometry``).
 
 ``reference`` converts each WCS with astropy.wcs (TAN + SIP as astrometry.net fitted it):
@@ -40,14 +41,17 @@ are not all handled by its converters). astrometry.net (Debian package ``astrome
 
 astrometry.net's own "up is X degrees E of N" and "parity" (printed by ``wcsinfo``) are
 recorded beside it; for these top-row-first images its parity is "neg" where ours is +1, and
-our roll is (X + 180) mod 360, which ``reference`` checks for every solved image.
+our roll is (X + 180) mod 360, which ``reference`` checks (within 0.01°) for every solved
+image whose CRPIX is at the centre (its "up" is the position angle at CRVAL).
 
 ``check`` is the independent test of the conversion: with the converted attitude and a
 pinhole camera of the converted field (no WCS involved), the Hipparcos stars to Hp 6.5
 that fall in the image are projected to pixels and matched to starnav's detections
 (``starnav.image.detect_image``); the median distance and the number matched are written
-into reference.json (``check``). A flipped row order, a mirrored parity or a roll off by 180°
-puts the stars nowhere near the detections.
+into reference.json (``check``), with the same for the attitude turned by 180°, mirrored
+and with the rows flipped: these put the stars nowhere near the detections. An answer of
+astrometry.net that does no better than three times those is rejected
+(``reject_failed_check``: ``solved_by_reference`` false, the reason in ``rejected``).
 """
 
 from __future__ import annotations
