@@ -52,6 +52,8 @@ def decode(path: str) -> tuple[np.ndarray, float]:
     t0 = time.perf_counter()
     with Image.open(path) as image:
         array = np.asarray(image)
+        if array.ndim == 3:  # tetra3rs takes one channel: colour (and alpha) to Pillow's "L"
+            array = np.asarray(image.convert("L"))
     return array, (time.perf_counter() - t0) * 1e3
 
 
