@@ -30,7 +30,13 @@ from tqdm import tqdm
 from docblock import replace_block
 from lost_in_space import machine
 from starnav.api import solve_verbose
-from starnav.budget import KNOWN_BUDGET_S, SCAN_BUDGET_S, SEARCH_BUDGET_S
+from starnav.budget import (
+    DEFAULTS,
+    KNOWN_BUDGET_S,
+    SCAN_BUDGET_S,
+    SEARCH_BUDGET_S,
+    WIDE_BUDGET_S,
+)
 from starnav.camera import Camera, Equidistant
 from starnav.catalog import load_catalog
 from starnav.fov import solve_fov
@@ -91,14 +97,14 @@ def solvable_cases(frames: int, seed: int):
     ]
     real += [
         (lambda b, p=p: _img(solve_image(p, time_budget_s=b)))
-        for p in sorted((ROOT / "tests" / "data" / "real").glob("*.*"))
+        for p in sorted((ROOT / "tests" / "data" / "real" / "files").glob("*.*"))
         if p.suffix.lower() in (".jpg", ".jpeg", ".png", ".tif", ".tiff", ".fits", ".fit")
     ]
     return [
         ("star lists, FOV known: pinhole 20°", KNOWN_BUDGET_S, lists(pin, frames, known(pin))),
         (
             "star lists, FOV known: equidistant 120°",
-            KNOWN_BUDGET_S,
+            WIDE_BUDGET_S,
             lists(wide, frames // 2, known(wide)),
         ),
         (
@@ -107,7 +113,7 @@ def solvable_cases(frames: int, seed: int):
             lists(pin, frames // 2, searched),
         ),
         ("rendered images 8-30°, FOV searched", SEARCH_BUDGET_S, images),
-        ("real images (tests/data), FOV searched", SEARCH_BUDGET_S, real),
+        ("real images (tests/data/images and the corpus), FOV searched", SEARCH_BUDGET_S, real),
         (
             "star lists, equidistant 185°, focal scanned 120-200°",
             SCAN_BUDGET_S,
@@ -142,7 +148,7 @@ def refusal_cases(seed: int):
         ),
         (
             "random points, fisheye 185° known",
-            KNOWN_BUDGET_S,
+            WIDE_BUDGET_S,
             lambda b: _why(
                 solve_verbose(rng.uniform(0, 1024, (100, 2)), camera=fish, time_budget_s=b)
             ),
@@ -235,8 +241,7 @@ def main() -> None:
     refusals = run_refusals(args.trials, args.seed)
     text = "\n".join(
         [
-            f"Defaults: {KNOWN_BUDGET_S:g} s with the FOV or camera known, {SEARCH_BUDGET_S:g} s "
-            f"with the FOV searched, {SCAN_BUDGET_S:g} s for a fisheye's focal scan. Each "
+            f"Defaults: {DEFAULTS}. Each "
             "solvable frame solved with the default budget and with none:",
             "",
             "| case | frames | default budget | solved (default) | solved (no budget) | "

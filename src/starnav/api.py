@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from starnav.budget import KNOWN_BUDGET_S, Deadline, check_budget
+from starnav.budget import Deadline, check_budget, default_budget_s
 from starnav.camera import MODELS, CameraModel, load_camera
 from starnav.catalog import Catalog, load_catalog
 from starnav.errors import CameraError, StarnavError
@@ -77,6 +77,12 @@ def make_camera(
     return MODELS[lens].from_fov(fov_deg, width, height)
 
 
+def known_budget_s(camera: CameraModel) -> float:
+    """The default time budget (s) of a solve through a known ``camera``
+    (``starnav.budget``: longer for a field wider than ``WIDE_FIELD_DEG``)."""
+    return default_budget_s(known=True, scan=False, field_deg=camera.diagonal_deg)
+
+
 def solver_for(
     camera: CameraModel,
     catalog: Catalog,
@@ -139,11 +145,11 @@ def solve_verbose(
     ``Solution`` or ``R_cam_from_icrs``), good to ``prior_sigma_deg`` (1-sigma): tracking mode
     matches the catalog stars near it only, and falls back to ``algorithm`` when that fails
     (``Solution.algorithm`` says which answered); ``time_budget_s``: give up after this many
-    seconds of identification, "time budget spent" (default ``budget.KNOWN_BUDGET_S``;
+    seconds of identification, "time budget spent" (default ``known_budget_s``;
     ``math.inf``: no limit; preparing the catalog and database is not counted).
     """
-    budget_s = check_budget(time_budget_s, KNOWN_BUDGET_S)
     cam = make_camera(width=width, height=height, fov_deg=fov_deg, camera=camera, lens=lens)
+    budget_s = check_budget(time_budget_s, known_budget_s(cam))
     stars = check_star_list(
         xy, width=cam.width, height=cam.height, brightness=brightness, labels=labels
     )
@@ -286,9 +292,10 @@ def solve_batch(
     """
     prior = options.pop("prior", None)
     prior_sigma_deg = options.pop("prior_sigma_deg", 1.0)
-    budget_s = check_budget(options.pop("time_budget_s", None), KNOWN_BUDGET_S)
+    time_budget_s = options.pop("time_budget_s", None)
     R_prior = check_prior(prior, prior_sigma_deg)
     solver = prepare_solver(**options)
+    budget_s = check_budget(time_budget_s, known_budget_s(solver.camera))
     lights = brightness if brightness is not None else [None] * len(frames)
     jobs = [(np.asarray(xy, dtype=float), b) for xy, b in zip(frames, lights, strict=True)]
     return solve_many(

@@ -2,9 +2,11 @@
 
 A ``Deadline`` is made when a solve starts (after the catalog, tables and solver are
 prepared: a one-time cost per process) and travels in the identification's ``MatchSettings``;
-the searches look at it between units of work (a chunk of star triangles, one hypothesis of
-the FOV search, one trial focal length of a fisheye scan), so a call overruns its budget by at
-most one such unit. When it is spent the answer is "not solved" with the reason
+the searches look at it between units of work: the triangle search's kernel reads the clock
+every ``CLOCK_EVERY`` hypotheses screened or verified, the FOV search between look-up batches
+(``next_chunk`` sizes them to ``UNIT_SHARE`` of the budget) and hypotheses, a fisheye scan
+between trial focal lengths. So a call overruns its budget by at most one such unit. When it
+is spent the answer is "not solved" with the reason
 "time budget spent (...)" and what was tried.
 
 Time spent compiling the machine code (once per installation, 1-2 min) is not counted: the
@@ -14,9 +16,10 @@ first solve after installing would otherwise always run out. numba announces com
 
 Defaults (seconds), chosen as what a user waits for and measured not to cost a solve on the
 benchmarks (docs/performance.md, "Time budgets"):
-``KNOWN_BUDGET_S`` star lists or images with the camera (focal length) known;
-``SEARCH_BUDGET_S`` the field of view searched (pinhole);
-``SCAN_BUDGET_S`` a fisheye's focal length scanned.
+``KNOWN_BUDGET_S`` star lists or images with the camera (focal length) known, a field up to
+``WIDE_FIELD_DEG`` across the diagonal; ``WIDE_BUDGET_S`` a wider one (its hypotheses cost more
+to verify); ``SEARCH_BUDGET_S`` the field of view searched (pinhole); ``SCAN_BUDGET_S`` a
+fisheye's focal length scanned.
 """
 
 from __future__ import annotations
@@ -29,8 +32,15 @@ from dataclasses import dataclass
 from starnav.errors import StarnavError
 
 KNOWN_BUDGET_S = 2.0
+WIDE_BUDGET_S = 10.0
+WIDE_FIELD_DEG = 60.0
 SEARCH_BUDGET_S = 10.0
-SCAN_BUDGET_S = 60.0
+SCAN_BUDGET_S = 120.0
+DEFAULTS = (
+    f"{KNOWN_BUDGET_S:g} s with the FOV or camera given ({WIDE_BUDGET_S:g} s for fields over "
+    f"{WIDE_FIELD_DEG:g}° across), {SEARCH_BUDGET_S:g} s with the FOV searched, "
+    f"{SCAN_BUDGET_S:g} s for a fisheye's focal scan"
+)
 
 UNIT_SHARE = 0.05  # a search's unit of work lasts about this part of its budget
 
@@ -65,12 +75,14 @@ def _install_compile_clock() -> None:
     event.register("numba:compile", _Clock())
 
 
-def default_budget_s(*, known: bool, scan: bool) -> float:
+def default_budget_s(*, known: bool, scan: bool, field_deg: float = 0.0) -> float:
     """The default budget (s) of a solve: a fisheye's focal ``scan``, or the camera or FOV
-    ``known``, or the FOV searched."""
+    ``known`` (a field of ``field_deg`` across the diagonal), or the FOV searched."""
     if scan:
         return SCAN_BUDGET_S
-    return KNOWN_BUDGET_S if known else SEARCH_BUDGET_S
+    if known:
+        return WIDE_BUDGET_S if field_deg > WIDE_FIELD_DEG else KNOWN_BUDGET_S
+    return SEARCH_BUDGET_S
 
 
 def check_budget(time_budget_s: float | None, default_s: float) -> float:
@@ -108,6 +120,12 @@ class Deadline:
     def spent_s(self) -> float:
         """Seconds of the budget used so far (compilation left out)."""
         return time.perf_counter() - self.start - (_COMPILE_S[0] - self.compile_s)
+
+    @property
+    def end_time(self) -> float:
+        """When the budget ends (``time.perf_counter()`` s), the compilations so far left out
+        (a kernel reads its clock against it)."""
+        return self.start + self.budget_s + (_COMPILE_S[0] - self.compile_s)
 
     def expired(self) -> bool:
         """Whether the budget is spent."""

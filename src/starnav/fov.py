@@ -291,9 +291,6 @@ def solve_fov(
     if lens != "pinhole" and tuple(fov_range_deg) == DEFAULT_FOV_RANGE_DEG:
         fov_range_deg = DEFAULT_LENS_FOV_RANGE_DEG  # the default range of a fisheye
     lo, hi = search_range(fov_deg, fov_range_deg, camera, lens)
-    known = fov_deg is not None or camera is not None
-    default_s = default_budget_s(known=known, scan=lens != "pinhole")
-    budget_s = check_budget(time_budget_s, default_s)
     height = width if height is None else height
     if camera is not None:
         base = camera
@@ -301,6 +298,9 @@ def solve_fov(
         base = Camera.from_fov(0.5 * (lo + hi), width, height)
     else:  # the scan sets the focal length
         base = MODELS[lens](int(width), int(height), 1.0)
+    known = fov_deg is not None or camera is not None
+    default_s = default_budget_s(known=known, scan=lens != "pinhole", field_deg=base.diagonal_deg)
+    budget_s = check_budget(time_budget_s, default_s)
     stars = check_star_list(
         xy, width=base.width, height=base.height, brightness=brightness, labels=labels
     )
@@ -358,8 +358,7 @@ def tracking_solver(
     if key not in _TRACKING:
         if camera.model == "pinhole" and mag_limit is None:
             full = search_catalog(catalog, epoch_year)
-            diagonal = math.degrees(2.0 * camera.half_diagonal_rad)
-            cat = full.brighter_than(band_mag_limit(diagonal, np.sort(full.mag)))
+            cat = full.brighter_than(band_mag_limit(camera.diagonal_deg, np.sort(full.mag)))
         else:
             cat = load_catalog(catalog, mag_limit=mag_limit, epoch_year=epoch_year)
         if len(_TRACKING) >= 8:

@@ -27,6 +27,7 @@ from starnav.errors import CameraError, ImageError
 from starnav.fov import (
     DEFAULT_FOV_RANGE_DEG,
     DEFAULT_PATTERN_STARS,
+    diagonal_fov_deg,
     search_range,
     solve_fov,
 )
@@ -131,8 +132,7 @@ def solve_image(
     if max_stars is not None and bad:
         raise ImageError(f"max_stars must be an integer >= 4, got {max_stars!r}")
     lens = camera.model if camera is not None else lens
-    known = fov_deg is not None or camera is not None
-    budget_s = check_budget(time_budget_s, default_budget_s(known=known, scan=lens != "pinhole"))
+    check_budget(time_budget_s, 1.0)  # a bad budget fails before any work
     t0 = time.perf_counter()
     if isinstance(image, np.ndarray):
         pixels, read_ms = image, 0.0
@@ -150,6 +150,7 @@ def solve_image(
             f"the camera file is for {camera.width} x {camera.height} px images, this image is "
             f"{width} x {height} px"
         )
+    budget_s = check_budget(time_budget_s, _default_budget_s(camera, fov_deg, lens, pixels))
     t1 = time.perf_counter()
     found = detect_image(pixels, lens=lens, threshold_sigma=threshold_sigma, max_stars=max_stars)
     detect_ms = (time.perf_counter() - t1) * 1e3
@@ -170,7 +171,7 @@ def solve_image(
         epoch_year=epoch_year if epoch_year is not None else hints.epoch_year,
         parity=parity,
     )
-    searched = not known and lens == "pinhole"
+    searched = fov_deg is None and camera is None and lens == "pinhole"
     result = _solve_hinted(solve, hints if searched else NO_HINTS, fov_deg, fov_range_deg,
                            budget_s, options)  # fmt: skip
     sol = result.solution
@@ -185,6 +186,17 @@ def solve_image(
         result.database.catalog,
         hints,
     )
+
+
+def _default_budget_s(camera, fov_deg, lens: str, pixels: np.ndarray) -> float:
+    """The default time budget (s) of an image's solve (``starnav.budget.default_budget_s``)."""
+    height, width = pixels.shape
+    if camera is not None:
+        field_deg = camera.diagonal_deg
+    else:
+        field_deg = diagonal_fov_deg(fov_deg, width, height) if fov_deg else 0.0
+    known = camera is not None or fov_deg is not None
+    return default_budget_s(known=known, scan=lens != "pinhole", field_deg=field_deg)
 
 
 def _solve_hinted(solve, hints: ImageHints, fov_deg, fov_range_deg, budget_s: float, options):

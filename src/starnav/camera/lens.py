@@ -78,6 +78,11 @@ class Lens:
         return float(k.half_diagonal(self.model_code, self.params, self.width, self.height))
 
     @property
+    def diagonal_deg(self) -> float:
+        """The field (degrees) across the diagonal: twice ``half_diagonal_rad``."""
+        return math.degrees(2.0 * self.half_diagonal_rad)
+
+    @property
     def field_cos(self) -> float:
         """Cosine of the cone (about the boresight) outside which nothing is in the image."""
         k = kernels()

@@ -55,6 +55,9 @@ class CameraModel(Protocol):
     def half_diagonal_rad(self) -> float: ...
 
     @property
+    def diagonal_deg(self) -> float: ...
+
+    @property
     def fov_deg(self) -> float: ...
 
     @property

@@ -10,7 +10,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import IO, Any, Protocol
 
-from starnav.budget import KNOWN_BUDGET_S, SCAN_BUDGET_S, SEARCH_BUDGET_S
+from starnav.budget import DEFAULTS
 from starnav.camera import MODELS
 from starnav.catalog import DEFAULT_MAG_LIMIT
 from starnav.errors import StarnavError
@@ -78,10 +78,12 @@ def seconds(text: str) -> float:
 
 def add_time_budget(p: argparse.ArgumentParser) -> None:
     """--time-budget (``starnav.budget``)."""
-    defaults = f"{KNOWN_BUDGET_S:g} s FOV given, {SEARCH_BUDGET_S:g} s searched, {SCAN_BUDGET_S:g}"
-    p.add_argument("--time-budget", type=seconds, metavar="SECONDS",
-                   help=f"give up after this many seconds of searching (default {defaults} s "
-                   "a fisheye's focal scan; 'none': no limit)")  # fmt: skip
+    p.add_argument(
+        "--time-budget",
+        type=seconds,
+        metavar="SECONDS",
+        help=f"give up after this many seconds of searching (default {DEFAULTS}; 'none': no limit)",
+    )
 
 
 def png_path(text: str) -> str:

@@ -16,15 +16,16 @@ The sky grid ``sky = (vectors, start, rows, n_dec, n_ra, step_rad)``: cell ``i *
 from __future__ import annotations
 
 import math
+import time
 from collections import namedtuple
 
 import numpy as np
-from numba import njit
+from numba import njit, objmode
 
 from starnav.attitude.rotation import det3, wahba
 
 # outcomes of a hypothesis test and of a search
-REJECTED, FOUND, AMBIGUOUS, NOT_FOUND = 0, 1, 2, 3
+REJECTED, FOUND, AMBIGUOUS, NOT_FOUND, OUT_OF_TIME = 0, 1, 2, 3, 4
 FLAT_FACTOR = 3.0  # a triangle is too flat to give its orientation below 3 tol x its longest side
 GATE_SIGMAS = 3.0  # a gated catalog star's radius grows by this many sigma of its position
 PRIOR_SIGMAS = 3.0  # tracking allows the catalog stars within the field plus this many sigma
@@ -55,6 +56,7 @@ def angle(a, b):
 
 WIDE_CONE_RAD = math.radians(60.0)  # cones wider than this are searched row by row
 WIDE_SCREEN_RAD = math.radians(35.0)  # wider fields screen hypotheses star by star
+CLOCK_EVERY = 32  # with a time budget, the clock is read every this many hypotheses
 
 
 @njit(cache=True, inline="always")
@@ -473,15 +475,19 @@ def catalog_triangles(pair_a, pair_b, pair_angle, vectors, allowed, s_ij, s_ik, 
 
 
 @njit(cache=True)
-def _screen(bearings, tri, triples, parities, sky, allowed, field_rad, screen2, work, cam):
+def _screen(bearings, tri, triples, parities, sky, allowed, field_rad, screen2, work, cam,
+            end_time):  # fmt: skip
     """Per hypothesis, how many bearings land near some catalog star under its attitude (a
-    quick count that may only err high)."""
+    quick count that may only err high); stops early (the rest counted 0) after
+    ``end_time`` (``clock`` seconds)."""
     vectors = sky[0]
     m = len(triples)
     agree = np.zeros(m, dtype=np.int64)
     ones = np.ones(3)
     sky_b = np.empty(3)
     for h in range(m):
+        if h % CLOCK_EVERY == CLOCK_EVERY - 1 and end_time < math.inf and clock() > end_time:
+            break
         R = wahba(tri, vectors[triples[h]], ones, parities[h])
         if field_rad > WIDE_SCREEN_RAD:  # a wide field: look up each bearing's own cells
             for b in range(len(bearings)):
@@ -539,14 +545,12 @@ def _orientations(tri, triples, vectors, tol, longest, parity_known):
 
 @njit(cache=True)
 def triangle_search(bearings, triangles, pair_a, pair_b, pair_angle, max_angle, sky, allowed,
-                    tol, radii, max_p, parity_known, max_hypotheses, hypotheses, proposed,
-                    best_p, head, mark, work, cam):  # fmt: skip
+                    tol, radii, max_p, parity_known, max_hypotheses, end_time):  # fmt: skip
     """Try the measured ``triangles`` (rows of ``bearings``, (t, 3)) in order: look up the
     catalog triangles of each, screen all their hypotheses, verify the best (by the screen)
-    until one is accepted, nothing left can be, or ``max_hypotheses`` are spent.
-    ``hypotheses``, ``proposed``, ``best_p``: the tally of earlier triangles of the same
-    search (a search may run in chunks of triangles); ``head`` (-1), ``mark`` (False),
-    ``work``, ``cam`` (n, 3): work space of one entry per catalog star, left as found."""
+    until one is accepted, nothing left can be, ``max_hypotheses`` are spent or the
+    ``clock`` passes ``end_time`` (s; looked at for every triangle and every ``CLOCK_EVERY``
+    hypotheses screened or verified; status ``OUT_OF_TIME``)."""
     vectors = sky[0]
     n_total = len(bearings)
     radius = radii.max()
@@ -555,9 +559,19 @@ def triangle_search(bearings, triangles, pair_a, pair_b, pair_angle, max_angle, 
     # catalog star): a screen count that cannot beat the threshold even so is not verified
     p_floor = (1.0 - math.cos(radii.min())) / (1.0 - math.cos(field_rad))
     screen2 = chord(radius) ** 2
+    work = np.empty(len(vectors), dtype=np.int64)
+    head = np.full(len(vectors), -1, dtype=np.int64)
+    mark = np.zeros(len(vectors), dtype=np.bool_)
+    cam = np.empty((len(vectors), 3))
+    hypotheses, proposed, best_p = 0, 0, 1.0
     empty = np.empty(0, dtype=np.int64)
     tri = np.empty((3, 3))
+    timed = end_time < math.inf
+    status = NOT_FOUND
     for t in range(len(triangles)):
+        if timed and clock() > end_time:
+            status = OUT_OF_TIME
+            break
         idx = triangles[t]
         for k in range(3):
             tri[k] = bearings[idx[k]]
@@ -575,11 +589,17 @@ def triangle_search(bearings, triangles, pair_a, pair_b, pair_angle, max_angle, 
             continue
         hypotheses += len(triples)
         agree = _screen(bearings, tri, triples, parities, sky, allowed, field_rad, screen2,
-                            work, cam)  # fmt: skip
+                        work, cam, end_time)  # fmt: skip
+        if timed and clock() > end_time:
+            status = OUT_OF_TIME
+            break
         for h in np.argsort(-agree, kind="mergesort"):
             p_best = len(radii) * false_match(n_total, agree[h], 3, p_floor, hypotheses)
             if p_best > max_p:
                 break  # neither this nor any later (lower) count can be convincing
+            if timed and proposed % CLOCK_EVERY == CLOCK_EVERY - 1 and clock() > end_time:
+                status = OUT_OF_TIME
+                break
             proposed += 1
             r = test_hypothesis(bearings, idx, triples[h], parities[h], sky, allowed, radii,
                                 hypotheses, max_p, parity_known, work)  # fmt: skip
@@ -587,9 +607,17 @@ def triangle_search(bearings, triangles, pair_a, pair_b, pair_angle, max_angle, 
             if r.status != REJECTED:
                 return Search(r.status, r.obs, r.cat, r.R, parities[h], r.p, hypotheses,
                               proposed, best_p)  # fmt: skip
-        if hypotheses >= max_hypotheses:
+        if status == OUT_OF_TIME or hypotheses >= max_hypotheses:
             break
-    return Search(NOT_FOUND, empty, empty, np.zeros((3, 3)), 0, 1.0, hypotheses, proposed, best_p)
+    return Search(status, empty, empty, np.zeros((3, 3)), 0, 1.0, hypotheses, proposed, best_p)
+
+
+@njit(cache=True)
+def clock():
+    """``time.perf_counter()`` inside a kernel (s; ~2 µs a call): for the time budget."""
+    with objmode(t="float64"):
+        t = time.perf_counter()
+    return t
 
 
 @njit(cache=True)

@@ -15,18 +15,17 @@ differ only in the triangles they give it (and tracking in the catalog stars it 
 from __future__ import annotations
 
 import functools
-import time
+import math
 
 import numpy as np
 
-from starnav.budget import next_chunk
 from starnav.identify.base import IdentifyOutcome, MatchSettings, screen_stars_only
 from starnav.identify.database import PairDatabase
 from starnav.identify.verify import HypothesisTester, Tally, kernels
 
 NO_TRIANGLE = "no star triangle matches the catalog"  # the reason when nothing matched
 FEWER_THAN_3 = "fewer than 3 stars"
-_MAX_CHUNK = 4096  # triangles per kernel call at most
+_CLOCKED: list[bool] = []  # whether the kernel and its clock are compiled in this process
 
 
 @functools.cache
@@ -84,48 +83,39 @@ def match_triangles(
     bearings = np.ascontiguousarray(bearings, dtype=np.float64)
     triangles = np.ascontiguousarray(triangles, dtype=np.int64).reshape(-1, 3)
     tester = HypothesisTester(bearings, database, settings, Tally(), allowed)
-    n = len(database.catalog)
-    work = (
-        np.full(n, -1, dtype=np.int64),
-        np.zeros(n, dtype=np.bool_),
-        np.empty(n, dtype=np.int64),
-        np.empty((n, 3)),
+    search = kernels().triangle_search
+    args = (
+        bearings,
+        triangles,
+        database.pair_a,
+        database.pair_b,
+        database.pair_angle_rad,
+        database.max_angle_rad,
+        database.sky,
+        tester.allowed,
+        settings.pair_tol_rad,
+        np.asarray(settings.match_radii_rad, dtype=np.float64),
+        settings.max_false_match_probability,
+        settings.parity or 0,
+        settings.max_hypotheses,
     )
-    t = tester.tally
     deadline = settings.deadline
-    # without a deadline in one call; with one in chunks lasting about ``budget.UNIT_SHARE``
-    # of the budget (measured as they go: triangles differ), the deadline looked at between
-    start, size = 0, len(triangles) if deadline is None else 1
-    while True:
-        clock = time.perf_counter()
-        r = kernels().triangle_search(
-            bearings,
-            triangles[start : start + size],
-            database.pair_a,
-            database.pair_b,
-            database.pair_angle_rad,
-            database.max_angle_rad,
-            database.sky,
-            tester.allowed,
-            settings.pair_tol_rad,
-            np.asarray(settings.match_radii_rad, dtype=np.float64),
-            settings.max_false_match_probability,
-            settings.parity or 0,
-            settings.max_hypotheses,
-            t.hypotheses,
-            t.proposed,
-            t.best_p,
-            *work,
-        )
-        t.hypotheses, t.proposed, t.best_p = int(r.hypotheses), int(r.proposed), float(r.best_p)
-        if r.status != kernels().NOT_FOUND:
-            outcome = tester.tested(r.status, r.obs, r.cat, r.R, int(r.parity), float(r.p))
-            return outcome or tester.outcome(NO_TRIANGLE)
-        start += size
-        if start >= len(triangles) or tester.exhausted:
-            break
-        size = next_chunk(deadline, time.perf_counter() - clock, size, _MAX_CHUNK)
-    return tester.outcome(NO_TRIANGLE)
+    if deadline is not None and not _CLOCKED:
+        # compile (or load) the kernel, and its clock's object-mode block, which compiles
+        # when first run, before the deadline's end is read: compiling is not counted
+        search(*args[:1], triangles[:0], *args[2:], math.inf)
+        kernels().clock()
+        _CLOCKED.append(True)
+    r = search(*args, math.inf if deadline is None else deadline.end_time)
+    tester.tally.hypotheses, tester.tally.proposed = int(r.hypotheses), int(r.proposed)
+    tester.tally.best_p = float(r.best_p)
+    if r.status == kernels().OUT_OF_TIME:
+        tried = f"{r.hypotheses} hypotheses, {r.proposed} verified"
+        return IdentifyOutcome(None, deadline.reason(tried), int(r.hypotheses))
+    if r.status == kernels().NOT_FOUND:
+        return tester.outcome(NO_TRIANGLE)
+    outcome = tester.tested(r.status, r.obs, r.cat, r.R, int(r.parity), float(r.p))
+    return outcome or tester.outcome(NO_TRIANGLE)
 
 
 class Pyramid:

@@ -87,7 +87,7 @@ def get_database(catalog: Catalog, camera: CameraModel) -> PairDatabase:
     stars, and verified over the whole field). In wide fields the pairs join only the
     brightest catalog stars, as many as keep about ``WIDE_PAIR_CANDIDATES`` catalog pairs
     within the tolerance of a side measured to 1 px."""
-    field_deg = float(np.degrees(2.0 * camera.half_diagonal_rad))
+    field_deg = camera.diagonal_deg
     max_angle_deg = min(field_deg, MAX_PAIR_DEG)
     pair_stars = len(catalog)
     if field_deg > MAX_PAIR_DEG:
