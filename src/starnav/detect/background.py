@@ -1,24 +1,36 @@
-"""The sky background of an image and its pixel noise, as maps: sep's mesh.
+"""The sky background of an image and its pixel noise, as maps on a mesh of cells.
 
-sep (Source Extractor's background) splits the image into cells, takes a sigma-clipped mode
-of each, median-filters the mesh (3 x 3 cells) and interpolates it with splines; the rms of
-each cell makes a noise map the same way. The mesh is 64 px; it is estimated on every
+As Source Extractor does, the image is split into cells, each gets a sigma-clipped median
+and rms, and the mesh is median-filtered over 3 x 3 cells; it is then interpolated
+bilinearly (``mesh_maps``; sep's bicubic splines ring beside a roof or a lit tree line, and
+their undershoot left bands of false residual, and negative noise, up to 100 px from it).
+The mesh is 64 px; it is estimated on every
 ``step``-th pixel so that about 256 px a side are used (the map is smooth and the rms per
 pixel is unchanged; 8x faster at 1024 px). A 64 px mesh follows moonlight and horizon
-glow, not a tree line or a roof edge: the residual there is left to the per-star local
-background (``starnav.detect.photometry``), and the noise map, which rises over textured
-foreground (foliage, lit walls), raises the detection threshold there.
+glow, not a tree line, a roof edge or the edge of a cloud: where its residual forms large
+patches above the detection threshold, a second mesh of 24 px (``fine_background``) is
+fitted to what is left with the compact sources masked. The rest is left to the per-star
+local background (``starnav.detect.photometry``).
 """
 
 from __future__ import annotations
 
+import math
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
-import sep
+from scipy import ndimage
 
 MESH_PX = 64
 SAMPLE_PX = 256  # the background is estimated on about this many px a side
+FINE_MESH_PX = 24
+FINE_SAMPLE_PX = 512
+CORRELATION_TILES = 64
+_TILE_PX = 32
+_MIN_TILES = 4
+_MIN_CELL_FRACTION = 0.2
+_MAD_TO_SIGMA = 1.4826
 
 
 @dataclass(frozen=True, eq=False)
@@ -41,6 +53,17 @@ class Background:
         """Pixel rms at integer pixel columns ``x`` and rows ``y``."""
         return self.rms_map[y // self.step, x // self.step]
 
+    def scaled_rms(self, factor: float) -> Background:
+        """The same background with its noise map and global rms multiplied by
+        ``factor`` (the pixel rms of noise that is smoother than white noise)."""
+        return Background(
+            self.step,
+            self.level_map,
+            self.rms_map * np.float32(factor),
+            self.level,
+            self.rms * factor,
+        )
+
     def with_rms_floor(self, floor: float) -> Background:
         """The same background with its global rms and noise map raised to at least
         ``floor`` (a noise-free image, or a quantised sky whose clipped rms is 0)."""
@@ -59,7 +82,8 @@ class Background:
 
 def estimate_background(data: np.ndarray, mask: np.ndarray | None) -> Background:
     """sep's background and noise maps of ``data`` (float32, C order), ``mask`` True for
-    pixels to leave out."""
+    pixels to leave out. The noise map rises under moonlight and over textured foreground
+    (foliage, lit walls), which raises the detection threshold there."""
     height, width = data.shape
     step = max(1, min(height, width) // SAMPLE_PX)
     sample = data if step == 1 else np.ascontiguousarray(data[::step, ::step])
@@ -68,8 +92,92 @@ def estimate_background(data: np.ndarray, mask: np.ndarray | None) -> Background
         sample_mask = mask if step == 1 else np.ascontiguousarray(mask[::step, ::step])
     cell = max(8, MESH_PX // step)
     bh, bw = min(cell, sample.shape[0]), min(cell, sample.shape[1])
-    bkg = sep.Background(sample, mask=sample_mask, bw=bw, bh=bh, fw=3, fh=3)
-    return Background(step, bkg.back(), bkg.rms(), float(bkg.globalback), float(bkg.globalrms))
+    return Background(step, *mesh_maps(sample, sample_mask, bh, bw))
+
+
+def mesh_maps(
+    sample: np.ndarray, mask: np.ndarray | None, bh: int, bw: int
+) -> tuple[np.ndarray, np.ndarray, float, float]:
+    """(level map, rms map, global level, global rms) of ``sample`` on a mesh of bh x bw
+    px cells: in each cell the median and rms (median absolute deviation x 1.4826, or the
+    standard deviation when that is 0) of the pixels within 3 sigmas (clipped three
+    times), cells with too few such pixels (masked, a wall of stars) taken from their
+    neighbours, the mesh median-filtered over 3 x 3 cells and interpolated bilinearly
+    between cell centres (a spline rings beside a roof or a bright tree line, and its
+    undershoot would leave a band of false residual there). Global values: medians."""
+    height, width = sample.shape
+    ny, nx = -(-height // bh), -(-width // bw)
+    padded = np.full((ny * bh, nx * bw), np.nan, dtype=np.float32)
+    padded[:height, :width] = sample
+    if mask is not None:
+        padded[:height, :width][mask] = np.nan
+    cells = padded.reshape(ny, bh, nx, bw).transpose(0, 2, 1, 3).reshape(ny, nx, -1)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # cells wholly masked: NaN
+        level = np.nanmedian(cells, axis=2)
+        rms = np.nanstd(cells, axis=2)
+        for _ in range(3):
+            kept = np.where(np.abs(cells - level[..., None]) <= 3.0 * rms[..., None], cells, np.nan)
+            level, rms = np.nanmedian(kept, axis=2), np.nanstd(kept, axis=2)
+        # the median absolute deviation, which a bright star's wings do not raise, unless
+        # the sky is quantised so finely that it is 0
+        mad = _MAD_TO_SIGMA * np.nanmedian(np.abs(kept - level[..., None]), axis=2)
+        rms = np.where(mad > 0, mad, rms)
+        few = np.sum(np.isfinite(kept), axis=2) < _MIN_CELL_FRACTION * bh * bw
+    level[few], rms[few] = np.nan, np.nan
+    if not np.isfinite(level).any():
+        return np.zeros_like(sample), np.zeros_like(sample), 0.0, 0.0
+    level, rms = _filled(level), _filled(rms)
+    level = ndimage.median_filter(level, size=3, mode="nearest")
+    rms = ndimage.median_filter(rms, size=3, mode="nearest")
+    return (
+        _bilinear(level, bh, bw, sample.shape),
+        _bilinear(rms, bh, bw, sample.shape),
+        float(np.median(level)),
+        float(np.median(rms)),
+    )
+
+
+def _filled(mesh: np.ndarray) -> np.ndarray:
+    """The mesh with its NaN cells set to the nearest finite cell's value."""
+    bad = ~np.isfinite(mesh)
+    if not bad.any():
+        return mesh
+    _, (iy, ix) = ndimage.distance_transform_edt(bad, return_indices=True)
+    return mesh[iy, ix]
+
+
+def _bilinear(mesh: np.ndarray, bh: int, bw: int, shape: tuple[int, int]) -> np.ndarray:
+    """The mesh of cell values interpolated bilinearly to every pixel (cell values at the
+    cell centres, constant beyond the outer centres), float32."""
+    height, width = shape
+    y = (np.arange(height) + 0.5) / bh - 0.5
+    x = (np.arange(width) + 0.5) / bw - 0.5
+    y = np.clip(y, 0, mesh.shape[0] - 1)
+    x = np.clip(x, 0, mesh.shape[1] - 1)
+    y0 = np.minimum(y.astype(int), max(mesh.shape[0] - 2, 0))
+    x0 = np.minimum(x.astype(int), max(mesh.shape[1] - 2, 0))
+    y1, x1 = np.minimum(y0 + 1, mesh.shape[0] - 1), np.minimum(x0 + 1, mesh.shape[1] - 1)
+    fy, fx = (y - y0)[:, None], (x - x0)[None, :]
+    top = mesh[y0][:, x0] * (1 - fx) + mesh[y0][:, x1] * fx
+    bottom = mesh[y1][:, x0] * (1 - fx) + mesh[y1][:, x1] * fx
+    return np.ascontiguousarray(top * (1 - fy) + bottom * fy, dtype=np.float32)
+
+
+def fine_background(data: np.ndarray, mask: np.ndarray | None, sources: np.ndarray) -> Background:
+    """The background left in background-subtracted ``data`` at the scale of
+    ``FINE_MESH_PX``, with ``sources`` (True on the pixels of compact sources: stars) and
+    ``mask`` left out: a tree line, the edge of a cloud, a roof, which the coarse mesh
+    smooths over, so that the stars beside them are not merged into their residual.
+    Estimated on every ``step``-th pixel (about 512 px a side)."""
+    height, width = data.shape
+    step = max(1, min(height, width) // FINE_SAMPLE_PX)
+    keep_out = sources if mask is None else sources | mask
+    sample = np.ascontiguousarray(data[::step, ::step])
+    out = ndimage.binary_dilation(keep_out[::step, ::step], iterations=max(1, 3 // step))
+    cell = max(6, FINE_MESH_PX // step)
+    bh, bw = min(cell, sample.shape[0]), min(cell, sample.shape[1])
+    return Background(step, *mesh_maps(sample, out, bh, bw))
 
 
 def subtract_background(data: np.ndarray, background: Background) -> None:
@@ -90,6 +198,43 @@ def subtract_map(data: np.ndarray, back: np.ndarray, step: int) -> None:
         data.reshape(height // step, step, width)[...] -= wide[:, None, :]
         return
     data -= _full(back, step, (height, width))
+
+
+def noise_correlation(data: np.ndarray, mask: np.ndarray | None) -> float:
+    """How much smoother than white noise the sky's noise is: the lower quartile (tiles
+    with a cloud's or a tree's edge have more), over up to
+    ``CORRELATION_TILES`` tiles of 32 x 32 px spread over background-subtracted ``data``, of
+    the pixel rms over the rms that differences of adjacent pixels give (1 for the white
+    noise of a raw frame; ~1.3-1.5 for a JPEG, whose compression smooths the noise),
+    clipped to 1..2. Both rms are clipped at 4 sigmas (stars; 8-bit skies are too
+    quantised for medians)."""
+    height, width = data.shape
+    rows, cols = height // _TILE_PX, width // _TILE_PX
+    if rows * cols < _MIN_TILES:
+        return 1.0
+    every = max(1, math.ceil(math.sqrt(rows * cols / CORRELATION_TILES)))
+    ratios = []
+    for i in range(0, rows, every):
+        for j in range(0, cols, every):
+            block = np.s_[i * _TILE_PX : (i + 1) * _TILE_PX, j * _TILE_PX : (j + 1) * _TILE_PX]
+            if mask is not None and mask[block].any():
+                continue
+            tile = data[block].astype(np.float64)
+            spread = _clipped_std(tile.ravel())
+            step_spread = _clipped_std(np.diff(tile, axis=1).ravel()) / math.sqrt(2.0)
+            if spread > 0 and step_spread > 0:
+                ratios.append(spread / step_spread)
+    return float(np.clip(np.percentile(ratios, 25), 1.0, 2.0)) if ratios else 1.0
+
+
+def _clipped_std(values: np.ndarray) -> float:
+    centre, spread = np.median(values), values.std()
+    for _ in range(2):
+        kept = values[np.abs(values - centre) <= 4.0 * spread]
+        if len(kept) < 10:
+            return 0.0
+        centre, spread = kept.mean(), kept.std()
+    return float(spread)
 
 
 def _full(sampled: np.ndarray, step: int, shape: tuple[int, int]) -> np.ndarray:

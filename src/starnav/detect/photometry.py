@@ -2,17 +2,23 @@
 
 Around each centroid, three zones scaled by the PSF sigma s (clipped to 0.5..8 px): the
 aperture r < max(2, 3 s) (99 % of a Gaussian star), the ring up to max(4, 5 s), the annulus
-up to max(7, 8 s). The annulus gives the local background (median) and noise (median
-absolute deviation x 1.4826): a star on a tree line, a roof edge or in foliage gets the
-noise of its surroundings, a glow patch its own level. The aperture flux is counted above
+up to max(7, 8 s). The annulus gives the local background (a plane fitted to it, plus the median of
+what is left: a gradient of glow or moonlight is followed) and noise (median absolute
+deviation x 1.4826): a star on a tree line, a roof edge or in foliage gets the noise of its
+surroundings, a glow patch its own level. The aperture flux is counted above
 that local background, so a patch wider than the aperture has none.
 
 A source is *extended* when the ring's median lies above a quarter of the aperture's mean
 excess, more than noise explains (3 sigmas of a median of the ring's pixels): a Gaussian star
 puts 1 % there, a blob twice as wide as the PSF 25 %, a patch of glow or a lit wall about
 100 %; a neighbouring star covers too few of the ring's pixels to move its median. A source
-is *elongated* when sep's isophotal axes have a > 2.5 b and a > 2 s (a trail, a lit edge; a
-faint star's few pixels can be 3:1 but are short).
+is *misshapen* when sep's isophotal axes have a > 2.5 b and a > 2 s (a trail, a lit edge; a
+faint star's few pixels can be 3:1 but are short), or b > 4 s (a star's second moments are
+about s whatever its brightness; a patch of glow wider than the annulus has no light in the
+ring above its annulus, but it is wide). A source is *in the foreground* when its annulus,
+after its plane is taken out, varies much more than its pixel-to-pixel noise explains
+(``LocalPhotometry.in_foreground``): noise changes from one pixel to the next, foliage, a lit
+wall, an edge or a trail across the annulus do not.
 """
 
 from __future__ import annotations
@@ -29,6 +35,10 @@ _RING_FRACTION = 0.25
 _RING_SIGMAS = 3.0
 _ELONGATION = 2.5
 _ELONGATED_LENGTH_SIGMAS = 2.0
+_CLIP_SIGMAS = 3.0
+_ROUGH_MIN, _ROUGH_OVER_SKY = 1.6, 1.4
+_WINGS = 0.05
+_LARGE_SIGMAS = 4.0
 _MAX_STAMP_VALUES = 2_000_000  # sources are measured in chunks of at most this many pixels
 
 
@@ -36,16 +46,21 @@ _MAX_STAMP_VALUES = 2_000_000  # sources are measured in chunks of at most this 
 class LocalPhotometry:
     """Per source: ``flux`` in the aperture above the local background (image units),
     ``background`` (annulus median, over the background map already subtracted),
-    ``noise`` (annulus pixel rms, NaN when the annulus is masked or off the image),
+    ``noise`` (annulus pixel rms about a plane fitted to it: noise and structure, NaN when
+    the annulus is masked or off the image), ``white_noise`` (the same from differences of
+    adjacent pixels: noise only, as noise changes from pixel to pixel and structure does not),
     ``ring`` (ring median above the local background), ``n_aperture`` and ``n_ring``
-    (pixels counted), ``radius_px`` (the aperture radius)."""
+    (pixels counted), ``peak`` (brightest aperture pixel above the local background),
+    ``radius_px`` (the aperture radius)."""
 
     flux: np.ndarray
     background: np.ndarray
     noise: np.ndarray
+    white_noise: np.ndarray
     ring: np.ndarray
     n_aperture: np.ndarray
     n_ring: np.ndarray
+    peak: np.ndarray
     radius_px: float
 
     def extended(self, noise: np.ndarray) -> np.ndarray:
@@ -56,6 +71,16 @@ class LocalPhotometry:
             np.maximum(self.n_ring, 1)
         )
         return self.ring > allowed
+
+    def in_foreground(self, noise_correlation: float = 1.0) -> np.ndarray:
+        """True for sources whose surroundings are not sky: an annulus whose rms about its
+        plane exceeds its pixel-to-pixel noise by more than 1.4 times what the image's sky
+        does (``noise_correlation``: 1 for white noise), and by at least 1.6 (foliage, a
+        lit wall, an edge or a trail across it: structure, not noise), and by more than 5 %
+        of the source's peak (a bright star's own wings shape its annulus a little)."""
+        rough = max(_ROUGH_MIN, _ROUGH_OVER_SKY * noise_correlation)
+        white = np.nan_to_num(self.white_noise, nan=np.inf)
+        return (self.noise > rough * white) & (self.noise > _WINGS * np.abs(self.peak))
 
 
 def zones(sigma_px: float) -> tuple[float, float, float]:
@@ -71,7 +96,7 @@ def local_photometry(
     integers) in background-subtracted ``data``, ``mask`` True for pixels to leave out."""
     r_ap, r_in, r_out = zones(sigma_px)
     if len(x) == 0:
-        return LocalPhotometry(*([np.zeros(0)] * 6), radius_px=r_ap)
+        return LocalPhotometry(*([np.zeros(0)] * 8), radius_px=r_ap)
     half = math.ceil(r_out)
     chunk = max(1, _MAX_STAMP_VALUES // (2 * half + 1) ** 2)
     parts = [
@@ -81,15 +106,60 @@ def local_photometry(
     return LocalPhotometry(*(np.concatenate(c) for c in zip(*parts, strict=True)), radius_px=r_ap)
 
 
-def elongated(objects: np.ndarray, sigma_px: float) -> np.ndarray:
-    """True for sep sources much longer than wide and longer than a star."""
+def misshapen(objects: np.ndarray, sigma_px: float) -> np.ndarray:
+    """True for sep sources much longer than wide and longer than a star (a trail, a lit
+    edge), or whose light spreads far wider than the PSF (a glow patch larger than the
+    annulus, which the ring test cannot see)."""
     a, b = objects["a"], objects["b"]
     s = max(sigma_px, 0.5)
-    return (a > _ELONGATION * b) & (a > _ELONGATED_LENGTH_SIGMAS * s)
+    long = (a > _ELONGATION * b) & (a > _ELONGATED_LENGTH_SIGMAS * s)
+    return long | (b > _LARGE_SIGMAS * s)
 
 
 def _measure(data, mask, x, y, half, radii):
     r_ap, r_in, r_out = radii
+    stamp, inside, dx, dy = _stamps(data, mask, x, y, half)
+    n = len(x)
+    r2 = dx**2 + dy**2
+    annulus = inside & (r2 >= r_in**2) & (r2 < r_out**2)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # an annulus wholly masked: NaN
+        local = _plane(stamp, annulus, dx, dy)
+        # once more without the pixels far off the first plane (a neighbouring star)
+        rest = np.where(annulus, stamp - local, np.nan).reshape(n, -1)
+        centre = np.nanmedian(rest, axis=1)[:, None]
+        spread = _MAD_TO_SIGMA * np.nanmedian(np.abs(rest - centre), axis=1)[:, None]
+        near = (np.abs(rest - centre) <= _CLIP_SIGMAS * spread).reshape(stamp.shape)
+        local = _plane(stamp, annulus & near, dx, dy)
+        c0 = local[:, half, half]
+        rest = np.where(annulus, stamp - local, np.nan).reshape(n, -1)
+        offset = np.nan_to_num(np.nanmedian(rest, axis=1), nan=0.0)
+        noise = _MAD_TO_SIGMA * np.nanmedian(np.abs(rest - offset[:, None]), axis=1)
+        pairs = annulus[:, :, 1:] & annulus[:, :, :-1]
+        step = np.where(pairs, stamp[:, :, 1:] - stamp[:, :, :-1], np.nan).reshape(n, -1)
+        step_median = np.nanmedian(step, axis=1)[:, None]
+        white = _MAD_TO_SIGMA * np.nanmedian(np.abs(step - step_median), axis=1) / math.sqrt(2)
+        excess = stamp - local - offset[:, None, None]
+        ring_zone = inside & (r2 >= r_ap**2) & (r2 < r_in**2)
+        ring = np.nanmedian(np.where(ring_zone, excess, np.nan).reshape(n, -1), axis=1)
+    aperture = inside & (r2 < r_ap**2)
+    flux = np.where(aperture, excess, 0.0).sum(axis=(1, 2))
+    peak = np.where(aperture, excess, -np.inf).max(axis=(1, 2), initial=-np.inf)
+    return (
+        flux,
+        c0 + offset,
+        noise,
+        white,
+        np.nan_to_num(ring, nan=0.0),
+        aperture.sum(axis=(1, 2)),
+        ring_zone.sum(axis=(1, 2)),
+        np.where(np.isfinite(peak), peak, 0.0),
+    )
+
+
+def _stamps(data, mask, x, y, half):
+    """(n, k, k) pixel stamps around the sources, whether each pixel is on the image and
+    unmasked, and the pixel centres' offsets from the source, dx (n, 1, k) and dy (n, k, 1)."""
     height, width = data.shape
     off = np.arange(-half, half + 1)
     cols = np.rint(x).astype(np.intp)[:, None] + off
@@ -99,29 +169,30 @@ def _measure(data, mask, x, y, half, radii):
     ]
     rr = np.clip(rows, 0, height - 1)[:, :, None]
     cc = np.clip(cols, 0, width - 1)[:, None, :]
-    stamp = data[rr, cc]
     if mask is not None:
         inside &= ~mask[rr, cc]
-    r2 = ((rows - y[:, None]) ** 2)[:, :, None] + ((cols - x[:, None]) ** 2)[:, None, :]
-    n = len(x)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)  # an annulus wholly masked: NaN
-        annulus = np.where(inside & (r2 >= r_in**2) & (r2 < r_out**2), stamp, np.nan)
-        annulus = annulus.reshape(n, -1)
-        background = np.nanmedian(annulus, axis=1)
-        noise = _MAD_TO_SIGMA * np.nanmedian(np.abs(annulus - background[:, None]), axis=1)
-        background = np.nan_to_num(background, nan=0.0)
-        ring_zone = inside & (r2 >= r_ap**2) & (r2 < r_in**2)
-        ring = np.nanmedian(np.where(ring_zone, stamp, np.nan).reshape(n, -1), axis=1)
-    aperture = inside & (r2 < r_ap**2)
-    excess = stamp - background[:, None, None]
-    flux = np.where(aperture, excess, 0.0).sum(axis=(1, 2))
-    ring = np.nan_to_num(ring - background, nan=0.0)
-    return (
-        flux,
-        background,
-        noise,
-        ring,
-        aperture.sum(axis=(1, 2)),
-        ring_zone.sum(axis=(1, 2)),
-    )
+    dx = (cols - x[:, None])[:, None, :]
+    dy = (rows - y[:, None])[:, :, None]
+    return data[rr, cc], inside, dx, dy
+
+
+def _plane(stamp, zone, dx, dy):
+    """The least-squares plane c0 + cx dx + cy dy through each stamp's ``zone`` pixels (a
+    constant, their mean, when too few), evaluated on the stamp."""
+    w = zone.astype(float)
+    v = np.where(zone, stamp, 0.0)
+    gx, gy = np.broadcast_to(dx, w.shape), np.broadcast_to(dy, w.shape)
+    terms = (np.ones_like(w), gx, gy)
+    normal = np.empty((len(w), 3, 3))
+    rhs = np.empty((len(w), 3))
+    for i, a in enumerate(terms):
+        rhs[:, i] = (w * a * v).sum(axis=(1, 2))
+        for j, b in enumerate(terms):
+            normal[:, i, j] = (w * a * b).sum(axis=(1, 2))
+    count = normal[:, 0, 0]
+    ok = (count >= 10) & (np.abs(np.linalg.det(normal)) > 1e-9 * np.maximum(count, 1) ** 3)
+    coef = np.zeros((len(w), 3))
+    if ok.any():
+        coef[ok] = np.linalg.solve(normal[ok], rhs[ok][:, :, None])[:, :, 0]
+    coef[~ok, 0] = rhs[~ok, 0] / np.maximum(count[~ok], 1)
+    return coef[:, 0, None, None] + coef[:, 1, None, None] * dx + coef[:, 2, None, None] * dy

@@ -1,14 +1,15 @@
 """The width of the point-spread function, from the compact sources of an image.
 
-Stars share one PSF; foreground (lit branches, a roof edge, holes of sky in a canopy),
-glow patches and trails come in every size. So the width is the most common size among
-round, unsaturated, well-detected sources, not the size of the brightest ones (which in a
-photograph with trees are the lit branches): the half-light radius of each of up to
-``PSF_CANDIDATES`` such sources (sep's ``flux_radius``, within 3 times its second-moment
-size), a histogram of log radius in 0.05 dex bins smoothed over 5 bins, and the median
-radius within 0.1 dex of its peak; when two peaks are about equally high (at least 2/3 of the
-highest), the smaller one, as foreground is never smaller than the PSF. Converted to a
-Gaussian sigma (half-light radius = 1.177 sigma). Fewer than 3 sources: 1 px.
+Stars share one PSF; foreground (lit branches, a roof edge, holes of sky in a canopy), glow
+patches and trails come in every size. So the width is the most common size among round,
+unsaturated, well-detected sources not in foreground (``starnav.detect.photometry``), not
+the size of the brightest ones (which in a photograph with trees are the lit branches): the
+half-light radius of each of up to ``PSF_CANDIDATES`` such sources (sep's ``flux_radius``,
+within 3 times its second-moment size), a histogram of log radius in 0.05 dex bins smoothed
+over 5 bins, and the median radius within 0.1 dex of its peak; when two peaks are about
+equally high (at least 2/3 of the highest), the smaller one, as foreground is never smaller
+than the PSF. Converted to a Gaussian sigma (half-light radius = 1.177 sigma). Fewer than 3
+sources: 1 px.
 """
 
 from __future__ import annotations
@@ -17,6 +18,8 @@ import math
 
 import numpy as np
 import sep
+
+from starnav.detect.photometry import local_photometry
 
 PSF_CANDIDATES = 100
 DEFAULT_SIGMA_PX = 1.0
@@ -28,16 +31,27 @@ _PEAK_RATIO = 2.0 / 3.0
 
 
 def measure_psf_sigma(
-    data: np.ndarray, objects: np.ndarray, mask: np.ndarray | None, peak_snr: np.ndarray
+    data: np.ndarray,
+    objects: np.ndarray,
+    mask: np.ndarray | None,
+    peak_snr: np.ndarray,
+    noise_correlation: float = 1.0,
 ) -> float:
     """PSF Gaussian sigma (px) of background-subtracted ``data`` from sep's unsaturated
     ``objects``, the ``peak_snr`` (peak over the local noise) of each choosing the best
-    detected."""
+    detected, those in foreground (``starnav.detect.photometry``; ``noise_correlation`` of
+    the sky's noise) left out."""
     a, b = objects["a"], objects["b"]
     usable = np.flatnonzero((objects["npix"] >= 5) & (a <= _ROUND * b) & (b > 0))
     if len(usable) < 3:
         return DEFAULT_SIGMA_PX
     pick = usable[np.argsort(-peak_snr[usable], kind="stable")[:PSF_CANDIDATES]]
+    # not sources in foreground (judged with their second moments as the PSF's size)
+    size = float(np.median(np.sqrt(a[pick] * b[pick])))
+    phot = local_photometry(data, mask, objects["x"][pick], objects["y"][pick], size)
+    clean = ~phot.in_foreground(noise_correlation)
+    if clean.sum() >= 3:
+        pick = pick[clean]
     size = np.sqrt(objects["x2"][pick] + objects["y2"][pick])
     rmax = np.clip(3.0 * size, 3.0, 50.0)
     r_half, _ = sep.flux_radius(data, objects["x"][pick], objects["y"][pick], rmax, 0.5, mask=mask)

@@ -36,9 +36,15 @@ from dataclasses import dataclass
 import numpy as np
 import sep
 
-from starnav.detect.background import Background, estimate_background, subtract_background
+from starnav.detect.background import (
+    Background,
+    estimate_background,
+    fine_background,
+    noise_correlation,
+    subtract_background,
+)
 from starnav.detect.hot import clean_hot_pixels
-from starnav.detect.photometry import elongated, local_photometry
+from starnav.detect.photometry import local_photometry, misshapen
 from starnav.detect.psf import measure_psf_sigma
 from starnav.errors import ImageError
 
@@ -48,6 +54,8 @@ _MAP_RMS_FLOOR = 0.5  # the noise map is kept above this fraction of the global 
 _LOCAL_NOISE_MARGIN = 1.25  # the annulus noise counts when this much above the noise map
 _MIN_SNR_FRACTION = 0.5  # of threshold_sigma: a source fainter than that here is dropped
 _CANDIDATES_PER_STAR, _CANDIDATES_EXTRA = 5, 50  # sources measured when max_stars is given
+_PLATEAU_PX = 1500  # a source of more filtered pixels is a patch of residual glow
+_WIDEST_FOR_DEFAULT_KERNEL = 2.5  # PSF sigma (px) beyond which its own Gaussian is used
 
 
 @dataclass(frozen=True, eq=False)
@@ -120,27 +128,27 @@ def detect_stars(
         saturation = _infer_saturation(data, dtype, high)
 
     background = estimate_background(data, mask)
+    subtract_background(data, background)
+    correlation = noise_correlation(data, mask)
+    background = background.scaled_rms(correlation)
     level, rms = background.level, background.rms
     if not rms > 0:  # a noise-free image: an rms relative to its range
         rms = _NOISE_FREE_RMS * (high - level)
         background = background.with_rms_floor(rms)
     background = background.with_rms_floor(_MAP_RMS_FLOOR * rms)
-    subtract_background(data, background)
     n_hot = clean_hot_pixels(data, threshold_sigma * rms) if reject_hot_pixels else 0
-    objects = _extract(data, mask, background, threshold_sigma, min_area_px, psf_sigma_px)
-    if len(objects) == 0:
+    found = _sources(
+        data, mask, background, threshold_sigma, min_area_px, psf_sigma_px, saturation, correlation
+    )
+    if found is None:
         return _empty(width, height, psf_sigma_px, level, rms, n_hot)
-
-    saturated = _saturated(objects, data, background, saturation)
+    objects, saturated, sigma = found
     n_saturated = int(saturated.sum())
     if not keep_saturated:
         objects, saturated = objects[~saturated], saturated[~saturated]
         if len(objects) == 0:
             return _empty(width, height, psf_sigma_px, level, rms, n_hot, n_saturated)
     peak_snr = objects["peak"] / _rms_at_peaks(background, objects)
-    sigma = psf_sigma_px
-    if sigma is None:
-        sigma = measure_psf_sigma(data, objects[~saturated], mask, peak_snr[~saturated])
     if (
         max_stars is not None
         and len(objects) > _CANDIDATES_PER_STAR * max_stars + _CANDIDATES_EXTRA
@@ -150,7 +158,7 @@ def detect_stars(
         rough = rough[: _CANDIDATES_PER_STAR * max_stars + _CANDIDATES_EXTRA]
         objects, saturated = objects[rough], saturated[rough]
     stars, n_rejected = _measured(
-        data, mask, objects, saturated, sigma, background, threshold_sigma, max_stars
+        data, mask, objects, saturated, sigma, background, threshold_sigma, max_stars, correlation
     )
     return Detections(
         *stars,
@@ -165,6 +173,47 @@ def detect_stars(
     )
 
 
+def _sources(
+    data: np.ndarray,
+    mask: np.ndarray | None,
+    background: Background,
+    threshold_sigma: float,
+    min_area_px: int,
+    psf_sigma_px: float | None,
+    saturation: float | None,
+    correlation: float,
+) -> tuple[np.ndarray, np.ndarray, float] | None:
+    """(sep's sources, their saturation flags, the PSF sigma given or measured), None when
+    nothing is found. With the PSF unknown, sources are found with sep's 3 x 3 kernel (a
+    matched filter for PSF sigma ~0.6-1.5 px: 90 % of the best SNR or more, 60 % at 2.5 px)
+    and found again with the measured PSF's Gaussian when that is wider than 2.5 px (a
+    wider kernel lowers the filtered noise so far that the faint residual of glow along a
+    horizon crosses the threshold in large patches, which swallow the stars in them)."""
+    objects, segments = _extract(
+        data, mask, background, threshold_sigma, min_area_px, psf_sigma_px, segments=True
+    )
+    plateaus = objects["npix"] > _PLATEAU_PX
+    if plateaus.any():  # the coarse mesh left patches of glow: a finer one, stars masked
+        compact = np.ones(len(objects) + 1, dtype=bool)
+        compact[0] = False
+        compact[1:][plateaus] = False
+        subtract_background(data, fine_background(data, mask, compact[segments]))
+        objects = _extract(data, mask, background, threshold_sigma, min_area_px, psf_sigma_px)
+    if len(objects) == 0:
+        return None
+    saturated = _saturated(objects, data, background, saturation)
+    sigma = psf_sigma_px
+    if sigma is None:
+        peak_snr = objects["peak"] / _rms_at_peaks(background, objects)
+        sigma = measure_psf_sigma(
+            data, objects[~saturated], mask, peak_snr[~saturated], correlation
+        )
+        if sigma > _WIDEST_FOR_DEFAULT_KERNEL:
+            objects = _extract(data, mask, background, threshold_sigma, min_area_px, sigma)
+            saturated = _saturated(objects, data, background, saturation)
+    return objects, saturated, sigma
+
+
 def _measured(
     data: np.ndarray,
     mask: np.ndarray | None,
@@ -174,18 +223,21 @@ def _measured(
     background: Background,
     threshold_sigma: float,
     max_stars: int | None,
+    correlation: float,
 ) -> tuple[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray], int]:
     """(centroids (our pixel convention), local flux, peak, SNR and saturation flag of the
     sources taken for stars, saturated first then by SNR, the first ``max_stars`` (None:
     all); how many sources were not taken for stars)."""
     x, y = _centroids(data, objects, sigma, mask)
     phot = local_photometry(data, mask, x, y, sigma)
-    # the noise of the surroundings where it is clearly above the image's (a tree line, a
-    # roof edge, foliage, a bright sky), else the image's (so that uniform skies rank by flux)
-    noise = np.fmax(background.rms, phot.noise / _LOCAL_NOISE_MARGIN)
+    # the noise of the surroundings where it is clearly above the map's (a tree line, a roof
+    # edge, foliage), else the smoother map's (so that uniform skies rank by flux)
+    noise = np.fmax(_rms_at_peaks(background, objects), phot.noise / _LOCAL_NOISE_MARGIN)
     snr = phot.flux / (noise * math.sqrt(4.0 * math.pi) * sigma)
-    shaped = ~elongated(objects, sigma)
-    star = shaped & ~phot.extended(noise) & (snr >= _MIN_SNR_FRACTION * threshold_sigma)
+    shaped = ~misshapen(objects, sigma)
+    foreground = phot.in_foreground(correlation)
+    star = shaped & ~phot.extended(noise) & ~foreground
+    star &= snr >= _MIN_SNR_FRACTION * threshold_sigma
     star |= saturated & shaped  # a saturated star's flat top and halo fill the ring
     keep = np.flatnonzero(star)
     order = keep[np.lexsort((-np.where(saturated, phot.flux, snr)[keep], ~saturated[keep]))]
@@ -230,10 +282,13 @@ def _extract(
     threshold_sigma: float,
     min_area_px: int,
     psf_sigma_px: float | None,
-) -> np.ndarray:
+    *,
+    segments: bool = False,
+):
     """sep's sources of the background-subtracted ``data``: matched filter (the PSF Gaussian
     or sep's 3x3 kernel), ``threshold_sigma`` counted in the filtered image's noise, from the
-    noise map (so the threshold rises over textured foreground)."""
+    noise map (so the threshold rises over textured foreground); with ``segments``, also
+    sep's segmentation map (0: no source, i: the pixels of source i - 1)."""
     kernel = _DEFAULT_KERNEL if psf_sigma_px is None else _gaussian_kernel(psf_sigma_px)
     filtered = float(np.sqrt((kernel**2).sum()) / kernel.sum())  # filtered / pixel noise
     try:
@@ -249,6 +304,7 @@ def _extract(
             # 4.5 px apart and 5:1 pairs 5.5 px apart at PSF sigma 1 (closer ones are one
             # star to a star tracker anyway)
             deblend_nthresh=16,
+            segmentation_map=segments,
         )
     except Exception as exc:  # sep raises plain Exception for its buffer limits
         raise ImageError(
