@@ -92,19 +92,21 @@ def estimate_background(data: np.ndarray, mask: np.ndarray | None) -> Background
         sample_mask = mask if step == 1 else np.ascontiguousarray(mask[::step, ::step])
     cell = max(8, MESH_PX // step)
     bh, bw = min(cell, sample.shape[0]), min(cell, sample.shape[1])
-    return Background(step, *mesh_maps(sample, sample_mask, bh, bw))
+    level_map, rms_map, level, rms = mesh_maps(sample, sample_mask, bh, bw)
+    return Background(step, level_map, rms_map, level, rms)
 
 
 def mesh_maps(
     sample: np.ndarray, mask: np.ndarray | None, bh: int, bw: int
 ) -> tuple[np.ndarray, np.ndarray, float, float]:
     """(level map, rms map, global level, global rms) of ``sample`` on a mesh of bh x bw
-    px cells: in each cell the median and rms (median absolute deviation x 1.4826, or the
-    standard deviation when that is 0) of the pixels within 3 sigmas (clipped three
-    times), cells with too few such pixels (masked, a wall of stars) taken from their
-    neighbours, the mesh median-filtered over 3 x 3 cells and interpolated bilinearly
-    between cell centres (a spline rings beside a roof or a bright tree line, and its
-    undershoot would leave a band of false residual there). Global values: medians."""
+    px cells: in each cell the median and rms (median absolute deviation x 1.4826 about a
+    plane fitted to the cell, or the standard deviation when that is 0) of the pixels
+    within 3 sigmas (clipped three times), cells with too few such pixels (masked, a wall
+    of stars) taken from their neighbours, the mesh median-filtered over 3 x 3 cells and
+    interpolated bilinearly between cell centres (a spline rings beside a roof or a bright
+    tree line, and its undershoot would leave a band of false residual there). Global
+    values: medians."""
     height, width = sample.shape
     ny, nx = -(-height // bh), -(-width // bw)
     padded = np.full((ny * bh, nx * bw), np.nan, dtype=np.float32)
@@ -119,9 +121,12 @@ def mesh_maps(
         for _ in range(3):
             kept = np.where(np.abs(cells - level[..., None]) <= 3.0 * rms[..., None], cells, np.nan)
             level, rms = np.nanmedian(kept, axis=2), np.nanstd(kept, axis=2)
-        # the median absolute deviation, which a bright star's wings do not raise, unless
-        # the sky is quantised so finely that it is 0
-        mad = _MAD_TO_SIGMA * np.nanmedian(np.abs(kept - level[..., None]), axis=2)
+        # the median absolute deviation about a plane fitted to the cell (the gradient of a
+        # cloud's edge or of moonlight is not noise), which a bright star's wings do not
+        # raise, unless the sky is quantised so finely that it is 0
+        rest = kept - _cell_planes(kept, bh, bw)
+        centre = np.nanmedian(rest, axis=2)
+        mad = _MAD_TO_SIGMA * np.nanmedian(np.abs(rest - centre[..., None]), axis=2)
         rms = np.where(mad > 0, mad, rms)
         few = np.sum(np.isfinite(kept), axis=2) < _MIN_CELL_FRACTION * bh * bw
     level[few], rms[few] = np.nan, np.nan
@@ -136,6 +141,27 @@ def mesh_maps(
         float(np.median(level)),
         float(np.median(rms)),
     )
+
+
+def _cell_planes(cells: np.ndarray, bh: int, bw: int) -> np.ndarray:
+    """Least-squares planes through each cell's finite pixels (ny, nx, bh * bw), evaluated
+    at every pixel of the cell (the cell mean where the fit is singular)."""
+    row, col = np.divmod(np.arange(bh * bw), bw)
+    terms = (np.ones(bh * bw), col - (bw - 1) / 2.0, row - (bh - 1) / 2.0)
+    w = np.isfinite(cells)
+    v = np.where(w, cells, 0.0)
+    normal = np.empty((*cells.shape[:2], 3, 3))
+    rhs = np.empty((*cells.shape[:2], 3))
+    for i, a in enumerate(terms):
+        rhs[..., i] = (v * a).sum(axis=2)
+        for j, b in enumerate(terms):
+            normal[..., i, j] = (w * (a * b)).sum(axis=2)
+    ok = np.linalg.det(normal) > 1e-6 * np.maximum(normal[..., 0, 0], 1.0) ** 3
+    coef = np.zeros(rhs.shape)
+    coef[..., 0] = rhs[..., 0] / np.maximum(normal[..., 0, 0], 1.0)
+    if ok.any():
+        coef[ok] = np.linalg.solve(normal[ok], rhs[ok][..., None])[..., 0]
+    return coef[..., 0:1] + coef[..., 1:2] * terms[1] + coef[..., 2:3] * terms[2]
 
 
 def _filled(mesh: np.ndarray) -> np.ndarray:

@@ -230,9 +230,9 @@ def _measured(
     all); how many sources were not taken for stars)."""
     x, y = _centroids(data, objects, sigma, mask)
     phot = local_photometry(data, mask, x, y, sigma)
-    # the noise of the surroundings where it is clearly above the map's (a tree line, a roof
-    # edge, foliage), else the smoother map's (so that uniform skies rank by flux)
-    noise = np.fmax(_rms_at_peaks(background, objects), phot.noise / _LOCAL_NOISE_MARGIN)
+    # the noise of the surroundings where it is clearly above the image's (a tree line, a
+    # roof edge, foliage, a bright sky), else the image's (so that uniform skies rank by flux)
+    noise = np.fmax(background.rms, phot.noise / _LOCAL_NOISE_MARGIN)
     snr = phot.flux / (noise * math.sqrt(4.0 * math.pi) * sigma)
     shaped = ~misshapen(objects, sigma)
     foreground = phot.in_foreground(correlation)
