@@ -13,8 +13,9 @@ excess, more than noise explains (3 sigmas of a median of the ring's pixels): a 
 puts 1 % there, a blob twice as wide as the PSF 25 %, a patch of glow or a lit wall about
 100 %; a neighbouring star covers too few of the ring's pixels to move its median. A source
 is *misshapen* when sep's isophotal axes have a > 2.5 b and a > 2 s (a trail, a lit edge; a
-faint star's few pixels can be 3:1 but are short), or b > 4 s (a star's second moments are
-about s whatever its brightness; a patch of glow wider than the annulus has no light in the
+faint star's few pixels can be 3:1 but are short; not when most well-detected sources are,
+as in a trailed frame), or when it is faint and b > 4 s (a star's second moments are about s
+unless a bright halo widens them; a patch of glow wider than the annulus has no light in the
 ring above its annulus, but it is wide). A source is *in the foreground* when its annulus,
 after its plane is taken out, varies much more than its pixel-to-pixel noise explains
 (``LocalPhotometry.in_foreground``): noise changes from one pixel to the next, foliage, a lit
@@ -39,6 +40,9 @@ _CLIP_SIGMAS = 3.0
 _ROUGH_MIN, _ROUGH_OVER_SKY = 1.6, 1.4
 _WINGS = 0.05
 _LARGE_SIGMAS = 4.0
+_FLAT_TOP = 0.05
+_STRONG_PEAK = 20.0
+_TRAILED_MIN = 5
 _MAX_STAMP_VALUES = 2_000_000  # sources are measured in chunks of at most this many pixels
 
 
@@ -51,6 +55,7 @@ class LocalPhotometry:
     adjacent pixels: noise only, as noise changes from pixel to pixel and structure does not),
     ``ring`` (ring median above the local background), ``n_aperture`` and ``n_ring``
     (pixels counted), ``peak`` (brightest aperture pixel above the local background),
+
     ``radius_px`` (the aperture radius)."""
 
     flux: np.ndarray
@@ -65,12 +70,15 @@ class LocalPhotometry:
 
     def extended(self, noise: np.ndarray) -> np.ndarray:
         """True for sources with more light in the ring than a star, given the pixel
-        ``noise`` to judge by."""
+        ``noise`` to judge by, and a ring of more than 5 % of their peak (a bright star's
+        halo, in a long exposure or a processed photograph, fills the ring too, under a
+        far higher peak)."""
         mean_excess = self.flux / np.maximum(self.n_aperture, 1)
         allowed = _RING_FRACTION * mean_excess + _RING_SIGMAS * _MEDIAN_NOISE * noise / np.sqrt(
             np.maximum(self.n_ring, 1)
         )
-        return self.ring > allowed
+        # a flat top: a star's ring is a small fraction of its peak, halo or not
+        return (self.ring > allowed) & (self.ring > _FLAT_TOP * self.peak)
 
     def in_foreground(self, noise_correlation: float = 1.0) -> np.ndarray:
         """True for sources whose surroundings are not sky: an annulus whose rms about its
@@ -106,14 +114,19 @@ def local_photometry(
     return LocalPhotometry(*(np.concatenate(c) for c in zip(*parts, strict=True)), radius_px=r_ap)
 
 
-def misshapen(objects: np.ndarray, sigma_px: float) -> np.ndarray:
+def misshapen(objects: np.ndarray, sigma_px: float, peak_snr: np.ndarray) -> np.ndarray:
     """True for sep sources much longer than wide and longer than a star (a trail, a lit
-    edge), or whose light spreads far wider than the PSF (a glow patch larger than the
-    annulus, which the ring test cannot see)."""
+    edge; unless most well-detected sources are, as in a frame trailed by the camera's
+    motion), or faint ones (peak below 20 noise sigmas, ``peak_snr``) whose light spreads
+    far wider than the PSF (a glow patch larger than the annulus, which the ring test
+    cannot see; a bright star's halo is wide too)."""
     a, b = objects["a"], objects["b"]
     s = max(sigma_px, 0.5)
     long = (a > _ELONGATION * b) & (a > _ELONGATED_LENGTH_SIGMAS * s)
-    return long | (b > _LARGE_SIGMAS * s)
+    strong = peak_snr >= _STRONG_PEAK
+    if strong.sum() >= _TRAILED_MIN and long[strong].mean() > 0.5:
+        long = np.zeros_like(long)
+    return long | ((b > _LARGE_SIGMAS * s) & ~strong)
 
 
 def _measure(data, mask, x, y, half, radii):

@@ -1,23 +1,44 @@
-"""Stars in an image: background, detection, hot pixels, saturation, sub-pixel centroids.
+"""Stars in an image, also a real sky's: background, hot pixels, detection, what is a star,
+sub-pixel centroids, ranking.
 
 Why sep: it is Source Extractor as a library, the de-facto astronomical detector, in C:
-background mesh with sigma clipping, matched-filter detection, deblending and windowed
-centroids in ~8 ms per 1024 px frame here (photutils does the same in Python/numpy, slower).
+matched-filter detection, deblending and windowed centroids in a few ms per 1024 px frame
+(photutils does the same in Python/numpy, slower, and adds nothing needed here). Around it,
+one module per stage:
 
-Steps: (1) background map and pixel rms from sep's mesh (64 px cells), estimated on every
-``step``-th pixel so that about 256 px a side are used (the map is smooth and the rms per pixel
-is unchanged; 8x faster at 1024 px); (2) hot pixels, i.e. pixels above the threshold whose four
-neighbours average under a tenth of their excess, are replaced by that average before
-detection, so they neither become stars nor bend a star's centroid (a star with PSF sigma
->= 0.4 px puts >= 13 % of its peak into each neighbour); (3) sep.extract with a matched filter
-(the PSF Gaussian when ``psf_sigma_px`` is given, else sep's 3x3 kernel), ``threshold_sigma``
-counted in the noise of the *filtered* image, deblending by sep; (4) windowed centroids
-(``sep.winpos``, a Gaussian window of sigma sqrt(psf² + 1 px²): the extra pixel keeps an
-undersampled star unbiased), which reach the Cramér-Rao bound sqrt(2) psf_sigma / SNR per axis
-for psf_sigma >= 0.8 px; (5) flux in a circular aperture of radius 3 PSF sigmas.
+1. background (``starnav.detect.background``): a 64 px mesh of sigma-clipped medians and
+   rms (about a plane per cell), interpolated bilinearly; the sky's noise correlation (1 for
+   a raw frame, ~1.2-1.5 for a JPEG) scales the rms to the pixels' own;
+2. hot pixels (``starnav.detect.hot``): a pixel above the threshold whose four neighbours
+   average under a tenth of its excess is replaced by that average (every star of PSF
+   sigma >= 0.4 px keeps more than that in its neighbours);
+3. detection: sep.extract with sep's 3x3 kernel (or the PSF Gaussian when given, or when
+   measured wider than 2.5 px), ``threshold_sigma`` counted in the filtered noise of the
+   noise map, deblending by sep; where sources of more than 1500 px show that the mesh
+   left patches (glow beside a tree line, a cloud's edge), a 24 px mesh is fitted to what
+   is left with the compact sources masked, and sources are found again;
+4. PSF width (``starnav.detect.psf``): the most common half-light radius of round,
+   unsaturated sources not in foreground (the brightest are often lit branches);
+5. windowed centroids (``sep.winpos``, a Gaussian window of sigma sqrt(psf² + 1 px²): the
+   extra pixel keeps an undersampled star unbiased), which reach the Cramér-Rao bound
+   sqrt(2) psf_sigma / SNR per axis for psf_sigma >= 0.8 px;
+6. what is a star (``starnav.detect.photometry``): each source measured against its own
+   annulus (a plane plus a median: local background; the median absolute deviation: local
+   noise), flux in an aperture of 3 PSF sigmas above it; dropped when *extended* (its ring
+   brighter than a star's), *misshapen* (a trail, an edge: a > 2.5 b; or b > 4 sigma), *in
+   foreground* (its annulus rougher than its pixel-to-pixel noise explains: foliage, a lit
+   wall, an edge across it) or fainter than half ``threshold_sigma`` against its
+   surroundings;
+7. ranking: saturated stars first, then by ``snr``, the local flux over the image's noise or
+   the clearly higher (x 1.25) noise of the surroundings: a lit wall, a patch of glow or a
+   branch cannot outrank a star by being large or bright.
+
+docs/images.md ("How stars are found in real skies") measures this on real photographs and
+says what it still cannot do.
 
 Limits: stars closer than ~4.5 px (PSF sigma 1) come out as one; a star cut by the image edge
-is pulled inwards (up to ~0.6 px when centred on the last pixel).
+is pulled inwards (up to ~0.6 px when centred on the last pixel); a star whose annulus (8 PSF
+sigmas) reaches foreground is judged by it and usually dropped.
 
 Saturated stars are kept and flagged (``saturated``), and sorted first: for a star tracker they
 are the brightest, surest catalog stars, and the centroid of a symmetric saturated star stays
@@ -158,7 +179,15 @@ def detect_stars(
         rough = rough[: _CANDIDATES_PER_STAR * max_stars + _CANDIDATES_EXTRA]
         objects, saturated = objects[rough], saturated[rough]
     stars, n_rejected = _measured(
-        data, mask, objects, saturated, sigma, background, threshold_sigma, max_stars, correlation
+        data,
+        mask,
+        objects,
+        saturated,
+        sigma,
+        background,
+        threshold_sigma,
+        max_stars,
+        correlation,
     )
     return Detections(
         *stars,
@@ -234,7 +263,7 @@ def _measured(
     # roof edge, foliage, a bright sky), else the image's (so that uniform skies rank by flux)
     noise = np.fmax(background.rms, phot.noise / _LOCAL_NOISE_MARGIN)
     snr = phot.flux / (noise * math.sqrt(4.0 * math.pi) * sigma)
-    shaped = ~misshapen(objects, sigma)
+    shaped = ~misshapen(objects, sigma, phot.peak / noise)
     foreground = phot.in_foreground(correlation)
     star = shaped & ~phot.extended(noise) & ~foreground
     star &= snr >= _MIN_SNR_FRACTION * threshold_sigma
