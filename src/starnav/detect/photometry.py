@@ -30,6 +30,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from starnav.detect.background import nanmedian_last
+
 _MAD_TO_SIGMA = 1.4826
 _MEDIAN_NOISE = 1.25  # standard error of a median / that of a mean, Gaussian noise
 _RING_FRACTION = 0.25
@@ -140,21 +142,21 @@ def _measure(data, mask, x, y, half, radii):
         local = _plane(stamp, annulus, dx, dy)
         # once more without the pixels far off the first plane (a neighbouring star)
         rest = np.where(annulus, stamp - local, np.nan).reshape(n, -1)
-        centre = np.nanmedian(rest, axis=1)[:, None]
-        spread = _MAD_TO_SIGMA * np.nanmedian(np.abs(rest - centre), axis=1)[:, None]
+        centre = nanmedian_last(rest)[:, None]
+        spread = _MAD_TO_SIGMA * nanmedian_last(np.abs(rest - centre))[:, None]
         near = (np.abs(rest - centre) <= _CLIP_SIGMAS * spread).reshape(stamp.shape)
         local = _plane(stamp, annulus & near, dx, dy)
         c0 = local[:, half, half]
         rest = np.where(annulus, stamp - local, np.nan).reshape(n, -1)
-        offset = np.nan_to_num(np.nanmedian(rest, axis=1), nan=0.0)
-        noise = _MAD_TO_SIGMA * np.nanmedian(np.abs(rest - offset[:, None]), axis=1)
+        offset = np.nan_to_num(nanmedian_last(rest), nan=0.0)
+        noise = _MAD_TO_SIGMA * nanmedian_last(np.abs(rest - offset[:, None]))
         pairs = annulus[:, :, 1:] & annulus[:, :, :-1]
         step = np.where(pairs, stamp[:, :, 1:] - stamp[:, :, :-1], np.nan).reshape(n, -1)
-        step_median = np.nanmedian(step, axis=1)[:, None]
-        white = _MAD_TO_SIGMA * np.nanmedian(np.abs(step - step_median), axis=1) / math.sqrt(2)
+        step_median = nanmedian_last(step)[:, None]
+        white = _MAD_TO_SIGMA * nanmedian_last(np.abs(step - step_median)) / math.sqrt(2)
         excess = stamp - local - offset[:, None, None]
         ring_zone = inside & (r2 >= r_ap**2) & (r2 < r_in**2)
-        ring = np.nanmedian(np.where(ring_zone, excess, np.nan).reshape(n, -1), axis=1)
+        ring = nanmedian_last(np.where(ring_zone, excess, np.nan).reshape(n, -1))
     aperture = inside & (r2 < r_ap**2)
     flux = np.where(aperture, excess, 0.0).sum(axis=(1, 2))
     peak = np.where(aperture, excess, -np.inf).max(axis=(1, 2), initial=-np.inf)
@@ -190,22 +192,21 @@ def _stamps(data, mask, x, y, half):
 
 
 def _plane(stamp, zone, dx, dy):
-    """The least-squares plane c0 + cx dx + cy dy through each stamp's ``zone`` pixels (a
-    constant, their mean, when too few), evaluated on the stamp."""
+    """The plane c0 + cx dx + cy dy through each stamp's ``zone`` pixels, fitted as if the
+    zone were symmetric about the source (an annulus: the offsets are then uncorrelated, so
+    each coefficient is a ratio of sums; a zone cut by the image edge is fitted a little
+    less well), evaluated on the stamp."""
     w = zone.astype(float)
+    count = np.maximum(w.sum(axis=(1, 2)), 1.0)
+    gx, gy = np.broadcast_to(dx, zone.shape), np.broadcast_to(dy, zone.shape)
+    mx = (w * gx).sum(axis=(1, 2)) / count
+    my = (w * gy).sum(axis=(1, 2)) / count
     v = np.where(zone, stamp, 0.0)
-    gx, gy = np.broadcast_to(dx, w.shape), np.broadcast_to(dy, w.shape)
-    terms = (np.ones_like(w), gx, gy)
-    normal = np.empty((len(w), 3, 3))
-    rhs = np.empty((len(w), 3))
-    for i, a in enumerate(terms):
-        rhs[:, i] = (w * a * v).sum(axis=(1, 2))
-        for j, b in enumerate(terms):
-            normal[:, i, j] = (w * a * b).sum(axis=(1, 2))
-    count = normal[:, 0, 0]
-    ok = (count >= 10) & (np.abs(np.linalg.det(normal)) > 1e-9 * np.maximum(count, 1) ** 3)
-    coef = np.zeros((len(w), 3))
-    if ok.any():
-        coef[ok] = np.linalg.solve(normal[ok], rhs[ok][:, :, None])[:, :, 0]
-    coef[~ok, 0] = rhs[~ok, 0] / np.maximum(count[~ok], 1)
-    return coef[:, 0, None, None] + coef[:, 1, None, None] * dx + coef[:, 2, None, None] * dy
+    c0 = v.sum(axis=(1, 2)) / count
+    ux, uy = gx - mx[:, None, None], gy - my[:, None, None]
+    sx = np.maximum((w * ux * ux).sum(axis=(1, 2)), 1e-9)
+    sy = np.maximum((w * uy * uy).sum(axis=(1, 2)), 1e-9)
+    cx = (v * ux).sum(axis=(1, 2)) / sx
+    cy = (v * uy).sum(axis=(1, 2)) / sy
+    c0 = c0 - cx * mx - cy * my
+    return c0[:, None, None] + cx[:, None, None] * dx + cy[:, None, None] * dy

@@ -74,7 +74,7 @@ _NOISE_FREE_RMS = 1e-3  # rms assumed for a noise-free image, as a fraction of i
 _MAP_RMS_FLOOR = 0.5  # the noise map is kept above this fraction of the global rms
 _LOCAL_NOISE_MARGIN = 1.25  # the annulus noise counts when this much above the noise map
 _MIN_SNR_FRACTION = 0.5  # of threshold_sigma: a source fainter than that here is dropped
-_CANDIDATES_PER_STAR, _CANDIDATES_EXTRA = 5, 50  # sources measured when max_stars is given
+_CANDIDATES_PER_STAR, _CANDIDATES_EXTRA = 4, 30  # sources measured when max_stars is given
 _PLATEAU_PX = 1500  # a source of more filtered pixels is a patch of residual glow
 _WIDEST_FOR_DEFAULT_KERNEL = 2.5  # PSF sigma (px) beyond which its own Gaussian is used
 
@@ -218,11 +218,13 @@ def _sources(
     and found again with the measured PSF's Gaussian when that is wider than 2.5 px (a
     wider kernel lowers the filtered noise so far that the faint residual of glow along a
     horizon crosses the threshold in large patches, which swallow the stars in them)."""
-    objects, segments = _extract(
-        data, mask, background, threshold_sigma, min_area_px, psf_sigma_px, segments=True
-    )
+    objects = _extract(data, mask, background, threshold_sigma, min_area_px, psf_sigma_px)
     plateaus = objects["npix"] > _PLATEAU_PX
     if plateaus.any():  # the coarse mesh left patches of glow: a finer one, stars masked
+        objects, segments = _extract(
+            data, mask, background, threshold_sigma, min_area_px, psf_sigma_px, segments=True
+        )
+        plateaus = objects["npix"] > _PLATEAU_PX
         compact = np.ones(len(objects) + 1, dtype=bool)
         compact[0] = False
         compact[1:][plateaus] = False
