@@ -82,6 +82,8 @@ KNOWN_FAILURES = {
     "oresat_img_7660.png": "solved, but the boresight is 123″ off (tolerance 91″): a 25° colour"
     " photograph whose lens distortion the pinhole fit (no distortion terms) leaves in",
 }
+
+
 def _params() -> list:
     return [
         pytest.param(n, marks=pytest.mark.xfail(strict=True, reason=KNOWN_FAILURES[n]))
