@@ -46,6 +46,7 @@ from starnav.identify.verify import AMBIGUOUS_PARITY, HypothesisTester, Tally
 BAND_FACTOR = math.sqrt(2.0)
 _LOOKUP_REL_TOL = 0.005  # ratio slack of the loose look-up (projection distortion of a cell)
 _MAX_CELL_HALF_WIDTH = 0.2  # relative focal-length half-width of a cell at most
+MIN_PATTERN_TOLS = 10.0  # a pattern's longest edge spans at least this many pair tolerances
 _FIRST_LOOKUP = 16  # observed patterns of a band's first look-up when there is a deadline
 _FOCAL_STEPS = 3  # Gauss-Newton steps of a pattern's focal length
 
@@ -196,7 +197,7 @@ def search_fov(
     for end in ends:
         if end <= start:
             continue
-        rows = combos[start:end]
+        rows = _informative(combos[start:end], xy, sigma_px)
         start = end
         for band, cells in plans:
             if expired(deadline):
@@ -247,6 +248,17 @@ def search_fov(
         )
         return
     yield FovMatch(None, tester.outcome().reason, tally.hypotheses, float("nan"), None)
+
+
+def _informative(rows: np.ndarray, xy: np.ndarray, sigma_px: float) -> np.ndarray:
+    """The 4-star patterns (rows of ``xy``) whose longest edge spans at least
+    ``MIN_PATTERN_TOLS`` pair tolerances: the edge ratios of a smaller one are known too
+    loosely to pick catalog patterns (a tight cluster of bright stars, the Pleiades in a 10°
+    field, matched thousands per band and took seconds a look-up), and it is verified no
+    better than the patterns around it."""
+    tol_px = MatchSettings.for_focal(sigma_px, 1.0).pair_tol_rad  # at a focal length of 1 px
+    d = np.linalg.norm(xy[rows[:, :, None]] - xy[rows[:, None, :]], axis=-1)  # (m, 4, 4)
+    return rows[d.reshape(len(rows), -1).max(axis=1) >= MIN_PATTERN_TOLS * tol_px]
 
 
 def _settings(sigma_px, focal_px, max_false_match_probability, parity, max_hypotheses, deadline):
