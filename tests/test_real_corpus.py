@@ -95,9 +95,10 @@ def _params() -> list:
 
 
 def _path(name: str) -> Path:
-    if FOLDER is None or not (FOLDER / name).exists():
-        where = FOLDER or "any corpus folder"
-        pytest.skip(f"{name} not in {where}: run python tests/data/real/fetch.py")
+    if FOLDER is None:  # one reason for all, so that pytest -rs prints it once
+        pytest.skip("the real-image corpus is not here: run python tests/data/real/fetch.py")
+    if not (FOLDER / name).exists():
+        pytest.skip(f"{name} not in {FOLDER}: run python tests/data/real/fetch.py")
     return FOLDER / name
 
 
