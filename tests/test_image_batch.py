@@ -208,3 +208,20 @@ def test_a_batch_on_a_local_dask_cluster_tracks_in_runs(sequence):
         _check(r.solution, R)
     # two runs, one per worker, each tracked after its first frame
     assert [r.record["tracked"] for r in results] == [False, True, True, False, True]
+
+
+def test_a_batch_reads_each_files_hints_unless_told_not_to(tmp_path):
+    from starnav.detect.header import ImageHints
+    from starnav.image_batch import solve_file
+
+    sky = load_catalog(None, mag_limit=7.0)
+    frame = render_frame(sky, CAMERA, attitude_from_radec_roll(*PAN[3], 1), RenderSettings(seed=6))
+    header = fits.Header()
+    header["RA"], header["DEC"] = 84.0, -5.0
+    path = tmp_path / "hinted.fits"
+    fits.PrimaryHDU(frame.image.astype(np.float32), header).writeto(path)
+    read = solve_file(path, {}, ImageOutputs())
+    assert read.record["hints"]["sources"] == ["RA/DEC"]
+    ignored = solve_file(path, {"hints": ImageHints()}, ImageOutputs())
+    assert ignored.record["hints"] is None
+    assert read.solution is not None and ignored.solution is not None

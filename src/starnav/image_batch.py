@@ -130,7 +130,8 @@ def solve_file(
     try:
         pixels = read_image(path)
         read_ms = (time.perf_counter() - t0) * 1e3
-        opts = dict(options, hints=fits_hints(path))
+        opts = dict(options)
+        opts.setdefault("hints", fits_hints(path))  # unless given (--no-hints: none)
         if prior is not None and prior.camera is not None:
             size = (prior.camera.width, prior.camera.height)
             if size == (pixels.shape[1], pixels.shape[0]):
