@@ -148,7 +148,7 @@ def main() -> None:
             "|---|---|---|---|---|---|---|",
             *rows,
             "",
-            f"{machine()} (load average {LOAD:.1f} when it started); "
+            f"{machine(LOAD)}; "
             f"`python benchmarks/image_batch.py --files {args.files}`, "
             f"{time.perf_counter() - t_start:.0f} s.",
         ]

@@ -44,14 +44,17 @@ def random_field(camera, rng) -> SimulatedFrame:
     )
 
 
-def machine() -> str:
+def machine(load: float | None = None) -> str:
+    """CPU, cores, Python, system; with ``load`` (``os.getloadavg()[0]`` when the run
+    started) also the load average, for runs that other jobs may have shared."""
     cpu = platform.processor() or platform.machine()
     try:
         with open("/proc/cpuinfo") as fh:
             cpu = next(line.split(":", 1)[1].strip() for line in fh if "model name" in line)
     except (OSError, StopIteration):
         pass
-    return f"{cpu}, {os.cpu_count()} cores, Python {platform.python_version()}, {platform.system()}"
+    text = f"{cpu}, {os.cpu_count()} cores, Python {platform.python_version()}, {platform.system()}"
+    return text if load is None else f"{text} (load average {load:.1f} when it started)"
 
 
 def warm_up(catalog, camera) -> float:

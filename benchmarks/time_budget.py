@@ -257,7 +257,7 @@ def main() -> None:
             "|---|---|---|---|---|---|",
             *refusals,
             "",
-            f"{machine()} (load average {LOAD:.1f} when it started); "
+            f"{machine(LOAD)}; "
             f"`python benchmarks/time_budget.py --frames {args.frames} --trials "
             f"{args.trials}`, {time.perf_counter() - t0:.0f} s.",
         ]

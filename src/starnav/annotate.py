@@ -16,6 +16,7 @@ from astropy.stats import sigma_clipped_stats
 from astropy.visualization import AsinhStretch, ImageNormalize
 from matplotlib import patheffects
 from matplotlib.axes import Axes
+from matplotlib.collections import PathCollection
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.path import Path as MarkerPath
@@ -149,17 +150,7 @@ def annotation_figure(
     ids = catalog.ids[rows]
     handles = _catalog_markers(ax, xy, ids, match, catalog, R, camera)
     if len(detected):
-        handles.append(
-            ax.scatter(
-                *detected.T,
-                marker="o",
-                s=40,
-                facecolors="none",
-                edgecolors="cyan",
-                linewidths=0.9,
-                label="detected",
-            )
-        )
+        handles.append(_circles(ax, detected, "detected"))
     if len(match):
         handles.append(_residuals_and_ids(ax, match, residual_scale))
     _name_labels(ax, ids, xy, names)
@@ -167,6 +158,14 @@ def annotation_figure(
         _legend(ax, handles)
     _title(fig, lines, fig_h)
     return fig
+
+
+def _circles(
+    ax: Axes, xy: np.ndarray, label: str, *, size=40, color="cyan", width=0.9
+) -> PathCollection:
+    """Open circles at detections ``xy`` (n, 2, px): the marker of detected stars."""
+    return ax.scatter(*xy.T, marker="o", s=size, facecolors="none", edgecolors=color,
+                      linewidths=width, label=label)  # fmt: skip
 
 
 def _title(fig: Figure, lines: list[str], fig_h: int) -> None:
@@ -197,29 +196,10 @@ def unsolved_figure(
     handles = []
     given, rest = detected[:used], detected[used:]
     if len(rest):
-        handles.append(
-            ax.scatter(
-                *rest.T,
-                marker="o",
-                s=30,
-                facecolors="none",
-                edgecolors="#557788",
-                linewidths=0.7,
-                label="detected (verification only)",
-            )
-        )
+        dim = {"size": 30, "color": "#557788", "width": 0.7}
+        handles.append(_circles(ax, rest, "detected (verification only)", **dim))
     if len(given):
-        handles.append(
-            ax.scatter(
-                *given.T,
-                marker="o",
-                s=40,
-                facecolors="none",
-                edgecolors="cyan",
-                linewidths=0.9,
-                label=f"brightest {len(given)} (patterns)",
-            )
-        )
+        handles.append(_circles(ax, given, f"brightest {len(given)} (patterns)"))
         for rank, (x, y) in enumerate(given[:_RANKS_SHOWN], start=1):
             ax.annotate(str(rank), (x, y), xytext=(5, 5), textcoords="offset points",
                         color="cyan", fontsize=7, path_effects=_OUTLINE)  # fmt: skip

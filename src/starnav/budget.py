@@ -117,11 +117,6 @@ class Deadline:
         return cls(budget_s, time.perf_counter(), _COMPILE_S[0])
 
     @property
-    def spent_s(self) -> float:
-        """Seconds of the budget used so far (compilation left out)."""
-        return time.perf_counter() - self.start - (_COMPILE_S[0] - self.compile_s)
-
-    @property
     def end_time(self) -> float:
         """When the budget ends (``time.perf_counter()`` s), the compilations so far left out
         (a kernel reads its clock against it)."""
@@ -129,7 +124,7 @@ class Deadline:
 
     def expired(self) -> bool:
         """Whether the budget is spent."""
-        return self.spent_s >= self.budget_s
+        return time.perf_counter() >= self.end_time
 
     def reason(self, tried: str) -> str:
         """The reason of a solve stopped by this deadline, with what was ``tried``."""
