@@ -265,6 +265,7 @@ def solve_fov(
     prior: np.ndarray | None = None,
     prior_sigma_deg: float = 1.0,
     position_hint_deg: tuple[float, float] | None = None,
+    position_radius_deg: float = POSITION_HINT_RADIUS_DEG,
 ) -> SolveResult:
     """Identify stars at ``xy`` (n, 2, px) in an image ``width`` x ``height`` px whose field
     of view is unknown: searched within ``fov_range_deg`` (horizontal, degrees), or within
@@ -281,7 +282,7 @@ def solve_fov(
     of a sequence (``R_cam_from_icrs``, good to ``prior_sigma_deg``), with a ``camera`` (the
     previous frame's fitted one): tracking, falling back to lost in space with that camera
     (``tracking_solver``). ``position_hint_deg``: (RA, Dec) of the boresight, roughly (e.g.
-    a FITS header's): the catalog within ``POSITION_HINT_RADIUS_DEG`` of it is searched first,
+    a FITS header's): the catalog within ``position_radius_deg`` of it is searched first,
     then the whole sky (the pinhole search). Other options as ``starnav.solve_verbose``.
     """
     if camera is not None:
@@ -332,7 +333,11 @@ def solve_fov(
     near = None
     if position_hint_deg is not None:
         ra, dec = (math.radians(float(v)) for v in position_hint_deg)
-        near = (radec_to_unit(ra, dec), math.radians(POSITION_HINT_RADIUS_DEG))
+        if not (math.isfinite(position_radius_deg) and 0 < position_radius_deg <= 180):
+            raise StarnavError(
+                f"the position hint's radius must be in (0, 180] degrees, got {position_radius_deg}"
+            )
+        near = (radec_to_unit(ra, dec), math.radians(position_radius_deg))
     deadline = Deadline.after(budget_s)
     with first_use("solve"):
         return _search_and_fit(

@@ -102,6 +102,7 @@ def solve_image(
     parity: int | None = None,
     hints: ImageHints | None = None,
     time_budget_s: float | None = None,
+    downsample: int = 1,
     **options,
 ) -> ImageSolveResult:
     """Solve an image file (FITS, PNG, JPEG, TIFF) or a 2-D array (row 0 at the top).
@@ -122,8 +123,10 @@ def solve_image(
     ``fov_range_deg`` is given and it lies within the default range, its epoch used when
     ``epoch_year`` is not, its position searched first; a solve that fails with the hinted
     FOV is tried again without it.
-    ``time_budget_s``: the solve's (``starnav.budget``; detection is not counted). Other
-    keywords: see ``starnav.fov.solve_fov``.
+    ``time_budget_s``: the solve's (``starnav.budget``; detection is not counted).
+    ``downsample``: stars are detected in the image binned by this factor (the mean of each
+    block; faster on large noisy images, astrometry.net's ``--downsample``) and solved at full
+    resolution. Other keywords: see ``starnav.fov.solve_fov``.
     """
     if isinstance(camera, str | Path):
         camera = load_camera(camera)
@@ -133,6 +136,8 @@ def solve_image(
         raise ImageError(f"max_stars must be an integer >= 4, got {max_stars!r}")
     lens = camera.model if camera is not None else lens
     check_budget(time_budget_s, 1.0)  # a bad budget fails before any work
+    if isinstance(downsample, bool) or not (isinstance(downsample, int) and downsample >= 1):
+        raise ImageError(f"downsample must be an integer >= 1, got {downsample!r}")
     t0 = time.perf_counter()
     if isinstance(image, np.ndarray):
         pixels, read_ms = image, 0.0
@@ -152,7 +157,12 @@ def solve_image(
         )
     budget_s = check_budget(time_budget_s, _default_budget_s(camera, fov_deg, lens, pixels))
     t1 = time.perf_counter()
-    found = detect_image(pixels, lens=lens, threshold_sigma=threshold_sigma, max_stars=max_stars)
+    found = detect_image(
+        _binned(pixels, downsample), lens=lens, threshold_sigma=threshold_sigma,
+        max_stars=max_stars,
+    )  # fmt: skip
+    if downsample > 1:  # a block's centre is its pixel's centre times the factor
+        found = replace(found, xy=found.xy * downsample, width=width, height=height)
     detect_ms = (time.perf_counter() - t1) * 1e3
     if len(found.xy) < 4:
         reason = f"{len(found.xy)} stars detected, at least 4 are needed"
@@ -186,6 +196,21 @@ def solve_image(
         result.database.catalog,
         hints,
     )
+
+
+def _binned(pixels: np.ndarray, factor: int) -> np.ndarray:
+    """``pixels`` binned ``factor`` x ``factor`` (each block's mean; the last partial row and
+    column of blocks dropped); unchanged for 1."""
+    if factor == 1:
+        return pixels
+    height, width = (n // factor for n in pixels.shape)
+    if min(height, width) < 16:
+        raise ImageError(
+            f"downsample {factor} leaves {width} x {height} px of a {pixels.shape[1]} x "
+            f"{pixels.shape[0]} px image"
+        )
+    blocks = np.asarray(pixels[: height * factor, : width * factor], dtype=np.float32)
+    return blocks.reshape(height, factor, width, factor).mean(axis=(1, 3))
 
 
 def _default_budget_s(camera, fov_deg, lens: str, pixels: np.ndarray) -> float:

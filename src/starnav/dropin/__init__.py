@@ -1,0 +1,1 @@
+"""Drop-in command lines for astronomy software: ``starnav-solve-field`` and ``starnav-astap``."""

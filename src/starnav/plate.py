@@ -1,0 +1,302 @@
+"""Plate solving in astrometry.net's and ASTAP's terms: their hints in, their numbers out.
+
+Astronomy software drives a plate solver through astrometry.net's web API (nova), its
+``solve-field`` command line or ASTAP's. They all speak of an image in FITS pixels (1-based,
+the first pixel's centre at (1, 1)) and describe a solution by its WCS. Ours has no flip: row 0
+of the array is FITS y = 1 (``starnav.wcs``), exactly as solve-field numbers the rows of a JPEG
+or PNG, so a point's FITS pixel is ours + 0.5 and the WCS is the one either tool would write.
+
+``PlateHints`` collects what a client may say of an image (the scale in any of astrometry.net's
+units, a position and radius, the parity, a downsampling factor, the centroid error, the
+reference pixel at the centre); ``solve_plate`` solves an image file or an x, y list with them;
+``Plate`` is the answer in their terms: field centre, radius, pixel scale, the orientation
+("up is X degrees E of N") and parity (nova's +1: det CD >= 0, solve-field's "neg") computed
+from the CD matrix with astrometry.net's own formulas (``net/wcs.py``: ``get_orientation``,
+``get_parity``).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from astropy.wcs import WCS
+
+from starnav.camera import Camera
+from starnav.detect.header import ImageHints, fits_hints, is_fits
+from starnav.errors import StarnavError
+from starnav.fov import DEFAULT_FOV_RANGE_DEG, FOV_LIMITS_DEG, solve_fov
+from starnav.image import ImageSolveResult, solve_image
+from starnav.results import Solution
+from starnav.wcs import choose_sip_order, wcs_from_attitude
+
+SCALE_UNITS = ("degwidth", "arcminwidth", "arcsecperpix", "focalmm")
+FULL_FRAME_WIDTH_MM = 36.0  # "focalmm" is the focal length of a 35 mm camera's 36 mm width
+DEFAULT_POSITION_RADIUS_DEG = 10.0  # a position given without a radius (as fov.py's hint)
+
+
+@dataclass(frozen=True)
+class PlateHints:
+    """What a client tells of an image, in starnav's terms.
+
+    ``fov_range_deg``: (low, high) horizontal field of view, degrees (None: starnav's default
+    range); ``ra_deg``, ``dec_deg``, ``radius_deg``: the boresight lies within ``radius_deg``
+    of this position (searched first, then the whole sky); ``parity``: starnav's (+1: the sky
+    as seen with y down, astrometry.net's "neg"; None: both); ``downsample``: stars detected on
+    the image binned by this factor; ``positional_error_px``: centroid 1-sigma (px; None: 1);
+    ``crpix_center``: the WCS's reference pixel at the image centre.
+    """
+
+    fov_range_deg: tuple[float, float] | None = None
+    ra_deg: float | None = None
+    dec_deg: float | None = None
+    radius_deg: float | None = None
+    parity: int | None = None
+    downsample: int = 1
+    positional_error_px: float | None = None
+    crpix_center: bool = False
+
+
+def width_deg_from_scale(units: str, value: float, width_px: float) -> float:
+    """The image width (degrees) a scale ``value`` in astrometry.net's ``units`` says:
+    "degwidth", "arcminwidth", "arcsecperpix" (times ``width_px``) or "focalmm" (the focal
+    length, mm, of a 35 mm camera: 36 mm wide)."""
+    if units not in SCALE_UNITS:
+        raise StarnavError(f"unknown scale units {units!r}; known: {', '.join(SCALE_UNITS)}")
+    value = _positive(value, "scale")
+    if units == "degwidth":
+        return value
+    if units == "arcminwidth":
+        return value / 60.0
+    if units == "arcsecperpix":
+        return value * width_px / 3600.0
+    return math.degrees(2.0 * math.atan(FULL_FRAME_WIDTH_MM / (2.0 * value)))
+
+
+def fov_range_from_scale(
+    units: str, lower: float, upper: float, width_px: float
+) -> tuple[float, float]:
+    """The horizontal FOV range (degrees) of a scale range (``width_deg_from_scale``), clipped
+    to where starnav searches: the part inside its default range when the two overlap (a
+    client's catch-all 0.1-180° searches what the default search does), else the part inside
+    ``FOV_LIMITS_DEG``. ``StarnavError`` when nothing is left."""
+    ends = sorted(width_deg_from_scale(units, v, width_px) for v in (lower, upper))
+    for lo, hi in (DEFAULT_FOV_RANGE_DEG, FOV_LIMITS_DEG):
+        clipped = (max(ends[0], lo), min(ends[1], hi))
+        if clipped[0] <= clipped[1]:
+            if clipped[0] == clipped[1]:  # one value: search around it
+                clipped = (clipped[0] * 0.95, clipped[1] * 1.05)
+            return clipped
+    raise StarnavError(
+        f"the scale range {ends[0]:.3g}-{ends[1]:.3g}° wide is outside the fields starnav "
+        f"solves ({FOV_LIMITS_DEG[0]:g}-{FOV_LIMITS_DEG[1]:g}°)"
+    )
+
+
+def scale_bounds(est: float, err_percent: float) -> tuple[float, float]:
+    """astrometry.net's "ev" scale type: the estimate ± ``err_percent`` %."""
+    est, err = _positive(est, "scale_est"), _positive(err_percent, "scale_err")
+    return est * (1.0 - err / 100.0), est * (1.0 + err / 100.0)
+
+
+def _positive(value, what: str) -> float:
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise StarnavError(f"{what} must be a number, got {value!r}") from None
+    if not (math.isfinite(v) and v > 0):
+        raise StarnavError(f"{what} must be a positive number, got {value!r}")
+    return v
+
+
+@dataclass(frozen=True)
+class XYList:
+    """A source list: FITS pixel coordinates (1-based) of stars, brightest first, in an image
+    ``width`` x ``height`` px (astrometry.net's xylist)."""
+
+    x: np.ndarray
+    y: np.ndarray
+    width: int
+    height: int
+
+    @classmethod
+    def make(cls, x: Sequence[float], y: Sequence[float], width, height) -> XYList:
+        """Checked: same lengths, finite numbers, a positive size. ``StarnavError`` else."""
+        try:
+            xs, ys = (np.asarray([float(v) for v in a], dtype=float) for a in (x, y))
+        except (TypeError, ValueError):
+            raise StarnavError("x and y must be lists of numbers") from None
+        if len(xs) != len(ys):
+            raise StarnavError(f"x and y differ in length ({len(xs)} and {len(ys)})")
+        if not (np.isfinite(xs).all() and np.isfinite(ys).all()):
+            raise StarnavError("x and y must be finite numbers")
+        w, h = (int(_positive(v, what)) for v, what in ((width, "image_width"),
+                                                        (height, "image_height")))  # fmt: skip
+        return cls(xs, ys, w, h)
+
+    @property
+    def xy(self) -> np.ndarray:
+        """Our pixel coordinates (top-left corner origin): FITS - 0.5."""
+        return np.column_stack([self.x, self.y]) - 0.5
+
+
+@dataclass(frozen=True, eq=False)
+class Plate:
+    """A solved image in astrometry.net's terms (``net/api.py``'s calibration).
+
+    ``ra_deg``, ``dec_deg``: the sky at the image centre (FITS pixel ((W+1)/2, (H+1)/2));
+    ``radius_deg``: half the diagonal; ``pixscale_arcsec``: sqrt |det CD|; ``orientation_deg``:
+    "up is X degrees E of N" of the WCS's +y axis (astrometry.net's raw orientation);
+    ``parity``: nova's, +1.0 when det CD >= 0 (solve-field's "neg"), -1.0 else ("pos");
+    ``wcs``: the WCS (astropy); ``width``, ``height``: px.
+    """
+
+    ra_deg: float
+    dec_deg: float
+    radius_deg: float
+    pixscale_arcsec: float
+    orientation_deg: float
+    parity: float
+    wcs: WCS
+    width: int
+    height: int
+
+    @classmethod
+    def from_wcs(cls, wcs: WCS, width: int, height: int) -> Plate:
+        """astrometry.net's numbers of a WCS (``net/wcs.py``, ``util/sip.c``)."""
+        cd = wcs.pixel_scale_matrix
+        det = float(np.linalg.det(cd))
+        parity = 1.0 if det >= 0 else -1.0
+        t = parity * cd[0, 0] + cd[1, 1]
+        a = parity * cd[1, 0] - cd[0, 1]
+        orientation = -math.degrees(math.atan2(a, t))
+        ra, dec = wcs.all_pix2world([[(width - 1) / 2.0, (height - 1) / 2.0]], 0)[0]
+        scale = 3600.0 * math.sqrt(abs(det))
+        radius = scale * math.hypot(width, height) / 2.0 / 3600.0
+        return cls(float(ra) % 360.0, float(dec), radius, scale, orientation, parity, wcs,
+                   width, height)  # fmt: skip
+
+    @property
+    def parity_name(self) -> str:
+        """solve-field's word: "neg" for det CD >= 0, "pos" else (``solver/solve-field.c``:
+        "negative determinant = positive parity")."""
+        return "neg" if self.parity > 0 else "pos"
+
+    def calibration(self, *, jpeglike: bool) -> dict:
+        """nova's ``api/jobs/N/calibration`` JSON. For a JPEG or PNG (``jpeglike``) nova
+        reports the orientation of the image as displayed, y down: (180 - X) mod 360
+        (``net/models.py``, ``Calibration.get_orientation``)."""
+        orient = (180.0 - self.orientation_deg) % 360.0 if jpeglike else self.orientation_deg
+        return {
+            "ra": self.ra_deg,
+            "dec": self.dec_deg,
+            "width_arcsec": self.pixscale_arcsec * self.width,
+            "height_arcsec": self.pixscale_arcsec * self.height,
+            "radius": self.radius_deg,
+            "pixscale": self.pixscale_arcsec,
+            "orientation": orient,
+            "parity": self.parity,
+        }
+
+
+@dataclass(frozen=True, eq=False)
+class PlateResult:
+    """One plate solve: ``plate`` (None when unsolved, with the ``reason``), the starnav
+    ``solution``, the image's ``pixels`` (None for a source list), the ``image`` result
+    (detections, camera, times; None for a source list), the source ``xy`` (ours, px),
+    ``jpeglike`` (not FITS) and the solve's ``time_ms``."""
+
+    plate: Plate | None
+    reason: str
+    solution: Solution | None
+    width: int
+    height: int
+    time_ms: float
+    pixels: np.ndarray | None = None
+    image: ImageSolveResult | None = None
+    xy: np.ndarray | None = None
+    jpeglike: bool = True
+
+
+def parity_from_nova(value) -> int | None:
+    """starnav's parity of nova's ``parity`` (0: "pos", 1: "neg", 2 or None: both) or of
+    solve-field's word ("pos", "neg", "both")."""
+    table = {0: -1, 1: 1, 2: None, "pos": -1, "neg": 1, "both": None, None: None}
+    if isinstance(value, str) and value.strip().isdigit():
+        value = int(value)
+    if isinstance(value, bool) or not isinstance(value, int | str | None) or value not in table:
+        raise StarnavError(f"parity must be 0 (pos), 1 (neg) or 2 (both), got {value!r}")
+    return table[value]
+
+
+def solve_plate(
+    source: str | Path | XYList,
+    hints: PlateHints = PlateHints(),
+    *,
+    time_budget_s: float | None = None,
+) -> PlateResult:
+    """Solve an image file (FITS, PNG, JPEG, TIFF) or a source list with a client's ``hints``
+    (``PlateHints``; they win over the FITS header's). ``time_budget_s``: the solve's
+    (``starnav.budget`` defaults). The WCS is written for the fitted camera (TAN, TAN-SIP
+    for a distorted fit); ``crpix_center`` puts its reference pixel at the image centre."""
+    options: dict = {"time_budget_s": time_budget_s, "parity": hints.parity}
+    if hints.fov_range_deg is not None:
+        options["fov_range_deg"] = tuple(hints.fov_range_deg)
+    if hints.positional_error_px is not None:
+        options["sigma_px"] = _positive(hints.positional_error_px, "positional_error")
+    if (hints.ra_deg is None) != (hints.dec_deg is None):
+        raise StarnavError("a position hint needs both RA and Dec")
+    if hints.ra_deg is not None:
+        if not -90.0 <= float(hints.dec_deg) <= 90.0:
+            raise StarnavError(f"Dec must be within ±90°, got {hints.dec_deg}")
+        options["position_radius_deg"] = hints.radius_deg or DEFAULT_POSITION_RADIUS_DEG
+    if isinstance(source, XYList):
+        if hints.ra_deg is not None:
+            options["position_hint_deg"] = (float(hints.ra_deg), float(hints.dec_deg))
+        res = solve_fov(source.xy, width=source.width, height=source.height, **options)
+        sol = res.solution
+        cam = None if sol is None else sol.camera
+        return _result(sol, cam, res.reason, source.width, source.height, res.time_ms,
+                       hints, xy=source.xy)  # fmt: skip
+    path = Path(source)
+    header = fits_hints(path)
+    if hints.ra_deg is not None:
+        header = ImageHints(float(hints.ra_deg) % 360.0, float(hints.dec_deg), header.fov_deg,
+                            header.epoch_year, (*header.sources, "client"))  # fmt: skip
+    from starnav.detect.read import read_image
+
+    pixels = read_image(path)
+    res = solve_image(pixels, hints=header, downsample=hints.downsample, **options)
+    height, width = pixels.shape
+    return _result(res.solution, res.camera, res.reason, width, height, res.total_ms, hints,
+                   pixels=pixels, image=res, xy=res.detections.xy,
+                   jpeglike=not is_fits(path))  # fmt: skip
+
+
+def _result(sol, camera, reason, width, height, time_ms, hints, **kw) -> PlateResult:
+    plate = None
+    if sol is not None:
+        plate = Plate.from_wcs(plate_wcs(sol.R_cam_from_icrs, camera, hints.crpix_center),
+                               width, height)  # fmt: skip
+    return PlateResult(plate, reason, sol, width, height, time_ms, **kw)
+
+
+def plate_wcs(R_cam_from_icrs: np.ndarray, camera, crpix_center: bool = False) -> WCS:
+    """The WCS of a solved camera (``starnav.wcs.wcs_from_attitude``). ``crpix_center``: a
+    camera whose principal point is off the image centre is turned so that its axis passes
+    through the centre (a pinhole without distortion: the same sky to well below a pixel over
+    fields whose principal point is a few per cent off), like solve-field's --crpix-center."""
+    centre = (camera.width / 2.0, camera.height / 2.0)
+    if crpix_center and (camera.cx, camera.cy) != centre and not camera.distorted:
+        axis = camera.pixels_to_bearings(np.array([centre]))[0]
+        x_dir = camera.pixels_to_bearings(np.array([[centre[0] + 1.0, centre[1]]]))[0]
+        z = axis / np.linalg.norm(axis)
+        x = x_dir - z * (x_dir @ z)
+        x /= np.linalg.norm(x)
+        turn = np.array([x, np.cross(z, x), z])  # new camera axes in the old camera frame
+        R_cam_from_icrs = turn @ R_cam_from_icrs
+        camera = Camera(camera.width, camera.height, camera.focal_px, *centre)
+    return wcs_from_attitude(R_cam_from_icrs, camera, sip_order=choose_sip_order(camera))

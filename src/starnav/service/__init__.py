@@ -1,0 +1,1 @@
+"""starnav as an HTTP service speaking astrometry.net's nova API (``starnav serve``)."""
