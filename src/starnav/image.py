@@ -286,7 +286,7 @@ def annotate_result(path_out: str | Path, image: np.ndarray, result: ImageSolveR
     """Draw an image into a PNG. Solved: detections, catalog stars, ids, names of bright stars
     and the residuals (``starnav.annotate``); not solved: the detections by rank and the
     reason (``starnav.annotate.unsolved_figure``)."""
-    from starnav.annotate import annotate_image, save_figure, unsolved_figure
+    from starnav.annotate import save_figure, unsolved_figure
 
     s, cam, cat = result.solution, result.camera, result.catalog
     if s is None or cam is None or cat is None:
@@ -301,6 +301,21 @@ def annotate_result(path_out: str | Path, image: np.ndarray, result: ImageSolveR
         used = min(len(det.xy), DEFAULT_PATTERN_STARS)
         save_figure(unsolved_figure(image, detected_xy=det.xy, used=used, lines=lines), path_out)
         return
+    annotate_solution(path_out, image, result.detections.xy, s, cam, cat)
+
+
+def annotate_solution(
+    path_out: str | Path,
+    image: np.ndarray,
+    detected_xy: np.ndarray,
+    s: Solution,
+    cam: CameraModel,
+    cat: Catalog,
+) -> None:
+    """Draw a solution on an image into a PNG: the ``detected_xy`` (px), the catalog stars of
+    the field, ids, names of bright stars and the residuals (``starnav.annotate``)."""
+    from starnav.annotate import annotate_image
+
     matched = [m for m in s.stars if m.catalog_id is not None]
     rows = cat.rows([m.catalog_id for m in matched])
     xy = np.array([(m.x, m.y) for m in matched]).reshape(-1, 2)
@@ -308,7 +323,7 @@ def annotate_result(path_out: str | Path, image: np.ndarray, result: ImageSolveR
     annotate_image(
         path_out,
         image,
-        detected_xy=result.detections.xy,
+        detected_xy=detected_xy,
         R_cam_from_icrs=s.R_cam_from_icrs,
         camera=cam,
         catalog=cat,
@@ -325,21 +340,23 @@ def write_outputs(
     source: str | Path | None,
     pixels: np.ndarray,
     result: ImageSolveResult,
+    wcs=None,
 ) -> dict[str, str]:
     """Write what ``paths`` asks for (a kind's path None: not written): "wcs", a FITS WCS
-    header in the projection of the fitted camera (solved only); "new_fits", the image as
-    FITS with that WCS in its header, like astrometry.net's ``.new`` (solved only; a FITS
-    ``source`` keeps its own 2-D data and header cards, others get the luminance that was
-    solved); "annotate", the picture (``annotate_result``, solved or not). Returns the
-    paths written, by kind."""
+    header in the projection of the fitted camera (solved only; ``wcs``, an astropy WCS of
+    the solution, when given); "new_fits", the image as FITS with that WCS in its header, like
+    astrometry.net's ``.new`` (solved only; a FITS ``source`` keeps its own 2-D data and header
+    cards, others get the luminance that was solved); "annotate", the picture
+    (``annotate_result``, solved or not). Returns the paths written, by kind."""
     written: dict[str, str] = {}
     s = result.solution
     if s is not None and (paths.get("wcs") or paths.get("new_fits")):
         from starnav.wcs import choose_sip_order, wcs_from_attitude, write_wcs
 
-        wcs = wcs_from_attitude(
-            s.R_cam_from_icrs, result.camera, sip_order=choose_sip_order(result.camera)
-        )
+        if wcs is None:
+            wcs = wcs_from_attitude(
+                s.R_cam_from_icrs, result.camera, sip_order=choose_sip_order(result.camera)
+            )
         if paths.get("wcs"):
             write_wcs(paths["wcs"], wcs)
             written["wcs"] = str(paths["wcs"])

@@ -26,10 +26,11 @@ import numpy as np
 from astropy.wcs import WCS
 
 from starnav.camera import Camera
+from starnav.catalog import Catalog
 from starnav.detect.header import ImageHints, fits_hints, is_fits
 from starnav.errors import StarnavError
-from starnav.fov import DEFAULT_FOV_RANGE_DEG, FOV_LIMITS_DEG, solve_fov
-from starnav.image import ImageSolveResult, solve_image
+from starnav.fov import DEFAULT_FOV_RANGE_DEG, DEFAULT_PATTERN_STARS, FOV_LIMITS_DEG, solve_fov
+from starnav.image import ImageSolveResult, annotate_solution, solve_image, write_outputs
 from starnav.results import Solution
 from starnav.wcs import choose_sip_order, wcs_from_attitude
 
@@ -207,7 +208,7 @@ class PlateResult:
     """One plate solve: ``plate`` (None when unsolved, with the ``reason``), the starnav
     ``solution``, the image's ``pixels`` (None for a source list), the ``image`` result
     (detections, camera, times; None for a source list), the source ``xy`` (ours, px),
-    ``jpeglike`` (not FITS) and the solve's ``time_ms``."""
+    ``jpeglike`` (not FITS), the solve's ``time_ms`` and the ``catalog`` matched in."""
 
     plate: Plate | None
     reason: str
@@ -219,6 +220,7 @@ class PlateResult:
     image: ImageSolveResult | None = None
     xy: np.ndarray | None = None
     jpeglike: bool = True
+    catalog: Catalog | None = None
 
 
 def parity_from_nova(value) -> int | None:
@@ -260,7 +262,7 @@ def solve_plate(
         sol = res.solution
         cam = None if sol is None else sol.camera
         return _result(sol, cam, res.reason, source.width, source.height, res.time_ms,
-                       hints, xy=source.xy)  # fmt: skip
+                       hints, xy=source.xy, catalog=res.database.catalog)  # fmt: skip
     path = Path(source)
     header = fits_hints(path)
     if hints.ra_deg is not None:
@@ -273,7 +275,7 @@ def solve_plate(
     height, width = pixels.shape
     return _result(res.solution, res.camera, res.reason, width, height, res.total_ms, hints,
                    pixels=pixels, image=res, xy=res.detections.xy,
-                   jpeglike=not is_fits(path))  # fmt: skip
+                   jpeglike=not is_fits(path), catalog=res.catalog)  # fmt: skip
 
 
 def _result(sol, camera, reason, width, height, time_ms, hints, **kw) -> PlateResult:
@@ -300,3 +302,48 @@ def plate_wcs(R_cam_from_icrs: np.ndarray, camera, crpix_center: bool = False) -
         R_cam_from_icrs = turn @ R_cam_from_icrs
         camera = Camera(camera.width, camera.height, camera.focal_px, *centre)
     return wcs_from_attitude(R_cam_from_icrs, camera, sip_order=choose_sip_order(camera))
+
+
+def write_plate_files(
+    result: PlateResult,
+    source: str | Path | None,
+    *,
+    wcs: str | Path | None = None,
+    new_fits: str | Path | None = None,
+    annotate: str | Path | None = None,
+) -> dict[str, str]:
+    """Write a plate solve's files (each None: not written): ``wcs``, the WCS header
+    (astrometry.net's ``.wcs``); ``new_fits``, the image with it (``.new``; a FITS ``source``
+    keeps its data and header cards); ``annotate``, a PNG (solved or not; a source list is
+    drawn on a black frame). Returns the paths written, by kind (``starnav.image
+    .write_outputs``)."""
+    paths = {"wcs": wcs, "new_fits": new_fits, "annotate": annotate}
+    paths = {k: Path(v) for k, v in paths.items() if v is not None}
+    plate_wcs_ = None if result.plate is None else result.plate.wcs
+    if result.image is not None:
+        return write_outputs(paths, source, result.pixels, result.image, wcs=plate_wcs_)
+    from starnav.wcs import write_wcs
+
+    written: dict[str, str] = {}
+    if plate_wcs_ is not None and "wcs" in paths:
+        write_wcs(paths["wcs"], plate_wcs_)
+        written["wcs"] = str(paths["wcs"])
+    if "annotate" in paths:
+        _annotate_list(paths["annotate"], result)
+        written["annotate"] = str(paths["annotate"])
+    return written
+
+
+def _annotate_list(path_out: Path, result: PlateResult) -> None:
+    """A source list's picture: its points on a black frame of the image's size, identified
+    (``starnav.annotate``) when solved."""
+    from starnav.annotate import save_figure, unsolved_figure
+
+    frame = np.zeros((result.height, result.width), dtype=np.float32)
+    s, xy = result.solution, result.xy
+    if s is None:
+        fig = unsolved_figure(frame, detected_xy=xy, used=min(len(xy), DEFAULT_PATTERN_STARS),
+                              lines=[f"not solved: {result.reason}"])  # fmt: skip
+        save_figure(fig, path_out)
+        return
+    annotate_solution(path_out, frame, xy, s, s.camera, result.catalog)
