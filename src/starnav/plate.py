@@ -18,7 +18,7 @@ from the CD matrix with astrometry.net's own formulas (``net/wcs.py``: ``get_ori
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -236,14 +236,26 @@ def parity_from_nova(value) -> int | None:
 
 def solve_plate(
     source: str | Path | XYList,
-    hints: PlateHints = PlateHints(),
+    hints: PlateHints | Callable[[int], PlateHints] = PlateHints(),
     *,
     time_budget_s: float | None = None,
 ) -> PlateResult:
     """Solve an image file (FITS, PNG, JPEG, TIFF) or a source list with a client's ``hints``
-    (``PlateHints``; they win over the FITS header's). ``time_budget_s``: the solve's
+    (``PlateHints``, or a function of the image's width in px giving them, for scales in
+    arcsec per pixel; they win over the FITS header's). ``time_budget_s``: the solve's
     (``starnav.budget`` defaults). The WCS is written for the fitted camera (TAN, TAN-SIP
     for a distorted fit); ``crpix_center`` puts its reference pixel at the image centre."""
+    if isinstance(source, XYList):
+        return _solve_plate(source, None, hints, time_budget_s)
+    from starnav.detect.read import read_image
+
+    pixels = read_image(source)
+    return _solve_plate(Path(source), pixels, hints, time_budget_s)
+
+
+def _solve_plate(source, pixels, hints, time_budget_s) -> PlateResult:
+    if callable(hints):
+        hints = hints(source.width if pixels is None else pixels.shape[1])
     options: dict = {"time_budget_s": time_budget_s, "parity": hints.parity}
     if hints.fov_range_deg is not None:
         options["fov_range_deg"] = tuple(hints.fov_range_deg)
@@ -263,14 +275,11 @@ def solve_plate(
         cam = None if sol is None else sol.camera
         return _result(sol, cam, res.reason, source.width, source.height, res.time_ms,
                        hints, xy=source.xy, catalog=res.database.catalog)  # fmt: skip
-    path = Path(source)
+    path = source
     header = fits_hints(path)
     if hints.ra_deg is not None:
         header = ImageHints(float(hints.ra_deg) % 360.0, float(hints.dec_deg), header.fov_deg,
                             header.epoch_year, (*header.sources, "client"))  # fmt: skip
-    from starnav.detect.read import read_image
-
-    pixels = read_image(path)
     res = solve_image(pixels, hints=header, downsample=hints.downsample, **options)
     height, width = pixels.shape
     return _result(res.solution, res.camera, res.reason, width, height, res.total_ms, hints,

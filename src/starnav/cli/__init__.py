@@ -20,6 +20,7 @@ from starnav.cli import (
     locate,
     pointing,
     render,
+    serve,
     simulate,
     solve,
 )
@@ -38,6 +39,7 @@ COMMAND_MODULES = (
     solve,
     render,
     calibrate,
+    serve,
 )
 
 

@@ -86,6 +86,16 @@ def add_time_budget(p: argparse.ArgumentParser) -> None:
     )
 
 
+def add_dask(p: argparse.ArgumentParser, what: str) -> None:
+    """--dask ADDRESS: run ``what`` on a Dask cluster (``starnav.pipeline.cluster``)."""
+    p.add_argument(
+        "--dask",
+        metavar="ADDRESS",
+        help=f"run {what} on this Dask scheduler (e.g. tcp://host:8786), or 'local' for a "
+        "LocalCluster",
+    )
+
+
 def png_path(text: str) -> str:
     """Argument type: the name of a PNG file to write."""
     if not text.lower().endswith(".png"):

@@ -10,6 +10,7 @@ from starnav.cli.common import (
     EXIT_OK,
     Subparsers,
     add_algorithm,
+    add_dask,
     algorithm_options,
     check_parent_dir,
     count,
@@ -60,11 +61,7 @@ def add_parser(subparsers: Subparsers) -> None:
     p.add_argument(
         "--workers", type=positive_int, help="processes (default: all cores; 1: this process)"
     )
-    p.add_argument(
-        "--dask",
-        metavar="ADDRESS",
-        help="run on this Dask scheduler (e.g. tcp://host:8786), or 'local' for a LocalCluster",
-    )
+    add_dask(p, "the frames")
     p.add_argument("--frames-csv", metavar="CSV", help="write one row per frame here")
     p.add_argument("--sky-map", metavar="PNG", type=png_path, help="whole-sky outcome map")
     p.add_argument("--json", action="store_true", help="print one JSON object")

@@ -16,6 +16,7 @@ from starnav.cli.common import (
     EXIT_NOT_SOLVED,
     EXIT_OK,
     Subparsers,
+    add_dask,
     add_fov_search,
     add_time_budget,
     check_parent_dir,
@@ -100,11 +101,7 @@ def add_parser(subparsers: Subparsers) -> None:
     batch.add_argument(
         "--workers", type=positive_int, help="processes for a batch (default: all cores)"
     )
-    batch.add_argument(
-        "--dask",
-        metavar="ADDRESS",
-        help="run the batch on this Dask scheduler (e.g. tcp://host:8786), or 'local'",
-    )
+    add_dask(batch, "the batch")
     batch.add_argument("--jsonl", metavar="FILE", help="write one JSON line per file here")
     batch.add_argument(
         "--track",

@@ -1,0 +1,94 @@
+"""``starnav serve``: the nova-compatible HTTP service and its web page (``starnav.service``)."""
+
+from __future__ import annotations
+
+import argparse
+import ipaddress
+import sys
+from pathlib import Path
+
+from starnav.cli.common import (
+    EXIT_OK,
+    Subparsers,
+    add_dask,
+    add_time_budget,
+    finite,
+    positive_int,
+)
+from starnav.errors import StarnavError
+
+DEFAULT_PORT = 8080
+
+
+def add_parser(subparsers: Subparsers) -> None:
+    """The ``serve`` command and its options."""
+    p = subparsers.add_parser(
+        "serve",
+        help="an HTTP plate-solving service speaking astrometry.net's API, with a web page",
+    )
+    p.add_argument("--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1)")
+    p.add_argument("--port", type=positive_int, default=DEFAULT_PORT,
+                   help=f"TCP port (default {DEFAULT_PORT})")  # fmt: skip
+    p.add_argument("--data-dir", default="starnav-data",
+                   help="jobs database and files (default ./starnav-data)")  # fmt: skip
+    p.add_argument("--workers", type=positive_int, default=1,
+                   help="jobs solved at once (worker processes; default 1)")  # fmt: skip
+    p.add_argument("--api-key", help="the key api/login asks for (needed off the loopback)")
+    p.add_argument("--max-upload-mb", type=finite, default=100.0,
+                   help="largest request body accepted (MB; default 100)")  # fmt: skip
+    add_time_budget(p)
+    add_dask(p, "the jobs")
+    p.add_argument("--json", action="store_true",
+                   help="print one JSON line with the address when listening")  # fmt: skip
+    p.set_defaults(run=run)
+
+
+def check_host(host: str, api_key: str | None) -> None:
+    """Refuse to listen beyond the loopback without an API key."""
+    try:
+        loopback = host == "localhost" or ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        loopback = False
+    if not loopback and not api_key:
+        raise StarnavError(
+            f"listening on {host} would let anyone on the network use this server: give "
+            "--api-key KEY (clients log in with it)"
+        )
+
+
+def run(args: argparse.Namespace) -> int:
+    """Serve until interrupted."""
+    check_host(args.host, args.api_key)
+    if args.max_upload_mb <= 0:
+        raise StarnavError(f"--max-upload-mb must be positive, got {args.max_upload_mb:g}")
+    try:
+        import uvicorn
+
+        from starnav.service.app import ServiceConfig, create_app
+    except ImportError as exc:
+        raise StarnavError(
+            f"starnav serve needs the serve extra ({exc.name} is missing): "
+            "pip install 'starnav[serve]'"
+        ) from None
+    data_dir = Path(args.data_dir)
+    try:
+        data_dir.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise StarnavError(f"cannot make --data-dir {str(data_dir)!r}: {exc.strerror}") from None
+    config = ServiceConfig(
+        data_dir=data_dir,
+        workers=args.workers,
+        api_key=args.api_key,
+        max_upload_bytes=int(args.max_upload_mb * 1e6),
+        time_budget_s=args.time_budget,
+        dask_address=args.dask,
+    )
+    url = f"http://{args.host}:{args.port}/"
+    if args.json:
+        import json
+
+        print(json.dumps({"url": url, "data_dir": str(data_dir.resolve())}), flush=True)
+    else:
+        print(f"starnav serve: {url} (data in {data_dir.resolve()})", file=sys.stderr, flush=True)
+    uvicorn.run(create_app(config), host=args.host, port=args.port, log_level="warning")
+    return EXIT_OK

@@ -1,0 +1,457 @@
+"""The HTTP service: astrometry.net's nova API on Starlette, jobs run by a pool of workers.
+
+Routes (GET and POST alike, with or without a trailing slash, as nova's ``net/urls.py``):
+``api/login``, ``api/upload`` (multipart: ``request-json`` and ``file``), ``api/url_upload``
+(a ``url``, or ``x``/``y`` with ``image_width``/``image_height``), ``api/submissions/N``,
+``api/myjobs``, ``api/jobs/N`` and its ``calibration``, ``info``, ``annotations``, ``tags``,
+``machine_tags``, ``objects_in_field``; ``wcs_file/N``, ``new_fits_file/N``,
+``annotated_display/N`` and ``annotated_full/N``. starnav's own: ``api/jobs/N/starnav`` (the
+whole solution: uncertainties, every star), ``json_file/N`` (the same as a download),
+``api/status`` (queue and workers), and the web page at ``/``.
+
+A request's JSON comes as nova's clients send it: the form field ``request-json`` (URL-encoded
+or multipart body, or the query string). Errors are nova's ``{"status": "error",
+"errormessage": ...}``. Uploads need a session from ``api/login``; with ``api_key`` set, the
+login needs that key. A body over ``max_upload_bytes`` is refused (413) before it is read.
+Files are stored under the data dir by job number with the service's own names.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import concurrent.futures
+import contextlib
+import json
+import multiprocessing
+import time
+import urllib.request
+from dataclasses import dataclass
+from pathlib import Path
+
+from starlette.applications import Starlette
+from starlette.exceptions import HTTPException
+from starlette.requests import Request
+from starlette.responses import FileResponse, JSONResponse, Response
+from starlette.routing import Mount, Route
+from starlette.staticfiles import StaticFiles
+
+from starnav.service import nova
+from starnav.service.store import JobStore
+from starnav.service.worker import OUTPUTS, input_name, run_job
+
+STATIC_DIR = Path(__file__).parent / "static"
+DEFAULT_MAX_UPLOAD_MB = 100.0
+URL_TIMEOUT_S = 30.0
+RESULT_FILE = "result.json"
+
+
+@dataclass(frozen=True)
+class ServiceConfig:
+    """How the service runs: ``data_dir`` (SQLite file and job directories), ``workers``
+    (processes solving at once; with ``dask_address``, jobs at once on that cluster),
+    ``api_key`` (None: any key logs in), ``max_upload_bytes``, ``time_budget_s`` per job
+    (None: starnav's defaults)."""
+
+    data_dir: Path
+    workers: int = 1
+    api_key: str | None = None
+    max_upload_bytes: int = int(DEFAULT_MAX_UPLOAD_MB * 1e6)
+    time_budget_s: float | None = None
+    dask_address: str | None = None
+
+
+class Jobs:
+    """The queue: each job waits for a free worker, is marked solving, runs (``run_job``) in
+    a worker process or on the Dask cluster, and its answer and files are stored."""
+
+    def __init__(self, config: ServiceConfig, store: JobStore):
+        self.config, self.store = config, store
+        self._slots = asyncio.Semaphore(config.workers)
+        self._tasks: set[asyncio.Task] = set()
+        self._dask = None
+        self._pool: concurrent.futures.ProcessPoolExecutor | None = None
+        self.running = 0
+
+    def start(self) -> None:
+        """Start the workers and give back the jobs still queued at the last stop."""
+        if self.config.dask_address:
+            from starnav.pipeline.cluster import dask_client
+
+            self._dask = dask_client(self.config.dask_address, self.config.workers)
+        else:
+            self._pool = self._new_pool()
+        for job_id in self.store.recover():
+            self.enqueue(job_id)
+
+    def _new_pool(self) -> concurrent.futures.ProcessPoolExecutor:
+        # forkserver: a worker must not inherit the server's event loop and threads
+        ctx = multiprocessing.get_context("forkserver")
+        return concurrent.futures.ProcessPoolExecutor(self.config.workers, mp_context=ctx)
+
+    async def stop(self) -> None:
+        """Stop: running jobs stay "solving" and are failed as interrupted at the next start."""
+        for task in list(self._tasks):
+            task.cancel()
+        if self._pool is not None:
+            self._pool.shutdown(wait=False, cancel_futures=True)
+        if self._dask is not None:
+            self._dask.close()
+
+    @property
+    def queued(self) -> int:
+        """Jobs waiting or running."""
+        return len(self._tasks)
+
+    def enqueue(self, job_id: int) -> None:
+        """Queue job ``job_id`` (its input already stored)."""
+        task = asyncio.get_running_loop().create_task(self._run(job_id))
+        self._tasks.add(task)
+        task.add_done_callback(self._tasks.discard)
+
+    async def _run(self, job_id: int) -> None:
+        async with self._slots:
+            job = self.store.get(job_id)
+            if job is None or job.done:
+                return
+            data = xy = None
+            if job.kind == "xy":
+                xy = job.request
+            else:
+                data = (self.store.job_dir(job_id) / job.input_name).read_bytes()
+            self.store.start(job_id)
+            self.running += 1
+            try:
+                answer = await self._solve(data, xy, job.request)
+            finally:
+                self.running -= 1
+            self._store_answer(job_id, answer)
+
+    async def _solve(self, data, xy, request) -> dict:
+        args = (data, xy, request, self.config.time_budget_s)
+        loop = asyncio.get_running_loop()
+        try:
+            if self._dask is not None:
+                future = self._dask.submit(run_job, *args, pure=False)
+                return await loop.run_in_executor(None, future.result)
+            return await loop.run_in_executor(self._pool, run_job, *args)
+        except concurrent.futures.process.BrokenProcessPool:
+            self._pool = self._new_pool()  # a worker died (killed, out of memory)
+            return _failed_answer("error: the worker process solving this job died")
+        except Exception as exc:  # the cluster lost the task, ...
+            return _failed_answer(f"error: the worker failed: {type(exc).__name__}: {exc}")
+
+    def _store_answer(self, job_id: int, answer: dict) -> None:
+        jdir = self.store.job_dir(job_id)
+        for kind, blob in answer.get("files", {}).items():
+            (jdir / OUTPUTS[kind]).write_bytes(blob)
+        result = answer.get("result")
+        if result is not None:
+            result = dict(result, reason=answer["reason"], worker_ms=answer.get("worker_ms"))
+            (jdir / RESULT_FILE).write_text(json.dumps(result, indent=1))
+        self.store.finish(job_id, answer["solved"], answer["reason"], answer["calibration"],
+                          result)  # fmt: skip
+
+
+def _failed_answer(reason: str) -> dict:
+    return {"solved": False, "reason": reason, "calibration": None, "result": None, "files": {}}
+
+
+def error(message: str, status_code: int = 200) -> JSONResponse:
+    """nova's error answer (HTTP 200 like nova's, unless ``status_code`` says otherwise)."""
+    return JSONResponse({"status": "error", "errormessage": message}, status_code=status_code)
+
+
+class UploadLimit:
+    """ASGI middleware: a request body over ``limit`` bytes gets 413 (by its Content-Length
+    before anything is read, or once the bytes received pass the limit)."""
+
+    def __init__(self, app, limit: int):
+        self.app, self.limit = app, limit
+
+    async def __call__(self, scope, receive, send):
+        if scope["type"] != "http":
+            return await self.app(scope, receive, send)
+        length = dict(scope.get("headers") or []).get(b"content-length")
+        too_big = f"the upload is larger than this server's limit of {self.limit / 1e6:g} MB"
+        if length is not None and length.isdigit() and int(length) > self.limit:
+            return await error(too_big, 413)(scope, receive, send)
+        seen = 0
+
+        async def counted():
+            nonlocal seen
+            message = await receive()
+            seen += len(message.get("body", b""))
+            if seen > self.limit:
+                raise _TooBig(too_big)
+            return message
+
+        try:
+            await self.app(scope, counted, send)
+        except _TooBig as exc:
+            await error(str(exc), 413)(scope, receive, send)
+
+
+class _TooBig(Exception):
+    pass
+
+
+async def _request_json(request: Request) -> tuple[dict | None, object]:
+    """The ``request-json`` of a request (None when absent) and its form (for the file)."""
+    form = None
+    raw = request.query_params.get("request-json")
+    if request.method == "POST":
+        body = await request.body()  # bounded by UploadLimit; the form parsers read it again
+        try:
+            form = await request.form(max_part_size=1 << 20)
+        except HTTPException:
+            form = _lenient_multipart(request.headers.get("content-type", ""), body)
+        raw = form.get("request-json", raw)
+    if raw is None:
+        return None, form
+    try:
+        args = json.loads(raw if isinstance(raw, str) else await raw.read())
+    except (ValueError, UnicodeDecodeError):
+        return {"__bad__": str(raw)[:100]}, form
+    return args if isinstance(args, dict) else {"__bad__": str(raw)[:100]}, form
+
+
+@dataclass(frozen=True)
+class _Part:
+    """A multipart file part (the ``UploadFile`` subset the service uses)."""
+
+    filename: str
+    data: bytes
+
+    async def read(self) -> bytes:
+        return self.data
+
+
+def _lenient_multipart(content_type: str, body: bytes) -> dict:
+    """A multipart body python-multipart refuses, read by the standard library's MIME parser:
+    astrometry.net's own ``client.py`` ends its boundary lines with a bare LF, which nova's
+    Django accepts. Fields as str, file parts as ``_Part``; {} when it is no multipart."""
+    import email.parser
+    import email.policy
+
+    head = f"Content-Type: {content_type}\r\n\r\n".encode("latin-1", "replace")
+    msg = email.parser.BytesParser(policy=email.policy.HTTP).parsebytes(head + body)
+    if not msg.is_multipart():
+        return {}
+    out: dict = {}
+    for part in msg.iter_parts():
+        name = part.get_param("name", header="content-disposition")
+        if not name:
+            continue
+        data = part.get_payload(decode=True) or b""
+        filename = part.get_filename()
+        if filename is None:
+            out[name] = data.decode("utf-8", "replace").rstrip("\r\n")
+        else:
+            out[name] = _Part(filename, data)
+    return out
+
+
+def create_app(config: ServiceConfig) -> Starlette:
+    """The service's ASGI application (``starnav serve`` runs it with uvicorn)."""
+    store = JobStore(config.data_dir)
+    jobs = Jobs(config, store)
+
+    async def parsed(request: Request, *, session: bool):
+        args, form = await _request_json(request)
+        if args is None:
+            return error("no json"), None, None
+        if "__bad__" in args:
+            return error(f'failed to parse JSON: "{args["__bad__"]}"'), None, None
+        if session:
+            key = args.get("session")
+            if not key:
+                return error('no "session" in JSON.'), None, None
+            if not store.has_session(str(key)):
+                return error(f'no session with key "{key}"'), None, None
+        return None, args, form
+
+    async def login(request: Request):
+        bad, args, _ = await parsed(request, session=False)
+        if bad:
+            return bad
+        key = args.get("apikey")
+        if key is None:
+            return error('need "apikey"')
+        if config.api_key is not None and str(key) != config.api_key:
+            return error("bad apikey")
+        return JSONResponse({"status": "success", "message": "authenticated user: starnav",
+                             "session": store.new_session()})  # fmt: skip
+
+    def accepted(job_id: int) -> JSONResponse:
+        jobs.enqueue(job_id)
+        return JSONResponse({"status": "success", "subid": job_id, "hash": str(job_id)})
+
+    async def upload(request: Request):
+        bad, args, form = await parsed(request, session=True)
+        if bad:
+            return bad
+        upfile = None if form is None else form.get("file")
+        if upfile is None or isinstance(upfile, str):
+            if "x" in args and "y" in args:
+                return xy_job(args)
+            return error('no file: send the image as the multipart field "file"')
+        data = await upfile.read()
+        return image_job(data, upfile.filename or "", args)
+
+    def image_job(data: bytes, original_filename: str, args: dict) -> JSONResponse:
+        if not data:
+            return error("the uploaded file is empty")
+        job_id = store.add_job("image", Path(original_filename).name, _hints_only(args))
+        name = input_name(data[:16])
+        (store.job_dir(job_id) / name).write_bytes(data)
+        store.set_input(job_id, name)
+        return accepted(job_id)
+
+    def xy_job(args: dict) -> JSONResponse:
+        x, y = args.get("x"), args.get("y")
+        if not isinstance(x, list) or not isinstance(y, list):
+            return error('Failed to parse JSON "x" and "y" values -- should be lists of floats')
+        if len(x) != len(y):
+            return error('"x" and "y" lists must be the same length')
+        return accepted(store.add_job("xy", "json-xy", _hints_only(args, keep_xy=True)))
+
+    async def url_upload(request: Request):
+        bad, args, _ = await parsed(request, session=True)
+        if bad:
+            return bad
+        if "x" in args and "y" in args:
+            return xy_job(args)
+        url = args.get("url")
+        if not isinstance(url, str) or not url.lower().startswith(("http://", "https://")):
+            return error('need "url" (http or https), or "x" and "y"')
+        try:
+            data = await asyncio.get_running_loop().run_in_executor(
+                None, _fetch, url, config.max_upload_bytes
+            )
+        except (OSError, ValueError) as exc:
+            return error(f"cannot fetch {url}: {exc}")
+        return image_job(data, url.rsplit("/", 1)[-1], args)
+
+    def job_or_404(request: Request):
+        job = store.get(int(request.path_params["job_id"]))
+        if job is None:
+            return None, JSONResponse({"status": "error", "errormessage": "no such job"}, 404)
+        return job, None
+
+    def answer(view):
+        async def endpoint(request: Request):
+            job, missing = job_or_404(request)
+            return missing or JSONResponse(view(job))
+
+        return endpoint
+
+    async def starnav_json(request: Request):
+        job, missing = job_or_404(request)
+        if missing:
+            return missing
+        return JSONResponse({"id": job.id, "status": job.status, "reason": job.reason,
+                             "original_filename": job.original_filename,
+                             "submitted": job.submitted, "started": job.started,
+                             "finished": job.finished, "calibration": job.calibration,
+                             "result": job.result})  # fmt: skip
+
+    def file_route(name: str, media_type: str, download: str | None):
+        async def endpoint(request: Request):
+            job, missing = job_or_404(request)
+            if missing:
+                return missing
+            path = store.job_dir(job.id) / name
+            if not path.is_file():
+                return Response(f"job {job.id} has no such file ({job.status})\n", 404)
+            filename = None if download is None else download.format(job.id)
+            return FileResponse(path, media_type=media_type, filename=filename)
+
+        return endpoint
+
+    async def myjobs(request: Request):
+        bad, _, _ = await parsed(request, session=True)
+        return bad or JSONResponse({"jobs": store.job_ids(), "status": "success"})
+
+    async def status(request: Request):
+        return JSONResponse({"status": "success", "workers": config.workers,
+                             "queued_or_running": jobs.queued, "running": jobs.running,
+                             "jobs": len(store.job_ids())})  # fmt: skip
+
+    async def page(request: Request):
+        return FileResponse(STATIC_DIR / "index.html", media_type="text/html")
+
+    job = "{job_id:int}"
+    names = lambda key: answer(lambda j: {key: nova.star_names(j)})  # noqa: E731
+    api = {
+        "/api/login": login,
+        "/api/upload": upload,
+        "/api/url_upload": url_upload,
+        f"/api/submissions/{job}": answer(nova.submission_status),
+        "/api/myjobs": myjobs,
+        f"/api/jobs/{job}": answer(nova.job_status),
+        f"/api/jobs/{job}/calibration": answer(nova.calibration),
+        f"/api/jobs/{job}/info": answer(nova.job_info),
+        f"/api/jobs/{job}/annotations": answer(nova.annotations),
+        f"/api/jobs/{job}/tags": names("tags"),
+        f"/api/jobs/{job}/machine_tags": names("tags"),
+        f"/api/jobs/{job}/objects_in_field": names("objects_in_field"),
+        f"/api/jobs/{job}/starnav": starnav_json,
+        "/api/status": status,
+        f"/wcs_file/{job}": file_route(OUTPUTS["wcs"], "application/fits", "wcs-{}.fits"),
+        f"/new_fits_file/{job}": file_route(
+            OUTPUTS["new_fits"], "application/fits", "new-image-{}.fits"
+        ),
+        f"/annotated_display/{job}": file_route(OUTPUTS["annotate"], "image/png", None),
+        f"/annotated_full/{job}": file_route(OUTPUTS["annotate"], "image/png", None),
+        f"/json_file/{job}": file_route(RESULT_FILE, "application/json", "starnav-{}.json"),
+    }
+    # GET and POST, with and without a trailing slash (a redirect would lose a POST)
+    routes = [Route(path + end, endpoint, methods=["GET", "POST"])
+              for path, endpoint in api.items() for end in ("", "/")]  # fmt: skip
+    routes.append(Route("/", page))
+    if STATIC_DIR.is_dir():
+        routes.append(Mount("/static", StaticFiles(directory=STATIC_DIR), name="static"))
+
+    @contextlib.asynccontextmanager
+    async def lifespan(app):
+        jobs.start()
+        yield
+        await jobs.stop()
+        store.close()
+
+    app = Starlette(routes=routes, lifespan=lifespan)
+    app.state.store, app.state.jobs = store, jobs
+    app.add_middleware(UploadLimit, limit=config.max_upload_bytes)
+    return app
+
+
+def _hints_only(args: dict, keep_xy: bool = False) -> dict:
+    """The request as stored: without the session (a credential) and, unless ``keep_xy``,
+    without a source list."""
+    drop = {"session"} | (set() if keep_xy else {"x", "y"})
+    return {k: v for k, v in args.items() if k not in drop}
+
+
+def _fetch(url: str, limit: int) -> bytes:
+    """The bytes at ``url`` (at most ``limit``; ``ValueError`` past it)."""
+    req = urllib.request.Request(url, headers={"User-Agent": "starnav-serve"})
+    with urllib.request.urlopen(
+        req, timeout=URL_TIMEOUT_S
+    ) as resp:  # http(s) only: checked by the caller
+        data = resp.read(limit + 1)
+    if len(data) > limit:
+        raise ValueError(f"larger than this server's limit of {limit / 1e6:g} MB")
+    return data
+
+
+def wait_ready(url: str, timeout_s: float = 30.0) -> None:
+    """Wait until the service at ``url`` answers ``api/status`` (for scripts and tests)."""
+    deadline = time.monotonic() + timeout_s
+    while True:
+        try:
+            with urllib.request.urlopen(url.rstrip("/") + "/api/status", timeout=2):
+                return
+        except OSError:
+            if time.monotonic() > deadline:
+                raise
+            time.sleep(0.1)

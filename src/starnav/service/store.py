@@ -1,0 +1,184 @@
+"""The service's records: sessions, submissions and their jobs, in SQLite under the data dir.
+
+One submission holds one image or source list and gets one job, numbered alike (nova's
+``api/submissions/N`` lists job N). A job is "queued", "solving", "success" or "failure";
+a finished job keeps its reason, nova calibration and starnav's solution as JSON, and its
+files (input, WCS, new FITS, annotated PNG, result JSON) live in ``DATA/jobs/N/`` under names
+the service chooses, never the client's. Every write is one committed transaction, so a
+restart loses no finished job (``JobStore.recover`` fails the ones that were solving and
+gives back the ones still queued).
+"""
+
+from __future__ import annotations
+
+import json
+import secrets
+import sqlite3
+import threading
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+SCHEMA = """
+CREATE TABLE IF NOT EXISTS sessions (
+    key TEXT PRIMARY KEY,
+    created REAL NOT NULL
+);
+CREATE TABLE IF NOT EXISTS jobs (
+    id INTEGER PRIMARY KEY AUTOINCREMENT,
+    kind TEXT NOT NULL,              -- "image" or "xy"
+    original_filename TEXT NOT NULL,
+    input_name TEXT,                 -- file name in the job's directory (image) or NULL
+    request TEXT NOT NULL,           -- the client's JSON (hints), as received
+    status TEXT NOT NULL,            -- queued | solving | success | failure
+    submitted REAL NOT NULL,
+    started REAL,
+    finished REAL,
+    reason TEXT,
+    calibration TEXT,                -- nova's calibration JSON (solved)
+    result TEXT                      -- starnav's JSON of the solve
+);
+"""
+STATUSES = ("queued", "solving", "success", "failure")
+INTERRUPTED = "interrupted: the server stopped while this job was solving"
+
+
+@dataclass(frozen=True)
+class Job:
+    """One job's record (times: Unix seconds, None when not reached)."""
+
+    id: int
+    kind: str
+    original_filename: str
+    input_name: str | None
+    request: dict
+    status: str
+    submitted: float
+    started: float | None
+    finished: float | None
+    reason: str | None
+    calibration: dict | None
+    result: dict | None
+
+    @property
+    def done(self) -> bool:
+        """Finished: "success" or "failure"."""
+        return self.status in ("success", "failure")
+
+
+class JobStore:
+    """The SQLite file ``DATA/starnav.sqlite`` and the job directories ``DATA/jobs/N``."""
+
+    def __init__(self, data_dir: str | Path):
+        self.data_dir = Path(data_dir).resolve()
+        (self.data_dir / "jobs").mkdir(parents=True, exist_ok=True)
+        self._lock = threading.Lock()
+        self._db = sqlite3.connect(
+            self.data_dir / "starnav.sqlite", check_same_thread=False, isolation_level=None
+        )
+        self._db.execute("PRAGMA journal_mode=WAL")
+        self._db.executescript(SCHEMA)
+
+    def close(self) -> None:
+        """Close the database."""
+        self._db.close()
+
+    def _write(self, sql: str, args: tuple = ()) -> sqlite3.Cursor:
+        with self._lock:
+            return self._db.execute(sql, args)
+
+    def new_session(self) -> str:
+        """A new session key (nova's ``api/login``)."""
+        key = secrets.token_hex(16)
+        self._write("INSERT INTO sessions VALUES (?, ?)", (key, time.time()))
+        return key
+
+    def has_session(self, key: str) -> bool:
+        """Whether ``key`` was given by ``new_session``."""
+        with self._lock:
+            row = self._db.execute("SELECT 1 FROM sessions WHERE key = ?", (key,)).fetchone()
+        return row is not None
+
+    def add_job(self, kind: str, original_filename: str, request: dict) -> int:
+        """A queued job; its directory is made. Returns its number."""
+        cur = self._write(
+            "INSERT INTO jobs (kind, original_filename, request, status, submitted) "
+            "VALUES (?, ?, ?, 'queued', ?)",
+            (kind, original_filename[:200], json.dumps(request), time.time()),
+        )
+        job_id = int(cur.lastrowid)
+        self.job_dir(job_id).mkdir(parents=True, exist_ok=True)
+        return job_id
+
+    def job_dir(self, job_id: int) -> Path:
+        """The directory of job ``job_id`` (made by ``add_job``)."""
+        return self.data_dir / "jobs" / str(int(job_id))
+
+    def set_input(self, job_id: int, name: str) -> None:
+        """Record the name of the job's input file in its directory."""
+        self._write("UPDATE jobs SET input_name = ? WHERE id = ?", (name, job_id))
+
+    def start(self, job_id: int) -> None:
+        """The job is being solved."""
+        self._write(
+            "UPDATE jobs SET status = 'solving', started = ? WHERE id = ?", (time.time(), job_id)
+        )
+
+    def finish(
+        self, job_id: int, solved: bool, reason: str, calibration: dict | None, result: dict | None
+    ) -> None:
+        """The job's answer (status "success" when ``solved``, else "failure")."""
+        self._write(
+            "UPDATE jobs SET status = ?, finished = ?, started = COALESCE(started, ?), "
+            "reason = ?, calibration = ?, result = ? WHERE id = ?",
+            (
+                "success" if solved else "failure",
+                time.time(),
+                time.time(),
+                reason,
+                None if calibration is None else json.dumps(calibration),
+                None if result is None else json.dumps(result),
+                job_id,
+            ),
+        )
+
+    def get(self, job_id: int) -> Job | None:
+        """Job ``job_id``, or None when there is none."""
+        with self._lock:
+            row = self._db.execute("SELECT * FROM jobs WHERE id = ?", (int(job_id),)).fetchone()
+        return None if row is None else _job(row)
+
+    def job_ids(self) -> list[int]:
+        """Every job's number, in order."""
+        with self._lock:
+            return [r[0] for r in self._db.execute("SELECT id FROM jobs ORDER BY id")]
+
+    def recover(self) -> list[int]:
+        """After a restart: jobs that were solving are failed (``INTERRUPTED``); returns the
+        queued ones, to be run again."""
+        self._write(
+            "UPDATE jobs SET status = 'failure', finished = ?, reason = ? WHERE status = 'solving'",
+            (time.time(), INTERRUPTED),
+        )
+        with self._lock:
+            rows = self._db.execute("SELECT id FROM jobs WHERE status = 'queued' ORDER BY id")
+            return [r[0] for r in rows]
+
+
+def _job(row: tuple) -> Job:
+    (id_, kind, name, input_name, request, status, submitted, started, finished, reason, cal,
+     result) = row  # fmt: skip
+    return Job(
+        id_,
+        kind,
+        name,
+        input_name,
+        json.loads(request),
+        status,
+        submitted,
+        started,
+        finished,
+        reason,
+        None if cal is None else json.loads(cal),
+        None if result is None else json.loads(result),
+    )

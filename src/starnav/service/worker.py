@@ -1,0 +1,114 @@
+"""One job, solved where a worker runs it: bytes in, bytes out.
+
+``run_job`` takes the upload's bytes (or a source list) and the client's request, and returns
+the answer with every file's bytes, so it runs the same in a local worker process or on any
+machine of a Dask cluster, which needs no shared disk. A bad file or hint becomes a failed
+answer with the reason; the worker never raises for the client's mistakes.
+"""
+
+from __future__ import annotations
+
+import functools
+import tempfile
+import time
+import traceback
+from pathlib import Path
+
+from starnav.catalog.names import star_names
+from starnav.errors import StarnavError
+from starnav.plate import XYList, solve_plate, write_plate_files
+from starnav.service.nova import plate_hints
+
+# magic bytes -> the name the input gets in the job's directory (never the client's name)
+MAGIC = (
+    (b"SIMPLE  =", "input.fits"),
+    (b"\x1f\x8b", "input.fits.gz"),
+    (b"\x89PNG\r\n\x1a\n", "input.png"),
+    (b"\xff\xd8\xff", "input.jpg"),
+    (b"II*\x00", "input.tif"),
+    (b"MM\x00*", "input.tif"),
+)
+OUTPUTS = {"wcs": "wcs.fits", "new_fits": "new.fits", "annotate": "annotated.png"}
+
+
+def input_name(head: bytes) -> str:
+    """The file name an upload is stored under, from its first bytes ("input.bin" for one
+    that is no image format starnav reads: it then fails with the reader's reason)."""
+    for magic, name in MAGIC:
+        if head.startswith(magic):
+            return name
+    return "input.bin"
+
+
+def run_job(data: bytes | None, xy: dict | None, request: dict, budget_s: float | None) -> dict:
+    """Solve an upload (``data``: the file's bytes) or a source list (``xy``: "x", "y" FITS
+    pixels, "image_width", "image_height") with the nova ``request``'s hints, within the time
+    budget ``budget_s`` (None: starnav's default). Returns "solved", "reason", "calibration"
+    (nova's, None when unsolved), "result" (starnav's JSON, stars with names) and "files"
+    (kind -> bytes: "wcs", "new_fits", "annotate")."""
+    t0 = time.perf_counter()
+    with tempfile.TemporaryDirectory(prefix="starnav-job-") as tmp:
+        try:
+            answer = _solve(Path(tmp), data, xy, request, budget_s)
+        except StarnavError as exc:
+            answer = _failed(f"error: {exc}")
+        except MemoryError:
+            answer = _failed("error: the image is too large for this server's memory")
+        except Exception as exc:  # a bug must fail the job, never the server
+            where = traceback.extract_tb(exc.__traceback__)[-1]
+            answer = _failed(
+                f"error: internal {type(exc).__name__}: {exc} ({Path(where.filename).name}:"
+                f"{where.lineno})"
+            )
+    answer["worker_ms"] = (time.perf_counter() - t0) * 1e3
+    return answer
+
+
+def _failed(reason: str) -> dict:
+    return {"solved": False, "reason": reason, "calibration": None, "result": None, "files": {}}
+
+
+def _solve(tmp: Path, data, xy, request, budget_s) -> dict:
+    if xy is not None:
+        source = XYList.make(xy.get("x") or [], xy.get("y") or [], xy.get("image_width"),
+                             xy.get("image_height"))  # fmt: skip
+        path = None
+    else:
+        path = tmp / input_name(data[:16])
+        path.write_bytes(data)
+        source = path
+    hints = functools.partial(plate_hints, request)  # of the image's width (arcsec per px)
+    res = solve_plate(source, hints, time_budget_s=budget_s)
+    targets = {k: tmp / name for k, name in OUTPUTS.items()}
+    if path is None:
+        targets.pop("new_fits")
+    written = write_plate_files(res, path, **targets)
+    files = {k: Path(p).read_bytes() for k, p in written.items()}
+    result = _result_json(res)
+    solved = res.plate is not None
+    calibration = res.plate.calibration(jpeglike=res.jpeglike) if solved else None
+    return {"solved": solved, "reason": "solved" if solved else res.reason,
+            "calibration": calibration, "result": result, "files": files}  # fmt: skip
+
+
+def _result_json(res) -> dict:
+    """starnav's JSON of the solve, each identified star with its name (when it has one) and
+    catalog magnitude, and the image size."""
+    from starnav.results import solve_dict
+
+    out = solve_dict(res.solution, res.reason, res.time_ms, None, res.xy)
+    names = star_names()
+    cat = res.catalog
+    for star in out["stars"]:
+        hip = star.get("catalog_id")
+        if hip is not None:
+            star["name"] = names.get(int(hip))
+            if cat is not None:
+                star["mag"] = float(cat.mag[cat.rows([hip])[0]])
+    out.update(width=res.width, height=res.height)
+    if res.plate is not None:
+        p = res.plate
+        out["plate"] = {"ra_deg": p.ra_deg, "dec_deg": p.dec_deg, "radius_deg": p.radius_deg,
+                        "pixscale_arcsec": p.pixscale_arcsec,
+                        "orientation_deg": p.orientation_deg, "parity": p.parity_name}  # fmt: skip
+    return out
