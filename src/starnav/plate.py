@@ -25,7 +25,6 @@ from pathlib import Path
 import numpy as np
 from astropy.wcs import WCS
 
-from starnav.camera import Camera
 from starnav.catalog import Catalog
 from starnav.detect.header import ImageHints, fits_hints, is_fits
 from starnav.errors import StarnavError
@@ -48,7 +47,7 @@ class PlateHints:
     of this position (searched first, then the whole sky); ``parity``: starnav's (+1: the sky
     as seen with y down, astrometry.net's "neg"; None: both); ``downsample``: stars detected on
     the image binned by this factor; ``positional_error_px``: centroid 1-sigma (px; None: 1);
-    ``crpix_center``: the WCS's reference pixel at the image centre.
+    ``crpix_center``: the WCS's reference pixel at the image centre (always so: ``plate_wcs``).
     """
 
     fov_range_deg: tuple[float, float] | None = None
@@ -243,8 +242,7 @@ def solve_plate(
     """Solve an image file (FITS, PNG, JPEG, TIFF) or a source list with a client's ``hints``
     (``PlateHints``, or a function of the image's width in px giving them, for scales in
     arcsec per pixel; they win over the FITS header's). ``time_budget_s``: the solve's
-    (``starnav.budget`` defaults). The WCS is written for the fitted camera (TAN, TAN-SIP
-    for a distorted fit); ``crpix_center`` puts its reference pixel at the image centre."""
+    (``starnav.budget`` defaults). The WCS is that of the fitted camera (``plate_wcs``)."""
     if isinstance(source, XYList):
         return _solve_plate(source, None, hints, time_budget_s)
     from starnav.detect.read import read_image
@@ -290,26 +288,14 @@ def _solve_plate(source, pixels, hints, time_budget_s) -> PlateResult:
 def _result(sol, camera, reason, width, height, time_ms, hints, **kw) -> PlateResult:
     plate = None
     if sol is not None:
-        plate = Plate.from_wcs(plate_wcs(sol.R_cam_from_icrs, camera, hints.crpix_center),
-                               width, height)  # fmt: skip
+        plate = Plate.from_wcs(plate_wcs(sol.R_cam_from_icrs, camera), width, height)
     return PlateResult(plate, reason, sol, width, height, time_ms, **kw)
 
 
-def plate_wcs(R_cam_from_icrs: np.ndarray, camera, crpix_center: bool = False) -> WCS:
-    """The WCS of a solved camera (``starnav.wcs.wcs_from_attitude``). ``crpix_center``: a
-    camera whose principal point is off the image centre is turned so that its axis passes
-    through the centre (a pinhole without distortion: the same sky to well below a pixel over
-    fields whose principal point is a few per cent off), like solve-field's --crpix-center."""
-    centre = (camera.width / 2.0, camera.height / 2.0)
-    if crpix_center and (camera.cx, camera.cy) != centre and not camera.distorted:
-        axis = camera.pixels_to_bearings(np.array([centre]))[0]
-        x_dir = camera.pixels_to_bearings(np.array([[centre[0] + 1.0, centre[1]]]))[0]
-        z = axis / np.linalg.norm(axis)
-        x = x_dir - z * (x_dir @ z)
-        x /= np.linalg.norm(x)
-        turn = np.array([x, np.cross(z, x), z])  # new camera axes in the old camera frame
-        R_cam_from_icrs = turn @ R_cam_from_icrs
-        camera = Camera(camera.width, camera.height, camera.focal_px, *centre)
+def plate_wcs(R_cam_from_icrs: np.ndarray, camera) -> WCS:
+    """The WCS of a solved camera (``starnav.wcs.wcs_from_attitude``: TAN, TAN-SIP for a
+    distorted fit). Its CRPIX is the principal point, which a plate solve (no camera file)
+    puts at the image centre: solve-field's --crpix-center always holds."""
     return wcs_from_attitude(R_cam_from_icrs, camera, sip_order=choose_sip_order(camera))
 
 
