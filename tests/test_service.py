@@ -206,3 +206,19 @@ def test_serve_refuses_the_network_without_a_key(capsys):
     assert cli_main(["serve", "--host", "0.0.0.0", "--data-dir", "/nonexistent/x"]) == 2
     err = capsys.readouterr().err.strip()
     assert err.count("\n") == 0 and "--api-key" in err
+
+
+def test_jobs_on_a_dask_cluster(tmp_path):
+    """--dask: the same jobs on a (local) Dask cluster, bytes in and out."""
+    pytest.importorskip("distributed", reason="Dask's distributed is not installed")
+    from starnav.detect.read import read_image
+    from starnav.image import detect_image
+
+    xy = detect_image(read_image(PNG)).xy[:30] + 0.5
+    config = ServiceConfig(data_dir=tmp_path, workers=1, dask_address="local")
+    with TestClient(create_app(config)) as client:
+        args = {"session": _session(client), "x": xy[:, 0].tolist(), "y": xy[:, 1].tolist(),
+                "image_width": 1024, "image_height": 768}  # fmt: skip
+        job = _wait(client, _post(client, "/api/url_upload", args)["subid"])
+        assert job["status"] == "success", job["reason"]
+        assert client.get(f"/wcs_file/{job['id']}").status_code == 200

@@ -35,6 +35,7 @@ from starlette.responses import FileResponse, JSONResponse, Response
 from starlette.routing import Mount, Route
 from starlette.staticfiles import StaticFiles
 
+from starnav.pipeline.cluster import dask_client, one_blas_thread
 from starnav.service import nova
 from starnav.service.store import JobStore
 from starnav.service.worker import OUTPUTS, input_name, run_job
@@ -69,19 +70,26 @@ class Jobs:
         self._slots = asyncio.Semaphore(config.workers)
         self._tasks: set[asyncio.Task] = set()
         self._dask = None
+        self._stack = contextlib.ExitStack()
         self._pool: concurrent.futures.ProcessPoolExecutor | None = None
         self.running = 0
 
-    def start(self) -> None:
-        """Start the workers and give back the jobs still queued at the last stop."""
+    async def start(self) -> None:
+        """Start the workers (connect to the Dask cluster, in a thread: its client runs its
+        own event loop) and give back the jobs still queued at the last stop."""
         if self.config.dask_address:
-            from starnav.pipeline.cluster import dask_client
-
-            self._dask = dask_client(self.config.dask_address, self.config.workers)
+            self._dask = await asyncio.get_running_loop().run_in_executor(None, self._connect)
         else:
+            one_blas_thread()  # before the worker processes start
             self._pool = self._new_pool()
         for job_id in self.store.recover():
             self.enqueue(job_id)
+
+    def _connect(self):
+        client, _ = self._stack.enter_context(
+            dask_client(self.config.dask_address, self.config.workers)
+        )
+        return client
 
     def _new_pool(self) -> concurrent.futures.ProcessPoolExecutor:
         # forkserver: a worker must not inherit the server's event loop and threads
@@ -94,8 +102,7 @@ class Jobs:
             task.cancel()
         if self._pool is not None:
             self._pool.shutdown(wait=False, cancel_futures=True)
-        if self._dask is not None:
-            self._dask.close()
+        self._stack.close()  # the Dask client (and a local cluster)
 
     @property
     def queued(self) -> int:
@@ -414,7 +421,7 @@ def create_app(config: ServiceConfig) -> Starlette:
 
     @contextlib.asynccontextmanager
     async def lifespan(app):
-        jobs.start()
+        await jobs.start()
         yield
         await jobs.stop()
         store.close()
