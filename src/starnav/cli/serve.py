@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import ipaddress
+import socket
 import sys
 from pathlib import Path
 
@@ -27,7 +28,7 @@ def add_parser(subparsers: Subparsers) -> None:
         help="an HTTP plate-solving service speaking astrometry.net's API, with a web page",
     )
     p.add_argument("--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1)")
-    p.add_argument("--port", type=positive_int, default=DEFAULT_PORT,
+    p.add_argument("--port", type=_port, default=DEFAULT_PORT,
                    help=f"TCP port (default {DEFAULT_PORT})")  # fmt: skip
     p.add_argument("--data-dir", default="starnav-data",
                    help="jobs database and files (default ./starnav-data)")  # fmt: skip
@@ -43,6 +44,14 @@ def add_parser(subparsers: Subparsers) -> None:
     p.set_defaults(run=run)
 
 
+def _port(text: str) -> int:
+    """Argument type: a TCP port, 1-65535."""
+    value = positive_int(text)
+    if value > 65535:
+        raise argparse.ArgumentTypeError(f"a TCP port is 1-65535, got {text}")
+    return value
+
+
 def check_host(host: str, api_key: str | None) -> None:
     """Refuse to listen beyond the loopback without an API key."""
     try:
@@ -54,6 +63,15 @@ def check_host(host: str, api_key: str | None) -> None:
             f"listening on {host} would let anyone on the network use this server: give "
             "--api-key KEY (clients log in with it)"
         )
+
+
+def _check_port(host: str, port: int) -> None:
+    """A one-line error now rather than uvicorn's log line later when the port is taken."""
+    try:
+        with socket.create_server((host, port)):
+            pass
+    except OSError as exc:
+        raise StarnavError(f"cannot listen on {host}:{port}: {exc.strerror or exc}") from None
 
 
 def run(args: argparse.Namespace) -> int:
@@ -83,6 +101,7 @@ def run(args: argparse.Namespace) -> int:
         time_budget_s=args.time_budget,
         dask_address=args.dask,
     )
+    _check_port(args.host, args.port)
     url = f"http://{args.host}:{args.port}/"
     if args.json:
         import json
