@@ -12,8 +12,8 @@ from starnav.cli.common import (
     Subparsers,
     add_fov_search,
     int_at_least,
-    print_json,
 )
+from starnav.cli.output import print_json
 
 
 def add_parser(subparsers: Subparsers) -> None:

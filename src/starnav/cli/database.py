@@ -8,7 +8,13 @@ import numpy as np
 
 from starnav.api import get_database, make_camera
 from starnav.catalog import load_catalog
-from starnav.cli.common import EXIT_OK, Subparsers, add_camera, add_catalog, print_json
+from starnav.cli.common import (
+    EXIT_OK,
+    Subparsers,
+    add_camera,
+    add_catalog,
+)
+from starnav.cli.output import print_json
 
 
 def add_parser(subparsers: Subparsers) -> None:

@@ -16,8 +16,8 @@ from starnav.cli.common import (
     count,
     finite,
     positive_int,
-    print_json,
 )
+from starnav.cli.output import print_json
 from starnav.errors import StarnavError
 from starnav.results import SolveResult
 from starnav.simulate import SimulatedFrame, simulate_frame

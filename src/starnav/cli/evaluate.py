@@ -17,8 +17,8 @@ from starnav.cli.common import (
     finite,
     png_path,
     positive_int,
-    print_json,
 )
+from starnav.cli.output import print_json
 from starnav.errors import StarnavError
 
 

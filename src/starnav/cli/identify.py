@@ -23,9 +23,8 @@ from starnav.cli.common import (
     finite,
     png_path,
     positive_int,
-    print_json,
-    print_solution,
 )
+from starnav.cli.output import print_json, print_solution
 from starnav.errors import StarnavError
 from starnav.geometry import attitude_from_radec_roll
 from starnav.identify import DEFAULT_ALGORITHM

@@ -14,8 +14,8 @@ from starnav.cli.common import (
     count,
     finite,
     positive_int,
-    print_json,
 )
+from starnav.cli.output import print_json
 from starnav.errors import PointingError, StarnavError
 from starnav.pointing import Pointing
 

@@ -17,8 +17,8 @@ from starnav.cli.common import (
     count,
     finite,
     positive_int,
-    print_json,
 )
+from starnav.cli.output import print_json
 from starnav.errors import StarnavError
 from starnav.geometry import attitude_from_radec_roll
 from starnav.render import PRESETS

@@ -14,8 +14,8 @@ from starnav.cli.common import (
     add_catalog,
     count,
     finite,
-    print_json,
 )
+from starnav.cli.output import print_json
 from starnav.simulate import simulate_frame, write_frame_csv
 
 

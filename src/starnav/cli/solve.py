@@ -23,10 +23,8 @@ from starnav.cli.common import (
     finite,
     int_at_least,
     positive_int,
-    print_json,
-    print_solution,
-    to_json,
 )
+from starnav.cli.output import print_json, print_solution, to_json
 from starnav.errors import StarnavError
 from starnav.image import DEFAULT_MAX_STARS, FISHEYE_MAX_STARS, ImageSolveResult
 
