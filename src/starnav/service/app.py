@@ -22,6 +22,7 @@ import asyncio
 import concurrent.futures
 import contextlib
 import json
+import logging
 import multiprocessing
 import time
 import urllib.request
@@ -41,6 +42,9 @@ from starnav.service.store import JobStore
 from starnav.service.worker import OUTPUTS, input_name, run_job
 
 STATIC_DIR = Path(__file__).parent / "static"
+# python-multipart logs each body it refuses; astrometry.net's client.py sends one on every
+# upload, which _lenient_multipart then reads: not worth a warning per upload
+logging.getLogger("python_multipart").setLevel(logging.ERROR)
 DEFAULT_MAX_UPLOAD_MB = 100.0
 URL_TIMEOUT_S = 30.0
 RESULT_FILE = "result.json"
