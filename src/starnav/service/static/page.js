@@ -17,11 +17,6 @@
     $("xy-input").hidden = !xy;
   }
 
-  function showFileName() {
-    const f = $("file").files[0];
-    $("file-name").textContent = f ? `${f.name} (${(f.size / 1e6).toFixed(2)} MB)` : "";
-  }
-
   function setUpDrop() {
     const drop = $("drop");
     for (const type of ["dragenter", "dragover"]) {
@@ -34,10 +29,7 @@
     drop.addEventListener("drop", (ev) => {
       ev.preventDefault();
       drop.classList.remove("over");
-      if (ev.dataTransfer.files.length) {
-        $("file").files = ev.dataTransfer.files;
-        showFileName();
-      }
+      if (ev.dataTransfer.files.length) $("file").files = ev.dataTransfer.files;
     });
   }
 
@@ -307,7 +299,6 @@
 
   $("mode-image").addEventListener("change", showMode);
   $("mode-xy").addEventListener("change", showMode);
-  $("file").addEventListener("change", showFileName);
   $("solve-form").addEventListener("submit", solve);
   setUpDrop();
   showMode();
