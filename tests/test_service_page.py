@@ -275,12 +275,19 @@ def test_pasted_source_list_solves(server, browser):
     _fill(browser, "width", str(det.width))
     _fill(browser, "height", str(det.height))
     _field_size_hint(browser, 38, 42, "arcsecperpix")
+    _fill(browser, "center-ra", "286")
+    _fill(browser, "center-dec", "29")
+    _fill(browser, "radius", "5")
+    Select(browser.find_element(By.ID, "parity")).select_by_value("1")
     state, job = _solve(browser, server, FIRST_SOLVE_S)
     assert state == "success", _text(browser, "#reason")
     sent = server.request_of(job)
     assert (sent["image_width"], sent["image_height"]) == (det.width, det.height)
     np.testing.assert_allclose(np.column_stack([sent["x"], sent["y"]]), fits_xy, atol=1e-3)
-    assert sent["scale_units"] == "arcsecperpix"
+    hints = {k: v for k, v in sent.items() if k not in ("x", "y", "image_width", "image_height")}
+    assert hints == {"parity": 1, "scale_units": "arcsecperpix", "scale_type": "ul",
+                     "scale_lower": 38, "scale_upper": 42, "center_ra": 286, "center_dec": 29,
+                     "radius": 5}  # fmt: skip
     _check_pointing(browser)
     assert not browser.find_element(By.ID, "dl-fits").is_displayed()  # no image: no .new
     assert _picture_loaded(browser)  # the sources drawn on a black frame

@@ -6,7 +6,6 @@
 (() => {
   const $ = (id) => document.getElementById(id);
   const POLL_MS = 500;
-  const LABEL = { queued: "queued", solving: "solving", success: "success", failure: "failure" };
   let session = null;
 
   // ---- input: image or source list, drag and drop ----
@@ -46,7 +45,7 @@
     const out = { parity: Number($("parity").value) };
     const lo = number("scale-lower", "Field size, from");
     const hi = number("scale-upper", "Field size, to");
-    if ((lo === null) !== (hi === null)) throw new Error("Field size: give both ends of the range.");
+    if ((lo === null) !== (hi === null)) throw new Error("Field size: give both ends.");
     if (lo !== null) {
       Object.assign(out, { scale_units: $("scale-units").value, scale_type: "ul",
                            scale_lower: lo, scale_upper: hi });
@@ -91,9 +90,10 @@
     const { x, y } = parseXY($("xy").value);
     const width = number("width", "Image width");
     const height = number("height", "Image height");
-    if (!(width > 0 && height > 0)) throw new Error("Source positions need the image's width and height.");
+    if (!(width > 0 && height > 0)) throw new Error("Source positions need the image's size.");
     const xy = { x, y, image_width: width, image_height: height };
-    return { image: false, send: (key) => post("api/url_upload", { ...args, ...xy, session: key }) };
+    const send = (key) => post("api/url_upload", { ...args, ...xy, session: key });
+    return { image: false, send };
   }
 
   // ---- the API ----
@@ -132,7 +132,7 @@
   function showStatus(state, seconds, extra = "") {
     const status = $("status");
     status.dataset.state = state;
-    status.textContent = `${LABEL[state]} — ${seconds.toFixed(0)} s${extra}`;
+    status.textContent = `${state} — ${seconds.toFixed(0)} s${extra}`;
   }
 
   // Poll submission `subid` until its job is done; returns the job's id and state.
