@@ -9,6 +9,7 @@ answer with the reason; the worker never raises for the client's mistakes.
 from __future__ import annotations
 
 import functools
+import os
 import tempfile
 import time
 import traceback
@@ -60,6 +61,8 @@ def run_job(data: bytes | None, xy: dict | None, request: dict, budget_s: float 
                 f"error: internal {type(exc).__name__}: {exc} ({Path(where.filename).name}:"
                 f"{where.lineno})"
             )
+        # a reason names the input by the service's name, not the worker's temporary path
+        answer["reason"] = answer["reason"].replace(f"{tmp}{os.sep}", "")
     answer["worker_ms"] = (time.perf_counter() - t0) * 1e3
     return answer
 

@@ -1,0 +1,5 @@
+"""``python -m starnav``: the ``starnav`` command."""
+
+from starnav.cli import main
+
+raise SystemExit(main())
