@@ -103,6 +103,37 @@ def scale_bounds(est: float, err_percent: float) -> tuple[float, float]:
     return est * (1.0 - err / 100.0), est * (1.0 + err / 100.0)
 
 
+def ra_deg_from_text(text: str) -> float:
+    """Right ascension (degrees, [0, 360)) of solve-field's ``--ra``: degrees, or sexagesimal
+    hours "HH:MM:SS.S" (``util/starutil.c``, ``atora``). ``StarnavError`` else."""
+    return _angle_from_text(text, "RA", "hourangle") % 360.0
+
+
+def dec_deg_from_text(text: str) -> float:
+    """Declination (degrees) of solve-field's ``--dec``: degrees, or sexagesimal
+    "[+-]DD:MM:SS.S" (``util/starutil.c``, ``atodec``). ``StarnavError`` else, or outside ±90°."""
+    dec = _angle_from_text(text, "Dec", "deg")
+    if not -90.0 <= dec <= 90.0:
+        raise StarnavError(f"Dec must be within ±90°, got {text!r}")
+    return dec
+
+
+def _angle_from_text(text: str, what: str, sexagesimal_unit: str) -> float:
+    value = str(text).strip()
+    try:
+        if ":" in value:  # the form astrometry.net's regex takes; astropy does the arithmetic
+            from astropy.coordinates import Angle
+
+            deg = float(Angle(value, unit=sexagesimal_unit).degree)
+        else:
+            deg = float(value)
+    except ValueError:
+        raise StarnavError(f"{what} must be degrees or sexagesimal, got {text!r}") from None
+    if not math.isfinite(deg):
+        raise StarnavError(f"{what} must be a finite number, got {text!r}")
+    return deg
+
+
 def _positive(value, what: str) -> float:
     try:
         v = float(value)
