@@ -150,7 +150,7 @@ def build_parser() -> Parser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run solve-field's command line; the exit status."""
-    args = build_parser().parse_args(argv)
+    args = build_parser().parse_args(_joined_values(sys.argv[1:] if argv is None else argv))
     try:
         hints_common = _hints(args)
         for i, infile in enumerate(args.inputs, start=1):
@@ -159,6 +159,23 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"{PROG}: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
     return EXIT_OK
+
+
+def _joined_values(argv: Sequence[str]) -> list[str]:
+    """ "--dec -30:00:00" as "--dec=-30:00:00": getopt takes a value that starts with "-",
+    argparse would take it for an option."""
+    out: list[str] = []
+    names = {"-3": "--ra", "-4": "--dec", "--ra": "--ra", "--dec": "--dec"}
+    items = list(argv)
+    i = 0
+    while i < len(items):
+        if items[i] in names and i + 1 < len(items) and items[i + 1].startswith("-"):
+            out.append(f"{names[items[i]]}={items[i + 1]}")
+            i += 2
+            continue
+        out.append(items[i])
+        i += 1
+    return out
 
 
 def _hints(args) -> dict:
@@ -234,6 +251,7 @@ def _solve_one(infile: Path, number: int, count: int, args, common: dict) -> Non
     if not infile.is_file():
         raise StarnavError(f"input file {str(infile)!r} does not exist")
     paths = output_paths(infile, args)
+    paths.base.parent.mkdir(parents=True, exist_ok=True)  # solve-field makes --dir
     existing = paths.existing()
     if existing and not args.overwrite:
         print(f'Output file already exists: "{existing[0]}".\n'
