@@ -37,6 +37,7 @@ DEFAULT_MAX_STARS = 50
 NO_HINTS = ImageHints()
 FISHEYE_MAX_STARS = 100  # a whole sky's brightest detections hold horizon lights and glow
 DEFAULT_THRESHOLD_SIGMA = 5.0  # detection threshold over the background noise
+MIN_DETECTIONS = 4  # fewer detected stars than this: not solved, without a search
 
 
 @dataclass(frozen=True, eq=False)
@@ -164,8 +165,8 @@ def solve_image(
     if downsample > 1:  # a block's centre is its pixel's centre times the factor
         found = replace(found, xy=found.xy * downsample, width=width, height=height)
     detect_ms = (time.perf_counter() - t1) * 1e3
-    if len(found.xy) < 4:
-        reason = f"{len(found.xy)} stars detected, at least 4 are needed"
+    if len(found.xy) < MIN_DETECTIONS:
+        reason = f"{len(found.xy)} stars detected, at least {MIN_DETECTIONS} are needed"
         return ImageSolveResult(None, reason, found, None, read_ms, detect_ms, 0.0, hints=hints)
     solve = functools.partial(
         solve_fov,

@@ -102,6 +102,37 @@ def scale_bounds(est: float, err_percent: float) -> tuple[float, float]:
     return est * (1.0 - err / 100.0), est * (1.0 + err / 100.0)
 
 
+def ra_deg_from_text(text: str) -> float:
+    """Right ascension (degrees, [0, 360)) of solve-field's ``--ra``: degrees, or sexagesimal
+    hours "HH:MM:SS.S" (``util/starutil.c``, ``atora``). ``StarnavError`` else."""
+    return _angle_from_text(text, "RA", "hourangle") % 360.0
+
+
+def dec_deg_from_text(text: str) -> float:
+    """Declination (degrees) of solve-field's ``--dec``: degrees, or sexagesimal
+    "[+-]DD:MM:SS.S" (``util/starutil.c``, ``atodec``). ``StarnavError`` else, or outside ±90°."""
+    dec = _angle_from_text(text, "Dec", "deg")
+    if not -90.0 <= dec <= 90.0:
+        raise StarnavError(f"Dec must be within ±90°, got {text!r}")
+    return dec
+
+
+def _angle_from_text(text: str, what: str, sexagesimal_unit: str) -> float:
+    value = str(text).strip()
+    try:
+        if ":" in value:  # the form astrometry.net's regex takes; astropy does the arithmetic
+            from astropy.coordinates import Angle
+
+            deg = float(Angle(value, unit=sexagesimal_unit).degree)
+        else:
+            deg = float(value)
+    except ValueError:
+        raise StarnavError(f"{what} must be degrees or sexagesimal, got {text!r}") from None
+    if not math.isfinite(deg):
+        raise StarnavError(f"{what} must be a finite number, got {text!r}")
+    return deg
+
+
 def _positive(value, what: str) -> float:
     try:
         v = float(value)
@@ -235,13 +266,13 @@ def parity_from_nova(value) -> int | None:
 
 def solve_plate(
     source: str | Path | XYList,
-    hints: PlateHints | Callable[[int], PlateHints] = PlateHints(),
+    hints: PlateHints | Callable[[int, int], PlateHints] = PlateHints(),
     *,
     time_budget_s: float | None = None,
 ) -> PlateResult:
     """Solve an image file (FITS, PNG, JPEG, TIFF) or a source list with a client's ``hints``
-    (``PlateHints``, or a function of the image's width in px giving them, for scales in
-    arcsec per pixel; they win over the FITS header's). ``time_budget_s``: the solve's
+    (``PlateHints``, or a function of the image's width and height in px giving them, for
+    scales in arcsec per pixel; they win over the FITS header's). ``time_budget_s``: the solve's
     (``starnav.budget`` defaults). The WCS is that of the fitted camera (``plate_wcs``)."""
     if isinstance(source, XYList):
         return _solve_plate(source, None, hints, time_budget_s)
@@ -253,7 +284,8 @@ def solve_plate(
 
 def _solve_plate(source, pixels, hints, time_budget_s) -> PlateResult:
     if callable(hints):
-        hints = hints(source.width if pixels is None else pixels.shape[1])
+        size = (source.width, source.height) if pixels is None else pixels.shape[::-1]
+        hints = hints(*size)
     options: dict = {"time_budget_s": time_budget_s, "parity": hints.parity}
     if hints.fov_range_deg is not None:
         options["fov_range_deg"] = tuple(hints.fov_range_deg)

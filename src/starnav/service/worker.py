@@ -8,7 +8,6 @@ answer with the reason; the worker never raises for the client's mistakes.
 
 from __future__ import annotations
 
-import functools
 import os
 import tempfile
 import time
@@ -80,7 +79,10 @@ def _solve(tmp: Path, data, xy, request, budget_s) -> dict:
         path = tmp / input_name(data[:16])
         path.write_bytes(data)
         source = path
-    hints = functools.partial(plate_hints, request)  # of the image's width (arcsec per px)
+
+    def hints(width: int, height: int):  # the width converts arcsec per pixel
+        return plate_hints(request, width)
+
     res = solve_plate(source, hints, time_budget_s=budget_s)
     targets = {k: tmp / name for k, name in OUTPUTS.items()}
     if path is None:
