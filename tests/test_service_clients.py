@@ -21,8 +21,15 @@ import pytest
 from astropy.io import fits
 from astropy.utils.exceptions import AstropyDeprecationWarning
 
-from service_helpers import IMAGES, REFERENCE, SOLVE_TIMEOUT_S, api, centre_offset_arcsec
-from starnav.detect import detect_stars, read_image
+from service_helpers import (
+    IMAGES,
+    REFERENCE,
+    SOLVE_TIMEOUT_S,
+    api,
+    centre_offset_arcsec,
+    source_list,
+)
+from starnav.detect import read_image
 
 pytest.importorskip("astroquery")
 from astroquery.astrometry_net import AstrometryNetClass
@@ -31,7 +38,6 @@ CLIENT_PY = Path(__file__).resolve().parent / "vendor" / "astrometry_net" / "cli
 LYRA = "tetra3_2019-07-29T204726_Alt60_Azi135_Try1.png"
 CYGNUS = "granasat_cisne_02sec.jpg"
 TOLERANCE_ARCSEC = 60.0
-LIST_STARS = 40  # brightest detections sent as a source list
 
 
 @pytest.fixture(scope="module")
@@ -51,12 +57,6 @@ def lyra_fits(tmp_path_factory) -> Path:
     path = tmp_path_factory.mktemp("fits") / "lyra.fits"
     fits.PrimaryHDU(read_image(IMAGES / LYRA)).writeto(path)
     return path
-
-
-def source_list(name: str) -> tuple[list[float], list[float]]:
-    """The brightest stars starnav detects in image ``name``, FITS pixels (1-based)."""
-    xy = detect_stars(read_image(IMAGES / name), max_stars=LIST_STARS).xy + 0.5
-    return [float(v) for v in xy[:, 0]], [float(v) for v in xy[:, 1]]
 
 
 def reference_pixscale_arcsec(name: str) -> float:
