@@ -1,6 +1,7 @@
 """``starnav serve`` as a real process for tests and benchmarks: start it on a free loopback
-port, wait for it, talk to it with the standard library (nova's form-encoded ``request-json``),
-stop or kill it."""
+port, wait for it, stop or kill it; nova's calls (form-encoded ``request-json`` with urllib,
+multipart uploads with httpx); and a load runner (``load_jobs``, ``run_load``) of concurrent
+clients that check each answer against its input."""
 
 from __future__ import annotations
 
@@ -13,12 +14,13 @@ import sys
 import time
 import urllib.parse
 import urllib.request
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
 from astropy.coordinates import SkyCoord
 from astropy.io import fits
-from astropy.wcs import WCS
+from astropy.wcs import WCS, FITSFixedWarning
 
 from starnav.service.app import wait_ready
 
@@ -129,7 +131,9 @@ def centre_offset_arcsec(header: fits.Header, name: str, shift_px=(0.0, 0.0)) ->
     ref = REFERENCE[name]
     x = (ref["file"]["width"] - 1) / 2.0 + shift_px[0]
     y = (ref["file"]["height"] - 1) / 2.0 + shift_px[1]
-    ra, dec = WCS(header, naxis=2).all_pix2world([[x, y]], 0)[0]
+    with warnings.catch_warnings():  # a .wcs file has NAXIS = 0: astropy says so
+        warnings.simplefilter("ignore", FITSFixedWarning)
+        ra, dec = WCS(header, naxis=2).all_pix2world([[x, y]], 0)[0]
     got = SkyCoord(ra, dec, unit="deg")
     return float(got.separation(SkyCoord(ref["ra_deg"], ref["dec_deg"], unit="deg")).arcsec)
 
@@ -186,7 +190,8 @@ class LoadOutcome:
     ``error``), ``latency_s`` from the start of the upload to the answer, ``offset_arcsec`` of
     the answer's WCS at the input's centre from the reference, ``stars_from_input`` (every
     identified star is a point of the input list; None for an image), ``worker_ms`` (the
-    solve in its worker)."""
+    solve in its worker), ``queued_s`` (the server's time from the upload to the start of
+    the solve)."""
 
     job: LoadJob
     job_id: int | None
@@ -195,6 +200,7 @@ class LoadOutcome:
     offset_arcsec: float | None = None
     stars_from_input: bool | None = None
     worker_ms: float | None = None
+    queued_s: float | None = None
     error: str | None = None
 
 
@@ -254,8 +260,10 @@ def run_load(url: str, jobs: list[LoadJob], clients: int, *, poll_s: float = 0.2
 def _checked(url: str, job: LoadJob, job_id: int, status: str, latency: float) -> LoadOutcome:
     record = api(url, f"jobs/{job_id}/starnav")
     result = record["result"] or {}
+    times = {"worker_ms": result.get("worker_ms"),
+             "queued_s": record["started"] - record["submitted"]}  # fmt: skip
     if status != "success":
-        return LoadOutcome(job, job_id, status, latency, worker_ms=result.get("worker_ms"))
+        return LoadOutcome(job, job_id, status, latency, **times)
     header = fits.Header.fromstring(fetch(f"{url}/wcs_file/{job_id}").decode("latin-1"))
     offset = centre_offset_arcsec(header, job.image, shift_px=job.shift_px)
     from_input = None
@@ -263,4 +271,4 @@ def _checked(url: str, job: LoadJob, job_id: int, status: str, latency: float) -
         points = {(round(x, 6), round(y, 6)) for x, y in zip(job.x, job.y, strict=True)}
         from_input = all((round(s["x"] + 0.5, 6), round(s["y"] + 0.5, 6)) in points
                          for s in result["stars"])  # fmt: skip
-    return LoadOutcome(job, job_id, status, latency, offset, from_input, result.get("worker_ms"))
+    return LoadOutcome(job, job_id, status, latency, offset, from_input, **times)
