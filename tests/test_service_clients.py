@@ -28,6 +28,7 @@ from service_helpers import (
     source_list,
 )
 from starnav.detect import read_image
+from starnav.service.store import JobStore
 
 pytest.importorskip("astroquery")
 from astroquery.astrometry_net import AstrometryNetClass
@@ -84,28 +85,54 @@ def test_astroquery_uploads_a_fits_file(astroquery_client, lyra_fits):
     assert centre_offset_arcsec(header, LYRA) < TOLERANCE_ARCSEC
 
 
-def test_astroquery_with_scale_and_position_hints(astroquery_client):
-    scale = reference_pixscale_arcsec(CYGNUS)
-    ref = REFERENCE[CYGNUS]
-    header = solve_upload(
-        astroquery_client, IMAGES / CYGNUS, scale_units="arcsecperpix", scale_type="ul",
-        scale_lower=0.9 * scale, scale_upper=1.1 * scale, center_ra=ref["ra_deg"] + 2.0,
-        center_dec=ref["dec_deg"] - 1.0, radius=5.0,
-    )  # fmt: skip
+def hints(kind: str, name: str) -> dict:
+    """astroquery settings of image ``name``: its scale (±10 %), a position 2.2° off with a 5°
+    radius, or both."""
+    ref = REFERENCE[name]
+    scale = reference_pixscale_arcsec(name)
+    out = {}
+    if kind in ("scale", "both"):
+        out.update(scale_units="arcsecperpix", scale_type="ul", scale_lower=0.9 * scale,
+                   scale_upper=1.1 * scale)  # fmt: skip
+    if kind == "estimate":
+        out.update(scale_units="degwidth", scale_type="ev", scale_est=ref["fov_deg"],
+                   scale_err=10.0)  # fmt: skip
+    if kind in ("position", "both"):
+        out.update(center_ra=ref["ra_deg"] + 2.0, center_dec=ref["dec_deg"] - 1.0, radius=5.0)
+    return out
+
+
+@pytest.mark.parametrize("kind", ["scale", "estimate", "position", "both"])
+def test_astroquery_with_scale_and_position_hints(astroquery_client, kind):
+    header = solve_upload(astroquery_client, IMAGES / CYGNUS, **hints(kind, CYGNUS))
     assert header
     assert centre_offset_arcsec(header, CYGNUS) < TOLERANCE_ARCSEC
-    assert header["IMAGEW"] == ref["file"]["width"]
+    assert header["IMAGEW"] == REFERENCE[CYGNUS]["file"]["width"]
+
+
+def test_astroquery_scale_hint_is_followed(astroquery_client, nova_server):
+    """A scale twice the true one: the field is searched at that scale only, and not solved;
+    the job stored nova's fields as astroquery sent them."""
+    wrong = {k: 2.0 * v if k.startswith("scale_") and k != "scale_units" else v
+             for k, v in hints("scale", CYGNUS).items() if k != "scale_type"}  # fmt: skip
+    header, job_id = solve_upload(astroquery_client, IMAGES / CYGNUS, scale_type="ul",
+                                  return_submission_id=True, **wrong)  # fmt: skip
+    assert header == {}
+    store = JobStore(nova_server.data_dir)
+    stored = store.get(int(job_id))
+    store.close()
+    assert stored.status == "failure"
+    assert not stored.reason.startswith("error"), stored.reason  # not solved, no mistake
+    assert {k: stored.request[k] for k in wrong} == wrong
 
 
 @pytest.mark.parametrize("name", [LYRA, CYGNUS])
 def test_astroquery_solves_a_source_list(astroquery_client, name):
     x, y = source_list(name)
-    ref = REFERENCE[name]
-    scale = reference_pixscale_arcsec(name)
+    ref = REFERENCE[name]["file"]
     header = astroquery_client.solve_from_source_list(
-        x, y, ref["file"]["width"], ref["file"]["height"], verbose=False,
-        solve_timeout=SOLVE_TIMEOUT_S, scale_units="arcsecperpix", scale_type="ul",
-        scale_lower=0.8 * scale, scale_upper=1.2 * scale,
+        x, y, ref["width"], ref["height"], verbose=False, solve_timeout=SOLVE_TIMEOUT_S,
+        **hints("scale", name),
     )  # fmt: skip
     assert header
     assert centre_offset_arcsec(header, name) < TOLERANCE_ARCSEC
