@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 from pathlib import Path
 
 import pytest
@@ -13,6 +14,7 @@ ROOT = Path(__file__).resolve().parents[1]
 SHARED = ROOT.parent / "shared" / "data"
 CONTEST = SHARED / "contest2019"
 REFERENCE = SHARED / "reference_frames"
+USER_CACHE_DIR = os.environ.get("STARNAV_CACHE_DIR")  # before _private_cache replaces it
 
 
 @pytest.fixture(autouse=True, scope="session")
@@ -38,3 +40,16 @@ def contest_catalog():
 def reference_frames(name: str) -> list[dict]:
     with (REFERENCE / name).open() as fh:
         return [json.loads(line) for line in fh]
+
+
+@pytest.fixture(scope="module")
+def nova_server(tmp_path_factory):
+    """``starnav serve`` with 2 workers on a free loopback port, its data in a fresh folder,
+    for one test module (``service_helpers.Server``: ``url``, ``data_dir``, ``log()``). It
+    uses the user's table cache, not the tests' fresh one: the service's tests are not about
+    building tables, and a build would cost each test session half a minute."""
+    from service_helpers import Server
+
+    server = Server(tmp_path_factory.mktemp("serve"), cache_dir=USER_CACHE_DIR).start()
+    yield server
+    server.stop()

@@ -8,6 +8,7 @@ answer with the reason; the worker never raises for the client's mistakes.
 
 from __future__ import annotations
 
+import math
 import os
 import tempfile
 import time
@@ -42,10 +43,11 @@ def input_name(head: bytes) -> str:
 
 def run_job(data: bytes | None, xy: dict | None, request: dict, budget_s: float | None) -> dict:
     """Solve an upload (``data``: the file's bytes) or a source list (``xy``: "x", "y" FITS
-    pixels, "image_width", "image_height") with the nova ``request``'s hints, within the time
-    budget ``budget_s`` (None: starnav's default). Returns "solved", "reason", "calibration"
-    (nova's, None when unsolved), "result" (starnav's JSON, stars with names) and "files"
-    (kind -> bytes: "wcs", "new_fits", "annotate")."""
+    pixels, "image_width", "image_height"; without a size, nova's: the list's extent) with the
+    nova ``request``'s hints, within the time budget ``budget_s`` (None: starnav's default).
+    Returns "solved", "reason", "calibration" (nova's, None when unsolved), "result"
+    (starnav's JSON, stars with names) and "files" (kind -> bytes: "wcs", "new_fits",
+    "annotate")."""
     t0 = time.perf_counter()
     with tempfile.TemporaryDirectory(prefix="starnav-job-") as tmp:
         try:
@@ -72,8 +74,9 @@ def _failed(reason: str) -> dict:
 
 def _solve(tmp: Path, data, xy, request, budget_s) -> dict:
     if xy is not None:
-        source = XYList.make(xy.get("x") or [], xy.get("y") or [], xy.get("image_width"),
-                             xy.get("image_height"))  # fmt: skip
+        x, y = xy.get("x") or [], xy.get("y") or []
+        source = XYList.make(x, y, xy.get("image_width") or _extent(x),
+                             xy.get("image_height") or _extent(y))  # fmt: skip
         path = None
     else:
         path = tmp / input_name(data[:16])
@@ -94,6 +97,15 @@ def _solve(tmp: Path, data, xy, request, budget_s) -> dict:
     calibration = res.plate.calibration(jpeglike=res.jpeglike) if solved else None
     return {"solved": solved, "reason": "solved" if solved else res.reason,
             "calibration": calibration, "result": result, "files": files}  # fmt: skip
+
+
+def _extent(values) -> int | None:
+    """The size nova gives a source list sent without one: its largest coordinate, rounded up
+    (``net/process_submissions.py``); None when there is none (``XYList.make`` says why)."""
+    try:
+        return math.ceil(max(float(v) for v in values))
+    except (TypeError, ValueError, OverflowError):
+        return None
 
 
 def _result_json(res) -> dict:
