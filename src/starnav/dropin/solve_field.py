@@ -61,7 +61,7 @@ IGNORED_VALUES = (
     "--uniformize", "--objs", "--depth", "--temp-dir", "--keep-xylist", "--corr", "--match",
     "--rdls", "--index-xyls", "--axy", "--config", "--backend-config", "--tweak-order",
     "--sigma", "--nsigma", "--plot-scale", "--plot-bg", "--extension", "--code-tolerance",
-    "--pixel-error", "--index-dir", "--index-file", "--kmz", "--scamp", "--scamp-config",
+    "--index-dir", "--index-file", "--kmz", "--scamp", "--scamp-config",
     "--sort-column", "--pnm", "--cancel", "--solved-in",
 )  # fmt: skip
 SHORT_IGNORED = {"--tweak-order": "-t", "--depth": "-d", "--temp-dir": "-m",
@@ -124,6 +124,8 @@ def build_parser() -> Parser:
         default="both",
         help="solve-field's parity (pos: det CD < 0; normal images are neg)",
     )
+    p.add_argument("--pixel-error", type=float,
+                   help="centroid error (px) of the matching tolerances (default 1)")  # fmt: skip
     p.add_argument("-l", "--cpulimit", type=float, help="time budget of the solve (seconds)")
     p.add_argument("-W", "--wcs", help="WCS output file (default BASE.wcs)")
     p.add_argument("-N", "--new-fits", help='new FITS file (default BASE.new; "none": not made)')
@@ -189,6 +191,7 @@ def _hints(args) -> dict:
     if args.downsample < 1:
         raise StarnavError(f"--downsample must be at least 1, got {args.downsample}")
     out["downsample"] = args.downsample
+    out["positional_error_px"] = args.pixel_error
     if args.scale_units.lower() not in SCALE_UNIT_NAMES:
         raise StarnavError(f"unknown --scale-units {args.scale_units!r}; known: "
                            f"{', '.join(SCALE_UNIT_NAMES)}")  # fmt: skip
