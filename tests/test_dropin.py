@@ -1,6 +1,7 @@
 """starnav-solve-field and starnav-astap run as their clients run them: as programs, their
 printed lines parsed as INDI's indi_astrometry parses them, their files read back, and
-end to end through astapy and through indiserver + indi_astrometry.
+end to end through astapy and through INDI's indi_astrometry driver (on a pipe, as
+indiserver runs it).
 
 Reference answers: tests/data/images/reference.json (two peer solvers; README.md there).
 Conventions: roll is the position angle of image up (-y, y down); astrometry.net's "up is X
@@ -296,7 +297,7 @@ def test_astapy_end_to_end(programs, images):
     assert _angle_diff(cards["CROTA2"], 180.0 - ref["roll_deg"]) < ANGLE_TOL_DEG
 
 
-# --- INDI: indiserver + indi_astrometry driving starnav-solve-field -------------------------
+# --- INDI: indi_astrometry driving starnav-solve-field ------------------------------------
 
 
 class IndiPipe:
