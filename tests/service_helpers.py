@@ -1,6 +1,6 @@
 """``starnav serve`` as a real process for tests and benchmarks: start it on a free loopback
 port, wait for it, stop or kill it; nova's calls (form-encoded ``request-json`` with urllib,
-multipart uploads with httpx); and a load runner (``load_jobs``, ``run_load``) of concurrent
+multipart uploads with httpx2); and a load runner (``load_jobs``, ``run_load``) of concurrent
 clients that check each answer against its input."""
 
 from __future__ import annotations
@@ -140,7 +140,7 @@ def centre_offset_arcsec(header: fits.Header, name: str, shift_px=(0.0, 0.0)) ->
 
 def upload_image(url: str, session: str, name: str, data: bytes, hints: dict | None = None):
     """nova's ``api/upload``: the file as the multipart field "file"; returns the job id."""
-    import httpx
+    import httpx2 as httpx
 
     args = json.dumps({"session": session, **(hints or {})})
     resp = httpx.post(f"{url}/api/upload", data={"request-json": args},

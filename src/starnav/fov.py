@@ -330,19 +330,24 @@ def solve_fov(
     if mag_limit is not None:
         raise StarnavError("mag_limit needs fov_deg (the FOV search chooses its own)")
     bands = load_bands(lo, hi, base.width, base.height, catalog, epoch_year)
-    near = None
-    if position_hint_deg is not None:
-        ra, dec = (math.radians(float(v)) for v in position_hint_deg)
-        if not (math.isfinite(position_radius_deg) and 0 < position_radius_deg <= 180):
-            raise StarnavError(
-                f"the position hint's radius must be in (0, 180] degrees, got {position_radius_deg}"
-            )
-        near = (radec_to_unit(ra, dec), math.radians(position_radius_deg))
+    near = _near(position_hint_deg, position_radius_deg)
     deadline = Deadline.after(budget_s)
     with first_use("solve"):
         return _search_and_fit(
             stars, base, bands, settings, (lo, hi), pattern_stars, deadline, near
         )
+
+
+def _near(position_hint_deg, radius_deg: float):
+    """(unit vector, radius in rad) of a position hint (RA, Dec in degrees), or None."""
+    if position_hint_deg is None:
+        return None
+    if not (math.isfinite(radius_deg) and 0 < radius_deg <= 180):
+        raise StarnavError(
+            f"the position hint's radius must be in (0, 180] degrees, got {radius_deg}"
+        )
+    ra, dec = (math.radians(float(v)) for v in position_hint_deg)
+    return radec_to_unit(ra, dec), math.radians(radius_deg)
 
 
 _TRACKING: dict[tuple, Solver] = {}  # per process: the solvers of the cameras tracked

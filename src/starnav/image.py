@@ -112,33 +112,28 @@ def solve_image(
     ``fov_deg`` (searched within 5 %) or a calibrated ``camera`` (a camera model or a camera
     file; within 1 %) is given; the fitted one is reported either way. ``lens``: the lens
     model when no camera is given (``starnav.camera.MODELS``; a fisheye model's focal length
-    is scanned, see ``starnav.fov.scan_focal``). ``max_stars``: the
-    brightest this many detections are used (default ``DEFAULT_MAX_STARS``, for a fisheye
-    ``FISHEYE_MAX_STARS``); ``threshold_sigma``: detection threshold over
-    the background noise; ``sigma_px``: centroid 1-sigma assumed by the matching
-    tolerances. With a fisheye lens (any model but the pinhole), detections outside the
-    image circle found in the image (``starnav.detect.circle``) are not made: the dark frame
-    around an all-sky camera's disc often holds burned-in text. ``hints``: what the file's
-    header says (``starnav.detect.header.fits_hints``; read from a FITS file when None, none
-    for an array): its FOV is searched (±5 %) when neither ``fov_deg``, ``camera`` nor another
+    is scanned, see ``starnav.fov.scan_focal``). ``max_stars``: the brightest this many
+    detections are used (default ``DEFAULT_MAX_STARS``, for a fisheye ``FISHEYE_MAX_STARS``);
+    ``threshold_sigma``: detection threshold over the background noise; ``sigma_px``:
+    centroid 1-sigma assumed by the matching tolerances. With a fisheye lens (any model but
+    the pinhole), detections outside the image circle found in the image
+    (``starnav.detect.circle``) are not made: the dark frame around an all-sky camera's disc
+    often holds burned-in text. ``hints``: what the file's header says
+    (``starnav.detect.header.fits_hints``; read from a FITS file when None, none for an
+    array): its FOV is searched (±5 %) when neither ``fov_deg``, ``camera`` nor another
     ``fov_range_deg`` is given and it lies within the default range, its epoch used when
     ``epoch_year`` is not, its position searched first; a solve that fails with the hinted
-    FOV is tried again without it.
-    ``time_budget_s``: the solve's (``starnav.budget``; detection is not counted).
-    ``downsample``: stars are detected in the image binned by this factor (the mean of each
-    block; faster on large noisy images, astrometry.net's ``--downsample``) and solved at full
-    resolution. Other keywords: see ``starnav.fov.solve_fov``.
+    FOV is tried again without it. ``time_budget_s``: the solve's (``starnav.budget``;
+    detection is not counted). ``downsample``: stars detected on the image binned by this
+    factor, solved at full resolution. Other keywords: see ``starnav.fov.solve_fov``.
     """
-    if isinstance(camera, str | Path):
-        camera = load_camera(camera)
+    camera = load_camera(camera) if isinstance(camera, str | Path) else camera
     search_range(fov_deg, fov_range_deg, camera, lens)  # a bad range fails before any work
     bad = isinstance(max_stars, bool) or not (isinstance(max_stars, int) and max_stars >= 4)
     if max_stars is not None and bad:
         raise ImageError(f"max_stars must be an integer >= 4, got {max_stars!r}")
     lens = camera.model if camera is not None else lens
     check_budget(time_budget_s, 1.0)  # a bad budget fails before any work
-    if isinstance(downsample, bool) or not (isinstance(downsample, int) and downsample >= 1):
-        raise ImageError(f"downsample must be an integer >= 1, got {downsample!r}")
     t0 = time.perf_counter()
     if isinstance(image, np.ndarray):
         pixels, read_ms = image, 0.0
@@ -158,12 +153,7 @@ def solve_image(
         )
     budget_s = check_budget(time_budget_s, _default_budget_s(camera, fov_deg, lens, pixels))
     t1 = time.perf_counter()
-    found = detect_image(
-        _binned(pixels, downsample), lens=lens, threshold_sigma=threshold_sigma,
-        max_stars=max_stars,
-    )  # fmt: skip
-    if downsample > 1:  # a block's centre is its pixel's centre times the factor
-        found = replace(found, xy=found.xy * downsample, width=width, height=height)
+    found = _detect_binned(pixels, downsample, lens, threshold_sigma, max_stars)
     detect_ms = (time.perf_counter() - t1) * 1e3
     if len(found.xy) < MIN_DETECTIONS:
         reason = f"{len(found.xy)} stars detected, at least {MIN_DETECTIONS} are needed"
@@ -199,11 +189,14 @@ def solve_image(
     )
 
 
-def _binned(pixels: np.ndarray, factor: int) -> np.ndarray:
-    """``pixels`` binned ``factor`` x ``factor`` (each block's mean; the last partial row and
-    column of blocks dropped); unchanged for 1."""
+def _detect_binned(pixels, factor, lens, threshold_sigma, max_stars) -> Detections:
+    """``detect_image`` on the image binned ``factor`` x ``factor`` (each block's mean; the
+    last partial row and column of blocks dropped), in full-resolution pixels."""
+    if isinstance(factor, bool) or not (isinstance(factor, int) and factor >= 1):
+        raise ImageError(f"downsample must be an integer >= 1, got {factor!r}")
     if factor == 1:
-        return pixels
+        return detect_image(pixels, lens=lens, threshold_sigma=threshold_sigma,
+                            max_stars=max_stars)  # fmt: skip
     height, width = (n // factor for n in pixels.shape)
     if min(height, width) < 16:
         raise ImageError(
@@ -211,7 +204,10 @@ def _binned(pixels: np.ndarray, factor: int) -> np.ndarray:
             f"{pixels.shape[0]} px image"
         )
     blocks = np.asarray(pixels[: height * factor, : width * factor], dtype=np.float32)
-    return blocks.reshape(height, factor, width, factor).mean(axis=(1, 3))
+    binned = blocks.reshape(height, factor, width, factor).mean(axis=(1, 3))
+    found = detect_image(binned, lens=lens, threshold_sigma=threshold_sigma, max_stars=max_stars)
+    # a block's centre is its pixel's centre times the factor
+    return replace(found, xy=found.xy * factor, width=pixels.shape[1], height=pixels.shape[0])
 
 
 def _default_budget_s(camera, fov_deg, lens: str, pixels: np.ndarray) -> float:

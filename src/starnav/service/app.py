@@ -262,12 +262,15 @@ def _lenient_multipart(content_type: str, body: bytes) -> dict:
     return out
 
 
-def create_app(config: ServiceConfig) -> Starlette:
-    """The service's ASGI application (``starnav serve`` runs it with uvicorn)."""
-    store = JobStore(config.data_dir)
-    jobs = Jobs(config, store)
+class NovaApi:
+    """The endpoints: nova's routes over the job store and queue (``routes``)."""
 
-    async def parsed(request: Request, *, session: bool):
+    def __init__(self, config: ServiceConfig, store: JobStore, jobs: Jobs):
+        self.config, self.store, self.jobs = config, store, jobs
+
+    async def parsed(self, request: Request, *, session: bool):
+        """(error response or None, the request's JSON, its form), as nova's decorators
+        ``requires_json_args`` and ``requires_json_session`` check them."""
         args, form = await _request_json(request)
         if args is None:
             return error("no json"), None, None
@@ -277,101 +280,96 @@ def create_app(config: ServiceConfig) -> Starlette:
             key = args.get("session")
             if not key:
                 return error('no "session" in JSON.'), None, None
-            if not store.has_session(str(key)):
+            if not self.store.has_session(str(key)):
                 return error(f'no session with key "{key}"'), None, None
         return None, args, form
 
-    async def login(request: Request):
-        bad, args, _ = await parsed(request, session=False)
+    async def login(self, request: Request):
+        bad, args, _ = await self.parsed(request, session=False)
         if bad:
             return bad
         key = args.get("apikey")
         if key is None:
             return error('need "apikey"')
-        if config.api_key is not None and str(key) != config.api_key:
+        if self.config.api_key is not None and str(key) != self.config.api_key:
             return error("bad apikey")
         return JSONResponse({"status": "success", "message": "authenticated user: starnav",
-                             "session": store.new_session()})  # fmt: skip
+                             "session": self.store.new_session()})  # fmt: skip
 
-    def accepted(job_id: int) -> JSONResponse:
-        jobs.enqueue(job_id)
+    def accepted(self, job_id: int) -> JSONResponse:
+        self.jobs.enqueue(job_id)
         return JSONResponse({"status": "success", "subid": job_id, "hash": str(job_id)})
 
-    async def upload(request: Request):
-        bad, args, form = await parsed(request, session=True)
+    async def upload(self, request: Request):
+        bad, args, form = await self.parsed(request, session=True)
         if bad:
             return bad
         upfile = None if form is None else form.get("file")
         if upfile is None or isinstance(upfile, str):
             if "x" in args and "y" in args:
-                return xy_job(args)
+                return self.xy_job(args)
             return error('no file: send the image as the multipart field "file"')
         data = await upfile.read()
-        return image_job(data, upfile.filename or "", args)
+        return self.image_job(data, upfile.filename or "", args)
 
-    def image_job(data: bytes, original_filename: str, args: dict) -> JSONResponse:
+    def image_job(self, data: bytes, original_filename: str, args: dict) -> JSONResponse:
         if not data:
             return error("the uploaded file is empty")
-        job_id = store.add_job("image", Path(original_filename).name, _hints_only(args))
+        job_id = self.store.add_job("image", Path(original_filename).name, _hints_only(args))
         name = input_name(data[:16])
-        (store.job_dir(job_id) / name).write_bytes(data)
-        store.set_input(job_id, name)
-        return accepted(job_id)
+        (self.store.job_dir(job_id) / name).write_bytes(data)
+        self.store.set_input(job_id, name)
+        return self.accepted(job_id)
 
-    def xy_job(args: dict) -> JSONResponse:
+    def xy_job(self, args: dict) -> JSONResponse:
         x, y = args.get("x"), args.get("y")
         if not isinstance(x, list) or not isinstance(y, list):
             return error('Failed to parse JSON "x" and "y" values -- should be lists of floats')
         if len(x) != len(y):
             return error('"x" and "y" lists must be the same length')
-        return accepted(store.add_job("xy", "json-xy", _hints_only(args, keep_xy=True)))
+        return self.accepted(self.store.add_job("xy", "json-xy", _hints_only(args, keep_xy=True)))
 
-    async def url_upload(request: Request):
-        bad, args, _ = await parsed(request, session=True)
+    async def url_upload(self, request: Request):
+        bad, args, _ = await self.parsed(request, session=True)
         if bad:
             return bad
         if "x" in args and "y" in args:
-            return xy_job(args)
+            return self.xy_job(args)
         url = args.get("url")
         if not isinstance(url, str) or not url.lower().startswith(("http://", "https://")):
             return error('need "url" (http or https), or "x" and "y"')
         try:
             data = await asyncio.get_running_loop().run_in_executor(
-                None, _fetch, url, config.max_upload_bytes
+                None, _fetch, url, self.config.max_upload_bytes
             )
         except (OSError, ValueError) as exc:
             return error(f"cannot fetch {url}: {exc}")
-        return image_job(data, url.rsplit("/", 1)[-1], args)
+        return self.image_job(data, url.rsplit("/", 1)[-1], args)
 
-    def job_or_404(request: Request):
-        job = store.get(int(request.path_params["job_id"]))
+    def job_or_404(self, request: Request):
+        job = self.store.get(int(request.path_params["job_id"]))
         if job is None:
             return None, JSONResponse({"status": "error", "errormessage": "no such job"}, 404)
         return job, None
 
-    def answer(view):
+    def answer(self, view):
+        """An endpoint answering ``view(job)`` (a function of the job record) as JSON."""
+
         async def endpoint(request: Request):
-            job, missing = job_or_404(request)
+            job, missing = self.job_or_404(request)
             return missing or JSONResponse(view(job))
 
         return endpoint
 
-    async def starnav_json(request: Request):
-        job, missing = job_or_404(request)
-        if missing:
-            return missing
-        return JSONResponse({"id": job.id, "status": job.status, "reason": job.reason,
-                             "original_filename": job.original_filename,
-                             "submitted": job.submitted, "started": job.started,
-                             "finished": job.finished, "calibration": job.calibration,
-                             "result": job.result})  # fmt: skip
+    def file_route(self, name: str, media_type: str, download: str | None):
+        """An endpoint sending the job's file ``name`` (``download``: its file name for the
+        browser, with the job number in ``{}``)."""
 
-    def file_route(name: str, media_type: str, download: str | None):
         async def endpoint(request: Request):
-            job, missing = job_or_404(request)
+            job, missing = self.job_or_404(request)
             if missing:
                 return missing
-            path = store.job_dir(job.id) / name
+            path = self.store.job_dir(job.id) / name
             if not path.is_file():
                 return Response(f"job {job.id} has no such file ({job.status})\n", 404)
             filename = None if download is None else download.format(job.id)
@@ -379,49 +377,59 @@ def create_app(config: ServiceConfig) -> Starlette:
 
         return endpoint
 
-    async def myjobs(request: Request):
-        bad, _, _ = await parsed(request, session=True)
-        return bad or JSONResponse({"jobs": store.job_ids(), "status": "success"})
+    async def myjobs(self, request: Request):
+        bad, _, _ = await self.parsed(request, session=True)
+        return bad or JSONResponse({"jobs": self.store.job_ids(), "status": "success"})
 
-    async def status(request: Request):
-        return JSONResponse({"status": "success", "workers": config.workers,
-                             "queued_or_running": jobs.queued, "running": jobs.running,
-                             "jobs": len(store.job_ids())})  # fmt: skip
+    async def status(self, request: Request):
+        return JSONResponse({"status": "success", "workers": self.config.workers,
+                             "queued_or_running": self.jobs.queued, "running": self.jobs.running,
+                             "jobs": len(self.store.job_ids())})  # fmt: skip
 
-    async def page(request: Request):
+    async def page(self, request: Request):
         return FileResponse(STATIC_DIR / "index.html", media_type="text/html")
 
-    job = "{job_id:int}"
-    names = lambda key: answer(lambda j: {key: nova.star_names(j)})  # noqa: E731
-    api = {
-        "/api/login": login,
-        "/api/upload": upload,
-        "/api/url_upload": url_upload,
-        f"/api/submissions/{job}": answer(nova.submission_status),
-        "/api/myjobs": myjobs,
-        f"/api/jobs/{job}": answer(nova.job_status),
-        f"/api/jobs/{job}/calibration": answer(nova.calibration),
-        f"/api/jobs/{job}/info": answer(nova.job_info),
-        f"/api/jobs/{job}/annotations": answer(nova.annotations),
-        f"/api/jobs/{job}/tags": names("tags"),
-        f"/api/jobs/{job}/machine_tags": names("tags"),
-        f"/api/jobs/{job}/objects_in_field": names("objects_in_field"),
-        f"/api/jobs/{job}/starnav": starnav_json,
-        "/api/status": status,
-        f"/wcs_file/{job}": file_route(OUTPUTS["wcs"], "application/fits", "wcs-{}.fits"),
-        f"/new_fits_file/{job}": file_route(
-            OUTPUTS["new_fits"], "application/fits", "new-image-{}.fits"
-        ),
-        f"/annotated_display/{job}": file_route(OUTPUTS["annotate"], "image/png", None),
-        f"/annotated_full/{job}": file_route(OUTPUTS["annotate"], "image/png", None),
-        f"/json_file/{job}": file_route(RESULT_FILE, "application/json", "starnav-{}.json"),
-    }
-    # GET and POST, with and without a trailing slash (a redirect would lose a POST)
-    routes = [Route(path + end, endpoint, methods=["GET", "POST"])
-              for path, endpoint in api.items() for end in ("", "/")]  # fmt: skip
-    routes.append(Route("/", page))
-    if STATIC_DIR.is_dir():
-        routes.append(Mount("/static", StaticFiles(directory=STATIC_DIR), name="static"))
+    def routes(self) -> list:
+        """Every route: GET and POST, with and without a trailing slash (a redirect would
+        lose a POST), the page and its static files."""
+        job = "{job_id:int}"
+        names = lambda key: self.answer(lambda j: {key: nova.star_names(j)})  # noqa: E731
+        files = self.file_route
+        api = {
+            "/api/login": self.login,
+            "/api/upload": self.upload,
+            "/api/url_upload": self.url_upload,
+            f"/api/submissions/{job}": self.answer(nova.submission_status),
+            "/api/myjobs": self.myjobs,
+            f"/api/jobs/{job}": self.answer(nova.job_status),
+            f"/api/jobs/{job}/calibration": self.answer(nova.calibration),
+            f"/api/jobs/{job}/info": self.answer(nova.job_info),
+            f"/api/jobs/{job}/annotations": self.answer(nova.annotations),
+            f"/api/jobs/{job}/tags": names("tags"),
+            f"/api/jobs/{job}/machine_tags": names("tags"),
+            f"/api/jobs/{job}/objects_in_field": names("objects_in_field"),
+            f"/api/jobs/{job}/starnav": self.answer(nova.starnav_answer),
+            "/api/status": self.status,
+            f"/wcs_file/{job}": files(OUTPUTS["wcs"], "application/fits", "wcs-{}.fits"),
+            f"/new_fits_file/{job}": files(
+                OUTPUTS["new_fits"], "application/fits", "new-image-{}.fits"
+            ),
+            f"/annotated_display/{job}": files(OUTPUTS["annotate"], "image/png", None),
+            f"/annotated_full/{job}": files(OUTPUTS["annotate"], "image/png", None),
+            f"/json_file/{job}": files(RESULT_FILE, "application/json", "starnav-{}.json"),
+        }
+        routes = [Route(path + end, endpoint, methods=["GET", "POST"])
+                  for path, endpoint in api.items() for end in ("", "/")]  # fmt: skip
+        routes.append(Route("/", self.page))
+        if STATIC_DIR.is_dir():
+            routes.append(Mount("/static", StaticFiles(directory=STATIC_DIR), name="static"))
+        return routes
+
+
+def create_app(config: ServiceConfig) -> Starlette:
+    """The service's ASGI application (``starnav serve`` runs it with uvicorn)."""
+    store = JobStore(config.data_dir)
+    jobs = Jobs(config, store)
 
     @contextlib.asynccontextmanager
     async def lifespan(app):
@@ -430,7 +438,7 @@ def create_app(config: ServiceConfig) -> Starlette:
         await jobs.stop()
         store.close()
 
-    app = Starlette(routes=routes, lifespan=lifespan)
+    app = Starlette(routes=NovaApi(config, store, jobs).routes(), lifespan=lifespan)
     app.state.store, app.state.jobs = store, jobs
     app.add_middleware(UploadLimit, limit=config.max_upload_bytes)
     return app

@@ -132,6 +132,14 @@ def star_names(job: Job) -> list[str]:
     return [s["name"] for s in stars if s.get("name")]
 
 
+def starnav_answer(job: Job) -> dict:
+    """``api/jobs/N/starnav``: starnav's own record of the job, with its whole solution."""
+    return {"id": job.id, "status": job.status, "reason": job.reason,
+            "original_filename": job.original_filename, "submitted": job.submitted,
+            "started": job.started, "finished": job.finished, "calibration": job.calibration,
+            "result": job.result}  # fmt: skip
+
+
 def job_info(job: Job) -> dict:
     """``api/jobs/N/info``."""
     names = star_names(job)
