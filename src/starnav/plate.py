@@ -304,7 +304,7 @@ def _solve_plate(source, pixels, hints, time_budget_s) -> PlateResult:
         sol = res.solution
         cam = None if sol is None else sol.camera
         return _result(sol, cam, res.reason, source.width, source.height, res.time_ms,
-                       hints, xy=source.xy, catalog=res.database.catalog)  # fmt: skip
+                       xy=source.xy, catalog=res.database.catalog)  # fmt: skip
     path = source
     header = fits_hints(path)
     if hints.ra_deg is not None:
@@ -312,12 +312,12 @@ def _solve_plate(source, pixels, hints, time_budget_s) -> PlateResult:
                             header.epoch_year, (*header.sources, "client"))  # fmt: skip
     res = solve_image(pixels, hints=header, downsample=hints.downsample, **options)
     height, width = pixels.shape
-    return _result(res.solution, res.camera, res.reason, width, height, res.total_ms, hints,
+    return _result(res.solution, res.camera, res.reason, width, height, res.total_ms,
                    pixels=pixels, image=res, xy=res.detections.xy,
                    jpeglike=not is_fits(path), catalog=res.catalog)  # fmt: skip
 
 
-def _result(sol, camera, reason, width, height, time_ms, hints, **kw) -> PlateResult:
+def _result(sol, camera, reason, width, height, time_ms, **kw) -> PlateResult:
     plate = None
     if sol is not None:
         plate = Plate.from_wcs(plate_wcs(sol.R_cam_from_icrs, camera), width, height)
