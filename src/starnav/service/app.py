@@ -105,6 +105,11 @@ class Jobs:
         for task in list(self._tasks):
             task.cancel()
         if self._pool is not None:
+            # the workers are the forkserver's children, not ours: a solving one would go on
+            # until its budget ran out after the server stopped (Python 3.11's pool has no
+            # public way to stop them; 3.14 adds terminate_workers)
+            for process in list(getattr(self._pool, "_processes", {}).values()):
+                process.terminate()
             self._pool.shutdown(wait=False, cancel_futures=True)
         self._stack.close()  # the Dask client (and a local cluster)
 
