@@ -29,7 +29,7 @@ import functools
 import math
 import sys
 from collections.abc import Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -337,8 +337,7 @@ def update_input(image: Path, result: PlateResult, solution: AstapSolution) -> N
             for card in solution.cards():
                 target.header[card[0]] = card[1:]
         return
-    plate = Plate.from_wcs(solution.wcs, result.width, result.height)
-    write_plate_files(replace(result, plate=plate), image, new_fits=image.with_suffix(".fits"))
+    write_plate_files(result, image, new_fits=image.with_suffix(".fits"))
 
 
 if __name__ == "__main__":
