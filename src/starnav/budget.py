@@ -46,6 +46,7 @@ UNIT_SHARE = 0.05  # a search's unit of work lasts about this part of its budget
 
 _COMPILING = threading.local()  # per thread: nesting depth and start of the outermost compile
 _COMPILE_S = [0.0]  # seconds spent compiling in this process
+_RUNNING = [0.0]  # start of the outermost compilation running now (any thread), 0: none
 _CLOCK: list[bool] = []  # whether the compile clock is installed
 
 
@@ -64,15 +65,24 @@ def _install_compile_clock() -> None:
         def on_start(self, _event) -> None:
             depth = getattr(_COMPILING, "depth", 0)
             if depth == 0:
-                _COMPILING.t0 = time.perf_counter()
+                _COMPILING.t0 = _RUNNING[0] = time.perf_counter()
             _COMPILING.depth = depth + 1
 
         def on_end(self, _event) -> None:
             _COMPILING.depth -= 1
             if _COMPILING.depth == 0:
                 _COMPILE_S[0] += time.perf_counter() - _COMPILING.t0
+                _RUNNING[0] = 0.0
 
     event.register("numba:compile", _Clock())
+
+
+def compiled_s() -> float:
+    """Seconds of numba compilation in this process, the one running now included, counted
+    from the first call (which starts the count; loading cached machine code is none)."""
+    _install_compile_clock()
+    running = _RUNNING[0]
+    return _COMPILE_S[0] + (time.perf_counter() - running if running else 0.0)
 
 
 def default_budget_s(*, known: bool, scan: bool, field_deg: float = 0.0) -> float:

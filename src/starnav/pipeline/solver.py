@@ -19,7 +19,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from starnav.budget import Deadline, expired
+from starnav.budget import Deadline, compiled_s, expired
 from starnav.camera import CameraModel
 from starnav.catalog import Catalog
 from starnav.errors import CatalogError, StarnavError
@@ -136,18 +136,25 @@ def _say_compiling() -> None:
 @contextmanager
 def first_use(what: str) -> Iterator[None]:
     """Around the first run of ``what`` in a process: it loads the cached machine code
-    (~0.1-0.3 s), or compiles it, the first time after installing. When the wait passes a
-    second, say why on stderr."""
+    (~0.1-0.3 s), or compiles it, the first time after installing. Once a second has gone
+    to compiling, say why on stderr (a slow load, or a small compile, says nothing)."""
     if what in _LOADED:
         yield
         return
-    notice = threading.Timer(1.0, _say_compiling)
-    notice.daemon = True
-    notice.start()
+    before = compiled_s()
+    done = threading.Event()
+
+    def watch() -> None:
+        while not done.wait(0.5):
+            if compiled_s() - before > 1.0:
+                _say_compiling()
+                return
+
+    threading.Thread(target=watch, daemon=True).start()
     try:
         yield
     finally:
-        notice.cancel()
+        done.set()
         _LOADED.add(what)
 
 
