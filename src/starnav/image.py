@@ -340,20 +340,18 @@ def write_outputs(
     wcs=None,
 ) -> dict[str, str]:
     """Write what ``paths`` asks for (a kind's path None: not written): "wcs", a FITS WCS
-    header in the projection of the fitted camera (solved only; ``wcs``, an astropy WCS of
-    the solution, when given); "new_fits", the image as FITS with that WCS in its header, like
+    header of the fitted camera (``solution_wcs``; solved only; ``wcs``: that WCS, when the
+    caller has it already); "new_fits", the image as FITS with that WCS in its header, like
     astrometry.net's ``.new`` (solved only; a FITS ``source`` keeps its own 2-D data and header
     cards, others get the luminance that was solved); "annotate", the picture
     (``annotate_result``, solved or not). Returns the paths written, by kind."""
     written: dict[str, str] = {}
     s = result.solution
     if s is not None and (paths.get("wcs") or paths.get("new_fits")):
-        from starnav.wcs import choose_sip_order, wcs_from_attitude, write_wcs
+        from starnav.wcs import write_wcs
 
         if wcs is None:
-            wcs = wcs_from_attitude(
-                s.R_cam_from_icrs, result.camera, sip_order=choose_sip_order(result.camera)
-            )
+            wcs = solution_wcs(s.R_cam_from_icrs, result.camera)
         if paths.get("wcs"):
             write_wcs(paths["wcs"], wcs)
             written["wcs"] = str(paths["wcs"])
@@ -365,6 +363,16 @@ def write_outputs(
         annotate_result(paths["annotate"], pixels, result)
         written["annotate"] = str(paths["annotate"])
     return written
+
+
+def solution_wcs(R_cam_from_icrs: np.ndarray, camera: CameraModel):
+    """The WCS (astropy) written for a solved image: the fitted camera's projection
+    (``starnav.wcs.wcs_from_attitude``), with SIP polynomials of the order
+    ``choose_sip_order`` picks for its distortion (TAN without distortion). Its CRPIX is the
+    principal point, the image centre unless a camera file says otherwise."""
+    from starnav.wcs import choose_sip_order, wcs_from_attitude
+
+    return wcs_from_attitude(R_cam_from_icrs, camera, sip_order=choose_sip_order(camera))
 
 
 def _source_fits(source: str | Path | None, pixels: np.ndarray):

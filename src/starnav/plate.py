@@ -29,9 +29,14 @@ from starnav.catalog import Catalog
 from starnav.detect.header import ImageHints, fits_hints, is_fits
 from starnav.errors import StarnavError
 from starnav.fov import DEFAULT_FOV_RANGE_DEG, DEFAULT_PATTERN_STARS, FOV_LIMITS_DEG, solve_fov
-from starnav.image import ImageSolveResult, annotate_solution, solve_image, write_outputs
+from starnav.image import (
+    ImageSolveResult,
+    annotate_solution,
+    solution_wcs,
+    solve_image,
+    write_outputs,
+)
 from starnav.results import Solution
-from starnav.wcs import choose_sip_order, wcs_from_attitude
 
 SCALE_UNITS = ("degwidth", "arcminwidth", "arcsecperpix", "focalmm")
 FULL_FRAME_WIDTH_MM = 36.0  # "focalmm" is the focal length of a 35 mm camera's 36 mm width
@@ -47,7 +52,8 @@ class PlateHints:
     of this position (searched first, then the whole sky); ``parity``: starnav's (+1: the sky
     as seen with y down, astrometry.net's "neg"; None: both); ``downsample``: stars detected on
     the image binned by this factor; ``positional_error_px``: centroid 1-sigma (px; None: 1);
-    ``crpix_center``: the WCS's reference pixel at the image centre (always so: ``plate_wcs``).
+    ``crpix_center``: the WCS's reference pixel at the image centre (always so: a plate solve
+    has no camera file, so the principal point, CRPIX, is the centre).
     """
 
     fov_range_deg: tuple[float, float] | None = None
@@ -273,7 +279,8 @@ def solve_plate(
     """Solve an image file (FITS, PNG, JPEG, TIFF) or a source list with a client's ``hints``
     (``PlateHints``, or a function of the image's width and height in px giving them, for
     scales in arcsec per pixel; they win over the FITS header's). ``time_budget_s``: the solve's
-    (``starnav.budget`` defaults). The WCS is that of the fitted camera (``plate_wcs``)."""
+    (``starnav.budget`` defaults). The WCS is that of the fitted camera
+    (``starnav.image.solution_wcs``)."""
     if isinstance(source, XYList):
         return _solve_plate(source, None, hints, time_budget_s)
     from starnav.detect.read import read_image
@@ -320,15 +327,8 @@ def _solve_plate(source, pixels, hints, time_budget_s) -> PlateResult:
 def _result(sol, camera, reason, width, height, time_ms, **kw) -> PlateResult:
     plate = None
     if sol is not None:
-        plate = Plate.from_wcs(plate_wcs(sol.R_cam_from_icrs, camera), width, height)
+        plate = Plate.from_wcs(solution_wcs(sol.R_cam_from_icrs, camera), width, height)
     return PlateResult(plate, reason, sol, width, height, time_ms, **kw)
-
-
-def plate_wcs(R_cam_from_icrs: np.ndarray, camera) -> WCS:
-    """The WCS of a solved camera (``starnav.wcs.wcs_from_attitude``: TAN, TAN-SIP for a
-    distorted fit). Its CRPIX is the principal point, which a plate solve (no camera file)
-    puts at the image centre: solve-field's --crpix-center always holds."""
-    return wcs_from_attitude(R_cam_from_icrs, camera, sip_order=choose_sip_order(camera))
 
 
 def write_plate_files(

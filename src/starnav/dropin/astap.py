@@ -8,7 +8,7 @@ github.com/han-k59/astap: ``command-line_version/astap_command_line.lpr``, ``ast
 astrometry.net's), BASE being ``-o`` or the input path, its extension replaced.
 
 The solution is ASTAP's: a TAN projection whose reference pixel is the image centre, FITS
-pixel ((W+1)/2, (H+1)/2) (the plate's WCS: ``starnav.plate.plate_wcs``), with CDELT and CROTA
+pixel ((W+1)/2, (H+1)/2) (the plate's WCS: ``starnav.image.solution_wcs``), with CDELT and CROTA
 from its CD matrix by inverting the relation ASTAP makes its CD matrix with
 (``command-line_version/unit_command_line_solving.pas``: CD1_1 = CDELT1 cos CROTA1, CD1_2 =
 -CDELT1 sin CROTA1 f, CD2_1 = CDELT2 sin CROTA2 f, CD2_2 = CDELT2 cos CROTA2, CDELT2 > 0,
@@ -75,7 +75,7 @@ class AstapSolution:
     @classmethod
     def from_plate(cls, plate: Plate) -> AstapSolution:
         """The centred TAN solution of a plate (module docstring)."""
-        tan = plate.wcs  # TAN, CRPIX at the centre (``starnav.plate.plate_wcs``)
+        tan = plate.wcs  # TAN, CRPIX at the centre (``starnav.image.solution_wcs``)
         cd = np.array(tan.wcs.cd, dtype=float)
         f = -1.0 if np.linalg.det(cd) < 0 else 1.0
         cdelt = (f * math.hypot(cd[0, 0], cd[0, 1]), math.hypot(cd[1, 0], cd[1, 1]))
