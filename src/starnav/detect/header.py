@@ -34,10 +34,9 @@ from pathlib import Path
 
 from astropy.time import Time
 
+from starnav.detect.read import FITS_MAGIC, FITS_SUFFIXES
 from starnav.errors import ImageError, StarnavError
 
-_FITS_MAGIC = b"SIMPLE  ="
-_FITS_SUFFIXES = (".fits", ".fit", ".fts", ".fits.gz", ".fit.gz", ".fts.gz", ".fz")
 _EXIF_IFD = 0x8769
 _DATE_TIME_ORIGINAL = 36867
 _SUBSEC_TIME_ORIGINAL = 37521
@@ -49,10 +48,10 @@ def is_fits(path: str | Path) -> bool:
     path = Path(path)
     try:
         with path.open("rb") as fh:
-            head = fh.read(len(_FITS_MAGIC))
+            head = fh.read(len(FITS_MAGIC))
     except OSError as exc:
         raise ImageError(f"cannot read image file {str(path)!r}: {exc.strerror or exc}") from None
-    return head == _FITS_MAGIC or path.name.lower().endswith(_FITS_SUFFIXES)
+    return head == FITS_MAGIC or path.name.lower().endswith(FITS_SUFFIXES)
 
 
 def fits_headers(path: Path) -> list:

@@ -28,9 +28,10 @@ import numpy as np
 from starnav.errors import ImageError
 
 REC709 = np.array([0.2126, 0.7152, 0.0722])
-_FITS_SUFFIXES = (".fits", ".fit", ".fts", ".fits.gz", ".fit.gz", ".fts.gz", ".fz")
-_FITS_MAGIC = b"SIMPLE  ="
-_GZIP_MAGIC = b"\x1f\x8b"
+FITS_SUFFIXES = (".fits", ".fit", ".fts", ".fits.gz", ".fit.gz", ".fts.gz", ".fz")
+FITS_MAGIC = b"SIMPLE  ="  # the first bytes of a FITS file
+GZIP_MAGIC = b"\x1f\x8b"  # of a gzip file (a FITS file when its name says so)
+TIFF_MAGICS = (b"II*\x00", b"MM\x00*", b"II+\x00", b"MM\x00+")  # TIFF and BigTIFF
 _COLOUR_MODES = (
     "RGB",
     "RGBA",
@@ -64,8 +65,8 @@ def read_image(path: str | Path) -> np.ndarray:
         raise ImageError(f"cannot read image file {name!r}: {exc.strerror or exc}") from None
     if not head:
         raise ImageError(f"image file {name!r} is empty (0 bytes)")
-    fits_name = path.name.lower().endswith(_FITS_SUFFIXES)
-    if head.startswith(_FITS_MAGIC) or (fits_name and head.startswith(_GZIP_MAGIC)):
+    fits_name = path.name.lower().endswith(FITS_SUFFIXES)
+    if head.startswith(FITS_MAGIC) or (fits_name and head.startswith(GZIP_MAGIC)):
         data = _read_fits(path)
     elif fits_name:
         raise ImageError(f"cannot read image file {name!r}: not a FITS file (no SIMPLE card)")
@@ -203,7 +204,7 @@ def _read_deep_colour(path: Path, fmt: str | None) -> np.ndarray:
 
 def _is_tiff(path: Path) -> bool:
     with path.open("rb") as fh:
-        return fh.read(4) in (b"II*\x00", b"MM\x00*", b"II+\x00", b"MM\x00+")
+        return fh.read(4) in TIFF_MAGICS
 
 
 def _finish(data: np.ndarray, name: str) -> np.ndarray:

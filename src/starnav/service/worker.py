@@ -16,18 +16,18 @@ import traceback
 from pathlib import Path
 
 from starnav.catalog.names import star_names
+from starnav.detect.read import FITS_MAGIC, GZIP_MAGIC, TIFF_MAGICS
 from starnav.errors import StarnavError
 from starnav.plate import XYList, solve_plate, write_plate_files
 from starnav.service.nova import plate_hints
 
 # magic bytes -> the name the input gets in the job's directory (never the client's name)
 MAGIC = (
-    (b"SIMPLE  =", "input.fits"),
-    (b"\x1f\x8b", "input.fits.gz"),
+    (FITS_MAGIC, "input.fits"),
+    (GZIP_MAGIC, "input.fits.gz"),  # read as FITS for its name (starnav.detect.read)
     (b"\x89PNG\r\n\x1a\n", "input.png"),
     (b"\xff\xd8\xff", "input.jpg"),
-    (b"II*\x00", "input.tif"),
-    (b"MM\x00*", "input.tif"),
+    *((magic, "input.tif") for magic in TIFF_MAGICS),
 )
 OUTPUTS = {"wcs": "wcs.fits", "new_fits": "new.fits", "annotate": "annotated.png"}
 
