@@ -25,6 +25,7 @@ from starnav.pipeline import (
     get_database,
 )
 from starnav.pipeline.batch import solve_many
+from starnav.pipeline.deep import deep_catalog
 from starnav.pipeline.solver import check_prior
 from starnav.pointing import Pointing, best_triple, three_star
 from starnav.results import Solution, SolveResult, StarMatch
@@ -126,6 +127,7 @@ def solve_verbose(
     prior: Solution | np.ndarray | None = None,
     prior_sigma_deg: float = 1.0,
     time_budget_s: float | None = None,
+    deep_mag_limit: float | None = None,
 ) -> SolveResult:
     """Like ``solve`` but always returns a ``SolveResult`` with the reason when unsolved.
 
@@ -146,7 +148,12 @@ def solve_verbose(
     matches the catalog stars near it only, and falls back to ``algorithm`` when that fails
     (``Solution.algorithm`` says which answered); ``time_budget_s``: give up after this many
     seconds of identification, "time budget spent" (default ``known_budget_s``;
-    ``math.inf``: no limit; preparing the catalog and database is not counted).
+    ``math.inf``: no limit; preparing the catalog and database is not counted);
+    ``deep_mag_limit``: after the fit, match every point to the same catalog down to this
+    magnitude (e.g. 12 for a 6° star tracker; no pair table of it is built), which gives ids
+    to stars fainter than ``mag_limit`` with a per-star ``match_probability`` and an
+    unresolved ``double`` flag in the star table (``starnav.pipeline.deep``); None (the
+    default): no deep stage.
     """
     cam = make_camera(width=width, height=height, fov_deg=fov_deg, camera=camera, lens=lens)
     budget_s = check_budget(time_budget_s, known_budget_s(cam))
@@ -166,6 +173,7 @@ def solve_verbose(
         min_matched_fraction=min_matched_fraction,
         algorithm=algorithm,
         algorithm_options=algorithm_options,
+        deep_mag_limit=deep_mag_limit,
     )
     deadline = Deadline.after(budget_s)
     return solver.solve(stars, prior=R_prior, prior_sigma_deg=prior_sigma_deg, deadline=deadline)
@@ -183,15 +191,18 @@ def prepare_solver(
     epoch_year: float | None = None,
     algorithm: str = DEFAULT_ALGORITHM,
     algorithm_options: Mapping[str, object] | None = None,
+    deep_mag_limit: float | None = None,
     **settings,
 ) -> Solver:
     """The prepared ``Solver`` of ``solve_verbose``'s options (checked, one-line errors):
     the camera (``make_camera``), catalog and algorithm, and ``settings``, the fields of
-    ``SolveSettings`` (``sigma_px``, ``parity``, ``fit_focal``, ...). Kept per process, so
-    repeated solves do not prepare it again."""
+    ``SolveSettings`` (``sigma_px``, ``parity``, ``fit_focal``, ...); ``deep_mag_limit``:
+    the deep stage's catalog depth (``solve_verbose``). Kept per process, so repeated solves
+    do not prepare it again."""
     cam = make_camera(width=width, height=height, fov_deg=fov_deg, camera=camera, lens=lens)
+    deep = deep_catalog(catalog, deep_mag_limit, epoch_year)
     try:
-        solve_settings = SolveSettings(**settings)
+        solve_settings = SolveSettings(**settings, deep_catalog=deep)
     except TypeError as exc:  # an option solve does not have
         raise StarnavError(f"unknown solve option: {exc}") from None
     cat = load_catalog(catalog, mag_limit=mag_limit, epoch_year=epoch_year)

@@ -26,6 +26,7 @@ from starnav.identify.base import MatchSettings
 from starnav.identify.database import PairDatabase, catalog_only
 from starnav.identify.pattern4 import FIELD_RADIUS_FRACTION, build_pattern_table
 from starnav.pipeline.conclude import elapsed_ms
+from starnav.pipeline.deep import deep_catalog
 from starnav.pipeline.solver import (
     DEFAULT_MAX_FALSE_MATCH_PROBABILITY,
     DEFAULT_MIN_MATCHED_FRACTION,
@@ -266,6 +267,7 @@ def solve_fov(
     prior_sigma_deg: float = 1.0,
     position_hint_deg: tuple[float, float] | None = None,
     position_radius_deg: float = POSITION_HINT_RADIUS_DEG,
+    deep_mag_limit: float | None = None,
 ) -> SolveResult:
     """Identify stars at ``xy`` (n, 2, px) in an image ``width`` x ``height`` px whose field
     of view is unknown: searched within ``fov_range_deg`` (horizontal, degrees), or within
@@ -283,7 +285,9 @@ def solve_fov(
     previous frame's fitted one): tracking, falling back to lost in space with that camera
     (``tracking_solver``). ``position_hint_deg``: (RA, Dec) of the boresight, roughly (e.g.
     a FITS header's): the catalog within ``position_radius_deg`` of it is searched first,
-    then the whole sky (the pinhole search). Other options as ``starnav.solve_verbose``.
+    then the whole sky (the pinhole search). ``deep_mag_limit``: match every point to the
+    catalog down to this magnitude after the fit (``starnav.pipeline.deep``). Other options
+    as ``starnav.solve_verbose``.
     """
     if camera is not None:
         width, height, lens = camera.width, camera.height, camera.model
@@ -312,6 +316,7 @@ def solve_fov(
         fit_distortion=fit_distortion,
         max_false_match_probability=max_false_match_probability,
         min_matched_fraction=min_matched_fraction,
+        deep_catalog=deep_catalog(catalog, deep_mag_limit, epoch_year),
     )
     R = check_prior(prior, prior_sigma_deg)
     if R is not None:

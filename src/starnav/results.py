@@ -46,6 +46,9 @@ SOLVE_KEYS = (
 class StarMatch:
     """One input point: its ``label``, position (px), the ``catalog_id`` it was identified as
     (None: no catalog star) and the length of its residual after the fit (px, None if unmatched).
+    With the deep stage (``pipeline.deep``): ``match_probability``, P(the id is right) (None
+    if unmatched or without the deep stage), and ``double``, whether the point was taken
+    for an unresolved double (given its brightest star).
     """
 
     label: str
@@ -53,26 +56,48 @@ class StarMatch:
     y: float
     catalog_id: int | None
     residual_px: float | None
+    match_probability: float | None = None
+    double: bool = False
 
 
 @dataclass(frozen=True, eq=False)
 class StarTable:
     """The input points of a solution as arrays: ``labels``, ``xy`` (n, 2, px), the
-    ``catalog_id`` of each (-1: none) and its residual length (px, NaN: unmatched)."""
+    ``catalog_id`` of each (-1: none) and its residual length (px, NaN: unmatched); with the
+    deep stage (``pipeline.deep``) also ``match_probability`` (NaN: unmatched) and
+    ``double`` (bool), None without it."""
 
     labels: tuple[str, ...]
     xy: np.ndarray
     catalog_id: np.ndarray
     residual_px: np.ndarray
+    match_probability: np.ndarray | None = None
+    double: np.ndarray | None = None
+
+    @property
+    def deep(self) -> bool:
+        """Whether the deep stage made this table (it has ``match_probability``)."""
+        return self.match_probability is not None
 
     def records(self) -> tuple[StarMatch, ...]:
         """One ``StarMatch`` per point."""
+        n = len(self.labels)
         ids = [None if i < 0 else i for i in self.catalog_id.tolist()]
-        res = [None if r != r else r for r in self.residual_px.tolist()]  # NaN -> None
-        return tuple(
-            StarMatch(label, x, y, i, r)
-            for label, (x, y), i, r in zip(self.labels, self.xy.tolist(), ids, res, strict=True)
+        res = _none_for_nan(self.residual_px)
+        prob = (
+            [None] * n if self.match_probability is None else _none_for_nan(self.match_probability)
         )
+        double = [False] * n if self.double is None else [bool(d) for d in self.double]
+        return tuple(
+            StarMatch(label, x, y, i, r, p, d)
+            for label, (x, y), i, r, p, d in zip(
+                self.labels, self.xy.tolist(), ids, res, prob, double, strict=True
+            )
+        )
+
+
+def _none_for_nan(values: np.ndarray) -> list[float | None]:
+    return [None if v != v else v for v in np.asarray(values, dtype=float).tolist()]
 
 
 @dataclass(frozen=True, eq=False)
@@ -126,7 +151,9 @@ class Solution:
         out = {f.name: getattr(self, f.name) for f in fields(self) if f.name not in skip}
         out["solved"] = True
         out["R_cam_from_icrs"] = self.R_cam_from_icrs.tolist()
-        out["stars"] = [asdict(s) for s in self.stars]
+        # the deep stage's columns only when it ran: other outputs keep their five keys
+        drop = () if self.star_table.deep else ("match_probability", "double")
+        out["stars"] = [{k: v for k, v in asdict(s).items() if k not in drop} for s in self.stars]
         return out
 
 

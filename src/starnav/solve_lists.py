@@ -47,13 +47,15 @@ def solve_star_list(
     prior: np.ndarray | None = None,
     prior_sigma_deg: float = 1.0,
     time_budget_s: float | None = None,
+    deep_mag_limit: float | None = None,
 ) -> SolveResult:
     """Solve one star list: with ``fov_deg`` or a ``camera`` (model or file) by
     ``solve_verbose`` (options as there), without them by ``solve_fov``, which searches
     ``fov_range_deg`` (for the ``lens`` model) and fits the focal length. The pinhole FOV
     search picks the catalog depth of each FOV band and identifies by 4-star patterns, so a
     ``prior``, another ``algorithm``, ``algorithm_options`` and ``mag_limit`` need ``fov_deg``
-    (``StarnavError`` otherwise; a fisheye lens's scan takes ``mag_limit``)."""
+    (``StarnavError`` otherwise; a fisheye lens's scan takes ``mag_limit``);
+    ``deep_mag_limit``: the deep stage's depth (``starnav.pipeline.deep``), either way."""
     if fov_deg is None and camera is None:
         from starnav.fov import solve_fov
 
@@ -81,6 +83,7 @@ def solve_star_list(
             sigma_px=sigma_px,
             max_false_match_probability=max_false_match_probability,
             time_budget_s=time_budget_s,
+            deep_mag_limit=deep_mag_limit,
         )
     return solve_verbose(
         stars.xy,
@@ -103,6 +106,7 @@ def solve_star_list(
         prior=prior,
         prior_sigma_deg=prior_sigma_deg,
         time_budget_s=time_budget_s,
+        deep_mag_limit=deep_mag_limit,
     )
 
 

@@ -180,6 +180,18 @@ def add_catalog(p: argparse.ArgumentParser) -> None:
     p.add_argument("--epoch", type=finite, help="year of Hipparcos proper motion (default: now)")
 
 
+def add_deep_mag_limit(p: argparse.ArgumentParser) -> None:
+    """--deep-mag-limit (the deep stage, ``starnav.pipeline.deep``)."""
+    p.add_argument(
+        "--deep-mag-limit",
+        type=finite,
+        metavar="MAG",
+        help="after the fit, match every star to the catalog down to this magnitude (e.g. 12 "
+        "for a 6° star tracker): ids of faint stars, each with its match probability and a "
+        "flag for unresolved doubles (default: off)",
+    )
+
+
 def add_algorithm(p: argparse.ArgumentParser) -> None:
     """--algorithm, its options by name (--algorithm-option) and --triangle-selection."""
     p.add_argument(

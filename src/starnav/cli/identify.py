@@ -17,6 +17,7 @@ from starnav.cli.common import (
     Subparsers,
     add_algorithm,
     add_catalog,
+    add_deep_mag_limit,
     add_fov_search,
     add_time_budget,
     algorithm_options,
@@ -48,6 +49,7 @@ def add_parser(subparsers: Subparsers) -> None:
     p.add_argument("--width", type=positive_int, help="image width (px; or give --camera)")
     p.add_argument("--height", type=positive_int, help="image height (px; default: width)")
     add_catalog(p)
+    add_deep_mag_limit(p)
     p.add_argument(
         "--sigma-px",
         type=finite,
@@ -117,6 +119,7 @@ def solve_options(args: argparse.Namespace) -> dict:
         algorithm=args.algorithm,
         algorithm_options=algorithm_options(args),
         time_budget_s=args.time_budget,
+        deep_mag_limit=args.deep_mag_limit,
     )
 
 

@@ -47,8 +47,15 @@ def print_solution(s: Solution, *, file: IO[str] | None = None) -> None:
         f"catalog: {s.catalog}",
         file=file,
     )
-    print(f"{'label':>8} {'x':>9} {'y':>9} {'catalog_id':>10} {'residual_px':>11}", file=file)
+    deep = s.star_table.deep  # the deep stage's columns, only when it ran
+    extra = f" {'match_probability':>17} {'double':>6}" if deep else ""
+    header = f"{'label':>8} {'x':>9} {'y':>9} {'catalog_id':>10} {'residual_px':>11}"
+    print(header + extra, file=file)
     for m in s.stars:
         cid = "-" if m.catalog_id is None else str(m.catalog_id)
         res = "-" if m.residual_px is None else f"{m.residual_px:.3f}"
-        print(f"{m.label:>8} {m.x:9.2f} {m.y:9.2f} {cid:>10} {res:>11}", file=file)
+        row = f"{m.label:>8} {m.x:9.2f} {m.y:9.2f} {cid:>10} {res:>11}"
+        if deep:
+            prob = "-" if m.match_probability is None else f"{m.match_probability:.4f}"
+            row += f" {prob:>17} {'yes' if m.double else '-':>6}"
+        print(row, file=file)

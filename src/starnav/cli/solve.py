@@ -17,6 +17,7 @@ from starnav.cli.common import (
     EXIT_OK,
     Subparsers,
     add_dask,
+    add_deep_mag_limit,
     add_fov_search,
     add_time_budget,
     check_parent_dir,
@@ -68,6 +69,7 @@ def add_parser(subparsers: Subparsers) -> None:
         "--catalog", help="CSV catalog id,ra_deg,dec_deg,mag (default: embedded Hipparcos)"
     )
     p.add_argument("--epoch", type=finite, help="year for Hipparcos proper motion")
+    add_deep_mag_limit(p)
     p.add_argument(
         "--wcs",
         metavar="FITS",
@@ -128,6 +130,7 @@ def _options(args: argparse.Namespace) -> dict:
         epoch_year=args.epoch,
         parity=args.parity,
         time_budget_s=args.time_budget,
+        deep_mag_limit=args.deep_mag_limit,
         **({"hints": ImageHints()} if args.no_hints else {}),
     )
 

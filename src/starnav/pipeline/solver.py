@@ -15,7 +15,7 @@ import threading
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -28,6 +28,7 @@ from starnav.identify.base import Identification, Identifier, IdentifyOutcome
 from starnav.identify.database import build_database, database_angle_deg
 from starnav.identify.tracking import Tracking
 from starnav.pipeline.conclude import conclude, elapsed_ms
+from starnav.pipeline.deep import deep_match
 from starnav.results import Solution, SolveResult
 from starnav.starlist import StarList
 
@@ -47,7 +48,9 @@ class SolveSettings:
     ``parity``: +1 / -1 when known; ``fit_focal``: fit the focal length with the attitude;
     ``fit_distortion``: and the distortion coefficients (from 12 matched stars on);
     ``max_false_match_probability``: refuse less certain identifications;
-    ``min_matched_fraction``: refuse when fewer of the stars that should be seen agree."""
+    ``min_matched_fraction``: refuse when fewer of the stars that should be seen agree;
+    ``deep_catalog``: match every point to this (fainter) catalog after the fit
+    (``pipeline.deep``; None: no deep stage)."""
 
     sigma_px: float = DEFAULT_SIGMA_PX
     parity: int | None = None
@@ -55,6 +58,7 @@ class SolveSettings:
     fit_distortion: bool = False
     max_false_match_probability: float = DEFAULT_MAX_FALSE_MATCH_PROBABILITY
     min_matched_fraction: float = DEFAULT_MIN_MATCHED_FRACTION
+    deep_catalog: Catalog | None = field(default=None, repr=False)
 
     def __post_init__(self) -> None:
         s = self.sigma_px
@@ -303,7 +307,8 @@ def fit_identification(
     stages: dict[str, float],
 ) -> SolveResult:
     """The ``SolveResult`` of an identification made with ``camera`` on ``database``: fitted
-    and decided by ``pipeline.conclude``, timed from ``t0`` (the fit from ``t_fit``;
+    and decided by ``pipeline.conclude``, then matched to ``settings.deep_catalog`` when it
+    is given (``pipeline.deep``, stage ``deep``), timed from ``t0`` (the fit from ``t_fit``;
     ``time.perf_counter()`` values), ``stages`` the times so far."""
     solution, reason = conclude(
         found,
@@ -317,6 +322,10 @@ def fit_identification(
         min_matched_fraction=settings.min_matched_fraction,
     )
     stages = {**stages, "fit": elapsed_ms(t_fit)}
+    if solution is not None and settings.deep_catalog is not None:
+        t_deep = time.perf_counter()
+        solution = deep_match(solution, stars, settings.deep_catalog, sigma_px=settings.sigma_px)
+        stages["deep"] = elapsed_ms(t_deep)
     ms = elapsed_ms(t0)
     if solution is not None:
         solution = replace(solution, time_ms=ms, algorithm=algorithm)
