@@ -52,6 +52,9 @@ MATCH_SIGMAS = 4.0  # a point's match circle: this many centroid sigmas (misses 
 DOUBLE_LIKELIHOOD_RATIO = 20.0  # a double's nearer star beats the brighter by this factor
 MIN_FIT_STARS = 8  # the fitted sigma is used from this many fitted stars on
 MIN_SIGMA_PX = 0.05  # the centroid sigma is never taken below this (px)
+UNRESOLVED_SIGMAS = 3.0  # two stars closer than max(1 px, this many sigma): one point
+MIN_MAG_SIGMA = 0.1  # the brightness model's scatter is never taken below this (mag)
+_NO_PAIR = 1e12  # cost of a point and a star that are not within the match circle
 
 
 MAX_DEEP_MAG = 16.0  # deep_mag_limit is a magnitude up to this (Hipparcos ends near Hp 14)
@@ -157,24 +160,37 @@ def deep_match(solution: Solution, stars: StarList, deep: Catalog, *, sigma_px: 
         row_of[free[pairs.obs]] = pairs.cat
         owner[pairs.cat] = free[pairs.obs]
 
-    # unresolved doubles: the brightest free star in the circle, unless clearly worse
-    double = np.zeros(n, dtype=np.bool_)
+    # contested groups (a point with two or more stars in its circle, or a star in two
+    # circles) decided again, by likelihood: the most pairs, then position and brightness
     chord2 = k.chord(radius_rad) ** 2
     sky_dir = bearings @ R  # rows: R^T b, the points' directions in ICRS
-    worse = 2.0 * sigma**2 * math.log(DOUBLE_LIKELIHOOD_RATIO)
-    for p in np.flatnonzero(row_of >= 0):
+    takes_part = (table.catalog_id < 0) | (row_of >= 0)  # not a bright id the deep lacks
+    edges = []
+    for p in np.flatnonzero(takes_part):
         m = k.cone(np.ascontiguousarray(sky_dir[p]), chord2, sky, everything, work)
-        near = work[:m]
-        near = near[(owner[near] < 0) | (owner[near] == p)]
-        if len(near) < 2:
-            continue
-        double[p] = True
-        d2 = np.sum((_pixels(camera, R, deep, near) - xy[p]) ** 2, axis=1)
-        brightest = int(np.argmin(deep.mag[near]))
-        choice = brightest if d2[brightest] - d2.min() <= worse else int(np.argmin(d2))
-        owner[row_of[p]] = -1
-        row_of[p] = near[choice]
-        owner[row_of[p]] = p
+        edges.extend((p, int(r)) for r in work[:m])
+    edges.extend((int(p), int(row_of[p])) for p in held)  # even beyond the circle
+    mag_sigma, zero_point = _magnitude_model(stars, row_of, deep)
+    if edges:
+        e = np.unique(np.array(edges, dtype=np.int64), axis=0)
+        star_xy = _pixels(camera, R, deep, e[:, 1])
+        d2 = np.sum((star_xy - xy[e[:, 0]]) ** 2, axis=1)
+        score = -0.5 * d2 / sigma**2
+        if mag_sigma is not None:
+            measured = zero_point - 2.5 * np.log10(stars.brightness[e[:, 0]])
+            score -= 0.5 * ((measured - deep.mag[e[:, 1]]) / mag_sigma) ** 2
+        keep = math.log(DOUBLE_LIKELIHOOD_RATIO)
+        bright_row = np.full(n, -1, dtype=np.int64)
+        bright_row[held] = row_of[held]
+        score += keep * (bright_row[e[:, 0]] == e[:, 1])  # the bright stage's id
+        unresolved_px = max(1.0, UNRESOLVED_SIGMAS * sigma)
+        score += keep * _brightest_of_double(e, deep.mag, star_xy, unresolved_px)
+        _decide_contested(e, score, row_of, owner)
+    double = np.zeros(n, dtype=np.bool_)
+    if edges:
+        free_or_own = (owner[e[:, 1]] < 0) | (owner[e[:, 1]] == e[:, 0])
+        double = np.bincount(e[free_or_own, 0], minlength=n) >= 2
+        double &= row_of >= 0
 
     matched = np.flatnonzero(row_of >= 0)
     catalog_id = table.catalog_id.copy()
@@ -191,6 +207,73 @@ def deep_match(solution: Solution, stars: StarList, deep: Catalog, *, sigma_px: 
     probability = match_probability(residual_px, sigma, stars_per_px2 + false_per_px2)
     deep_table = StarTable(table.labels, table.xy, catalog_id, residual_px, probability, double)
     return replace(solution, star_table=deep_table, n_matched=len(matched))
+
+
+def _magnitude_model(stars: StarList, row_of: np.ndarray, deep: Catalog):
+    """(sigma, zero point) of catalog mag = zero point - 2.5 log10(brightness), from the
+    matched points (median; sigma 1.4826 MAD, at least ``MIN_MAG_SIGMA``), or (None, 0)
+    without brightness or with fewer than ``MIN_FIT_STARS`` matched points having it."""
+    b = stars.brightness
+    if b is None:
+        return None, 0.0
+    ok = (row_of >= 0) & np.isfinite(b) & (b > 0)
+    if ok.sum() < MIN_FIT_STARS or not np.all(np.isfinite(b) & (b > 0)):
+        return None, 0.0
+    offset = deep.mag[row_of[ok]] + 2.5 * np.log10(b[ok])
+    zero_point = float(np.median(offset))
+    mad = float(np.median(np.abs(offset - zero_point)))
+    return max(1.4826 * mad, MIN_MAG_SIGMA), zero_point
+
+
+def _brightest_of_double(
+    e: np.ndarray, mag: np.ndarray, star_xy: np.ndarray, unresolved_px: float
+) -> np.ndarray:
+    """Whether each edge (point, star) joins its point to the brightest star of the point's
+    circle when another star of that circle is within ``unresolved_px`` of it (px)."""
+    out = np.zeros(len(e), dtype=bool)
+    order = np.argsort(e[:, 0], kind="stable")
+    starts = np.flatnonzero(np.r_[True, e[order[1:], 0] != e[order[:-1], 0]])
+    for group in np.split(order, starts[1:]):
+        if len(group) < 2:
+            continue
+        b = group[np.argmin(mag[e[group, 1]])]
+        apart = np.hypot(*(star_xy[group] - star_xy[b]).T)
+        out[b] = np.sum(apart <= unresolved_px) >= 2  # itself and another
+    return out
+
+
+def _decide_contested(e: np.ndarray, score: np.ndarray, row_of, owner) -> None:
+    """Re-pair each group of edges (point, star) linked through shared points or stars and
+    holding more than one edge: one to one, the most pairs, then the highest total ``score``
+    (a linear assignment; a point may stay unpaired). ``row_of`` (point -> star) and
+    ``owner`` (star -> point) are updated in place."""
+    from scipy.optimize import linear_sum_assignment
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    points, p_index = np.unique(e[:, 0], return_inverse=True)
+    rows, s_index = np.unique(e[:, 1], return_inverse=True)
+    n_p, n_s = len(points), len(rows)
+    graph = coo_matrix((np.ones(len(e)), (p_index, n_p + s_index)), shape=(n_p + n_s,) * 2)
+    _, label = connected_components(graph, directed=False)
+    edge_group = label[p_index]
+    pair_bonus = 1.0 + np.ptp(score) + 1.0  # more than any difference of scores
+    for g in np.unique(edge_group[np.bincount(edge_group)[edge_group] > 1]):
+        sel = np.flatnonzero(edge_group == g)
+        gp, gp_i = np.unique(p_index[sel], return_inverse=True)
+        gs, gs_i = np.unique(s_index[sel], return_inverse=True)
+        cost = np.full((len(gp), len(gs) + len(gp)), _NO_PAIR)
+        cost[gp_i, gs_i] = -(score[sel] + pair_bonus)
+        cost[np.arange(len(gp)), len(gs) + np.arange(len(gp))] = 0.0  # unpaired
+        r, c = linear_sum_assignment(cost)
+        for pi in points[gp]:
+            if row_of[pi] >= 0 and owner[row_of[pi]] == pi:
+                owner[row_of[pi]] = -1
+            row_of[pi] = -1
+        for i, j in zip(r, c, strict=True):
+            if j < len(gs):
+                p, star = points[gp[i]], rows[gs[j]]
+                row_of[p], owner[star] = star, p
 
 
 def _pixels(camera, R: np.ndarray, catalog: Catalog, rows: np.ndarray) -> np.ndarray:
