@@ -129,9 +129,10 @@ def _unsolved_table(xy: np.ndarray, ids: np.ndarray | None = None) -> Solution:
     )
 
 
-def _deep(xy, catalog, ids=None, sigma_px=0.5) -> StarTable:
+def _deep(xy, catalog, ids=None, sigma_px=0.5, mag=None) -> StarTable:
     xy = np.asarray(xy, dtype=float)
-    stars = StarList(xy, tuple(str(i + 1) for i in range(len(xy))), None)
+    brightness = None if mag is None else 10.0 ** (-0.4 * np.asarray(mag, dtype=float))
+    stars = StarList(xy, tuple(str(i + 1) for i in range(len(xy))), brightness)
     return deep_match(_unsolved_table(xy, ids), stars, catalog, sigma_px=sigma_px).star_table
 
 
@@ -168,6 +169,20 @@ def test_two_points_near_two_stars_2px_apart_are_never_swapped():
     # the same with one of them identified by the bright stage: it keeps its star
     table = _deep([(500.7, 500.0), (501.3, 500.0)], cat, ids=[-1, 2])
     assert table.catalog_id.tolist() == [1, 2]
+
+
+def test_a_bright_id_changes_only_when_the_deep_match_is_clearly_better():
+    # the bright stage (Hp 8) gave the Hp 7.7 star A to the point of its Hp 9.7 neighbour
+    # B, 0.9 px away, which the bright catalog lacks; 8 single stars fit the brightness
+    singles = [(100.0 + 90.0 * i, 800.0) for i in range(8)]
+    mag = [7.7, 9.7, *np.linspace(6.0, 10.0, 8)]
+    cat = _catalog([(500.0, 500.0), (500.9, 500.0), *singles], mag)
+    xy = [(500.5, 500.0), (500.4, 500.0), *singles]
+    ids = [-1, 1] + [-1] * 8
+    # positions alone: either way is as likely, the bright id stays
+    assert _deep(xy, cat, ids=ids).catalog_id[:2].tolist() == [2, 1]
+    # the brightness says which is which: 20 times more likely (and far more), so changed
+    assert _deep(xy, cat, ids=ids, mag=mag).catalog_id[:2].tolist() == [1, 2]
 
 
 def test_match_probability_high_for_a_clean_match_low_for_a_far_one():

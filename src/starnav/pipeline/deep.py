@@ -8,29 +8,45 @@ cone search on the deep catalog's sky grid and the one-to-one least-squares pair
 
 The rules (``deep_match``):
 
-- The stars of the bright identification are the deep catalog's too (the same ids); they
-  are not paired again, so a faint star is never given to a point the verified
-  identification explained, and two points never swap stars.
-- An unresolved double: a point whose match circle (``MATCH_SIGMAS`` sigma) holds two or
-  more deep-catalog stars that no other point was paired with. Its centroid is their
-  photocentre, which lies nearer the brighter star, so it gets the **brightest** of them,
-  unless another of them explains the centroid clearly better (its Gaussian likelihood at
-  the centroid sigma is more than ``DOUBLE_LIKELIHOOD_RATIO`` times the brightest's: e.g. a
-  point on a faint star whose brighter neighbour 2 px away was not detected). Either way it
-  is flagged ``double``. Only stars no other point holds are ever taken, so the rule never
-  swaps ids between two measured points. The same rule applies to the points of the bright
-  identification (the bright star is the brightest candidate, so it keeps its id unless a
-  free deep star explains the point that much better).
+- Pairing. The points the bright identification left without an id are paired with the
+  deep stars no bright id holds, one to one, least total squared distance
+  (``pair_catalog``), within a match circle of ``MATCH_SIGMAS`` centroid sigmas. Then every
+  contested group (a point with two or more deep stars in its circle, or a star in two
+  points' circles, the bright identification's points and stars included) is decided
+  again as one linear assignment: the most pairs, then the highest total log-likelihood,
+  -d^2 / 2 sigma^2 for the residual d, minus (m - mag)^2 / 2 sigma_m^2 when the points have
+  a brightness (m = zero point - 2.5 log10(brightness), the zero point and sigma_m fitted
+  on the matched points, sigma_m at least ``MIN_MAG_SIGMA``), plus two bonuses of
+  ln ``DOUBLE_LIKELIHOOD_RATIO`` (ln 20) described next. One to one, so two measured points
+  never both get one star, and two points swap stars only when that is what the data say
+  is most likely (the noise moved each nearer the other's star, and their brightness does
+  not tell them apart).
+- The bright identification's ids are kept unless the deep match is clearly better: its
+  pairs have the bonus, so one changes only when another assignment is 20 times more
+  likely (e.g. the bright stage gave a Hp 7.7 star to the point of its Hp 9.7 neighbour
+  0.9 px away, which the bright catalog lacks, and the brightness says otherwise).
+- Unresolved doubles: a point whose match circle holds two or more deep stars that no
+  other point holds is flagged ``double``. When two of them are closer together than
+  max(1 px, ``UNRESOLVED_SIGMAS`` sigma) (the separation at which the evaluation's
+  ``_wrong_ids`` cannot tell them apart either), the point is taken for their blend, whose
+  photocentre lies nearer the brighter: the brightest has the bonus, so it gets the id
+  unless another star explains the centroid 20 times better. A wider neighbour is decided
+  by the likelihood alone (a point sitting on a faint star keeps it even when a brighter
+  one, not detected, lies 2 px away). Similar brightness needs no rule of its own: the
+  brighter still has the bonus, and the likelihood decides.
 - ``match_probability``: P(the id is right) = f / (f + rho), f the Gaussian density of the
   residual at the centroid sigma (per px^2) and rho the density of chance neighbours: deep
   catalog stars per px^2 over the field plus false points per px^2 (the points left
   without an id, at least one per image). This is the likelihood ratio of "the point is
   this star" to "the star is a chance neighbour inside the match circle" (whose prior,
-  rho x the circle's area, spread uniformly over it, gives the density rho).
+  rho x the circle's area, spread uniformly over it, gives the density rho). Positions
+  only: the brightness is not in it.
 
 The centroid sigma: the fitted one (the bright fit's residual rms per axis, corrected for
 the 3 fitted angles) when at least ``MIN_FIT_STARS`` stars were fitted, else the told
-``sigma_px``; the match circle's radius uses the larger of the two.
+``sigma_px``; the match circle's radius uses the larger of the two. The attitude, camera,
+their sigmas and ``false_match_probability`` stay the bright identification's;
+``n_matched`` counts the deep matches too.
 """
 
 from __future__ import annotations
