@@ -233,3 +233,11 @@ def test_cli_deep_mag_limit(capsys, tmp_path, frame):
         code, out, err = _run(capsys, *base, "--deep-mag-limit", bad)
         assert code == 2 and out == "" and len(err.strip().splitlines()) == 1, err
         assert "deep-mag-limit" in err or "deep_mag_limit" in err
+
+
+def test_cli_solve_takes_deep_mag_limit(capsys, tmp_path):
+    image = tmp_path / "frame.png"
+    image.write_bytes(b"")  # never read: the bad value is refused first
+    code, out, err = _run(capsys, "solve", str(image), "--deep-mag-limit", "abc")
+    assert code == 2 and out == "" and len(err.strip().splitlines()) == 1
+    assert "--deep-mag-limit" in err
