@@ -162,12 +162,13 @@ def main() -> int:
             False,
         ),
     }
-    rows = []
+    rows, notes = [], []
     for name, (settings, brightness) in configs.items():
         solver = Solver(camera, bright, settings=settings)
         first = frames[0][1]  # loads the machine code: no scene's time
         solver.solve(check_star_list(first.xy, width=SIZE_PX, height=SIZE_PX))
         per_kind: dict[str, list] = {}
+        probability, right = [], []  # of every matched point, for the calibration line
         t0 = time.perf_counter()
         for kind, frame, merged in frames:
             stars = check_star_list(
@@ -181,6 +182,10 @@ def main() -> int:
             ids = np.full(len(frame.xy), -1) if s is None else s.star_table.catalog_id
             c, w, f, t = score(ids, frame, deep, camera)
             table = None if s is None else s.star_table
+            if table is not None and table.deep:
+                matched = ids != -1
+                probability.extend(table.match_probability[matched])
+                right.extend(ids[matched] == frame.true_id[matched])
             flagged = 0 if table is None or table.double is None else int(table.double.sum())
             entry = (
                 max((c - 2 * w) / max(t, 1), -1.0),
@@ -197,6 +202,14 @@ def main() -> int:
             per_kind.setdefault(kind, []).append(entry)
             per_kind.setdefault("all", []).append(entry)
         print(f"{name}: {time.perf_counter() - t0:.1f} s", file=sys.stderr)
+        if probability:
+            pr, ok = np.array(probability), np.array(right)
+            notes.append(
+                f"- {name}: {len(pr)} ids, {int((~ok).sum())} not the true one; "
+                f"sum of (1 - match_probability) {np.sum(1 - pr):.1f}; "
+                f"{int(np.sum(pr < 0.9))} ids with P < 0.9, {int((~ok[pr < 0.9]).sum())} of "
+                f"them not the true one; smallest P {pr.min():.3f}"
+            )
         for kind in ("all", "random", "pair 1-2 px", "pair < 1 px"):
             e = np.array(per_kind.get(kind, []), dtype=float)
             if len(e):
@@ -214,7 +227,7 @@ def main() -> int:
             f"{int(f.sum())} | {int(swaps.sum())} | {int(merged.sum())} ({int(flagged.sum())}) | "
             f"{np.median(ms):.1f} / {np.percentile(ms, 95):.1f} |"
         )
-    table = "\n".join(lines)
+    table = "\n".join(lines) + "\n\nmatch_probability against the truth:\n\n" + "\n".join(notes)
     print(table)
     defaults = (args.scenes, args.seed, args.bright_mag, args.deep_mag) == (200, 1, 8.0, 12.0)
     if defaults and not args.no_doc:

@@ -39,8 +39,9 @@ The rules (``deep_match``):
   catalog stars per px^2 over the field plus false points per px^2 (the points left
   without an id, at least one per image). This is the likelihood ratio of "the point is
   this star" to "the star is a chance neighbour inside the match circle" (whose prior,
-  rho x the circle's area, spread uniformly over it, gives the density rho). Positions
-  only: the brightness is not in it.
+  rho x the circle's area, spread uniformly over it, gives the density rho). The
+  double's other free stars in the circle add their own Gaussian densities at the point
+  to rho (either could be the one seen). Positions only: the brightness is not in it.
 
 The centroid sigma: the fitted one (the bright fit's residual rms per axis, corrected for
 the 3 fitted angles) when at least ``MIN_FIT_STARS`` stars were fitted, else the told
@@ -116,10 +117,11 @@ def centroid_sigma_px(solution: Solution, sigma_px: float) -> float:
     return max(fitted, MIN_SIGMA_PX)
 
 
-def match_probability(residual_px: np.ndarray, sigma_px: float, chance_per_px2: float):
+def match_probability(residual_px: np.ndarray, sigma_px: float, chance_per_px2):
     """P(the id is right) of matches with residual lengths ``residual_px`` (px): the
-    Gaussian density of the residual at ``sigma_px`` (per axis) against ``chance_per_px2``,
-    the density of chance neighbours (stars and false points per px^2). NaN stays NaN."""
+    Gaussian density of the residual at ``sigma_px`` (per axis) against ``chance_per_px2``
+    (a number or one per match), the density of the other explanations (chance stars and
+    false points per px^2, a double's companions). NaN stays NaN."""
     r = np.asarray(residual_px, dtype=float)
     f = np.exp(-0.5 * (r / sigma_px) ** 2) / (2.0 * math.pi * sigma_px**2)
     return f / (f + chance_per_px2)
@@ -203,10 +205,14 @@ def deep_match(solution: Solution, stars: StarList, deep: Catalog, *, sigma_px: 
         score += keep * _brightest_of_double(e, deep.mag, star_xy, unresolved_px)
         _decide_contested(e, score, row_of, owner)
     double = np.zeros(n, dtype=np.bool_)
+    companions = np.zeros(n)  # density (per px^2) of the other free stars at each point
     if edges:
         free_or_own = (owner[e[:, 1]] < 0) | (owner[e[:, 1]] == e[:, 0])
         double = np.bincount(e[free_or_own, 0], minlength=n) >= 2
         double &= row_of >= 0
+        other = free_or_own & (row_of[e[:, 0]] != e[:, 1])
+        density = np.exp(-0.5 * d2 / sigma**2) / (2.0 * math.pi * sigma**2)
+        companions = np.bincount(e[other, 0], weights=density[other], minlength=n)
 
     matched = np.flatnonzero(row_of >= 0)
     catalog_id = table.catalog_id.copy()
@@ -220,7 +226,8 @@ def deep_match(solution: Solution, stars: StarList, deep: Catalog, *, sigma_px: 
     n_field = k.cone(np.ascontiguousarray(R[2]), k.chord(half) ** 2, sky, everything, work)
     stars_per_px2 = n_field / (2.0 * math.pi * (1.0 - math.cos(half))) / scale**2
     false_per_px2 = max(n - len(matched), 1) / (camera.width * camera.height)
-    probability = match_probability(residual_px, sigma, stars_per_px2 + false_per_px2)
+    chance = stars_per_px2 + false_per_px2 + companions
+    probability = match_probability(residual_px, sigma, chance)
     deep_table = StarTable(table.labels, table.xy, catalog_id, residual_px, probability, double)
     return replace(solution, star_table=deep_table, n_matched=len(matched))
 
