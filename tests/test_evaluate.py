@@ -11,16 +11,21 @@ from starnav.camera import Equidistant, Equisolid, save_camera
 from starnav.cli import main
 from starnav.errors import StarnavError
 from starnav.evaluate import (
+    KINDS,
     EvalConfig,
     camera_items,
     grid_boresights,
+    make_frame,
     run_evaluation,
     runner,
     solve_frame,
     summarize,
     uniform_boresights,
 )
+from starnav.evaluate.kinds import MIRROR
 from starnav.evaluate.report import describe
+from starnav.evaluate.sampling import frame_rng
+from starnav.simulate import FALSE_STAR_ID
 
 
 def test_published_grid_has_7200_boresights_inside_the_sky():
@@ -145,6 +150,9 @@ def test_cli_evaluate_on_a_local_dask_cluster(capsys):
         (["--mag-limit", "40"], "mag limit"),
         (["--grid-step-deg", "0"], "grid step"),
         (["--sky-map", "/nonexistent/dir/x.png"], "does not exist"),
+        (["--kind", "true,nonsense"], "unknown frame kind 'nonsense'"),
+        (["--kind", ","], "no frame kind given"),
+        (["--max-false-match-probability", "1.5"], "max_false_match_probability"),
     ],
 )
 def test_cli_evaluate_bad_input_is_one_line_exit_2(args, message, capsys):
@@ -226,3 +234,140 @@ def test_cli_evaluate_with_a_camera_file(tmp_path, capsys):
     assert main([*args, "--fov-deg", "20"]) == 2
     err = capsys.readouterr().err.strip()
     assert "drop --fov-deg" in err and "\n" not in err
+
+
+def _kind_frame(kind: str, index: int = 3, seed: int = 7):
+    config = EvalConfig(seed=seed)
+    solver = runner.config_solver(config)
+    b = uniform_boresights(index + 1, seed=seed)
+    return make_frame(
+        kind,
+        solver.catalog,
+        solver.camera,
+        frame_rng(seed, index),
+        ra_deg=float(b.ra_deg[index]),
+        dec_deg=float(b.dec_deg[index]),
+        roll_deg=float(b.roll_deg[index]),
+        noise_px=config.noise_px,
+        false_stars=config.false_stars,
+        missing_frac=config.missing_frac,
+        mag_noise=config.mag_noise,
+        mag_limit=config.mag_limit,
+    )
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_every_kind_remakes_the_same_frame_from_seed_and_index(kind):
+    (a, fa), (b, fb) = _kind_frame(kind), _kind_frame(kind)
+    assert np.array_equal(a.xy, b.xy) and np.array_equal(a.mag, b.mag) and fa == fb
+    assert np.array_equal(a.true_id, b.true_id)
+    assert np.array_equal(a.R_cam_from_icrs, b.R_cam_from_icrs)
+    assert len(a.xy) >= 3 and a.camera.contains(a.xy).all()
+    other, _ = _kind_frame(kind, index=4)
+    assert not np.array_equal(a.xy[:3], other.xy[:3])
+
+
+def test_each_kind_makes_what_it_says():
+    true, _ = _kind_frame("true")
+    real = true.true_id != FALSE_STAR_ID
+    random, _ = _kind_frame("random")
+    assert len(random.xy) == max(len(true.xy), 3) and (random.true_id == FALSE_STAR_ID).all()
+    scrambled, _ = _kind_frame("scrambled")
+    assert np.array_equal(np.sort(scrambled.xy[:, 0]), np.sort(true.xy[:, 0]))
+    assert np.array_equal(scrambled.mag, true.mag)  # every point keeps its brightness
+    assert np.sum(scrambled.true_id != FALSE_STAR_ID) < real.sum() / 2
+    mirrored, _ = _kind_frame("mirrored")
+    assert np.allclose(mirrored.xy[:, 0], true.camera.width - true.xy[:, 0])
+    assert np.allclose(mirrored.R_cam_from_icrs, MIRROR @ true.R_cam_from_icrs)
+    assert np.linalg.det(mirrored.R_cam_from_icrs) < 0
+    off, factor = _kind_frame("fov-off")
+    assert 0.02 <= abs(factor - 1.0) <= 0.10
+    assert off.camera.focal_px == pytest.approx(true.camera.focal_px * factor)
+    crowded, _ = _kind_frame("crowded")
+    n_false = np.sum(crowded.true_id == FALSE_STAR_ID)
+    assert n_false == len(crowded.xy) - n_false == real.sum()
+    few, _ = _kind_frame("few")
+    assert 3 <= np.sum(few.true_id != FALSE_STAR_ID) <= 6
+    assert np.sum(few.true_id == FALSE_STAR_ID) == 2
+    assert set(few.true_id) <= set(true.true_id)
+
+
+def test_a_solved_random_frame_is_wrong_and_a_mirrored_one_needs_parity_minus_1(monkeypatch):
+    config = EvalConfig(kinds=("true", "random", "mirrored"), seed=2)
+    b = uniform_boresights(3, seed=2)
+    true = solve_frame(config, b, 0)
+    assert true.kind == "true" and true.outcome == "correct"
+    assert 0.0 <= true.false_match_probability < 1e-4
+    mirrored = solve_frame(config, b, 2)
+    assert mirrored.kind == "mirrored" and mirrored.outcome == "correct"
+    refused = solve_frame(config, b, 1)
+    assert refused.kind == "random" and refused.outcome == "none"
+    assert np.isnan(refused.false_match_probability)
+
+    solver = runner.config_solver(config)
+    real = solver.solve
+    answer = real(*_stars_of(config, b, 0))
+
+    monkeypatch.setattr(solver, "solve", lambda *a, **k: answer)
+    monkeypatch.setattr(runner, "_wrong_ids", lambda *a: 0)  # the answer is another frame's
+    wrong = solve_frame(config, b, 1)  # any answer to a random frame is wrong
+    assert wrong.outcome == "wrong"
+    assert wrong.false_match_probability == answer.solution.false_match_probability
+
+    def unmirrored(*args, **kwargs):  # the mirrored truth's twin of parity +1
+        result = real(*args, **kwargs)
+        s = result.solution
+        twin = replace(s, R_cam_from_icrs=MIRROR @ s.R_cam_from_icrs, parity=1)
+        return replace(result, solution=twin)
+
+    monkeypatch.setattr(solver, "solve", unmirrored)
+    assert solve_frame(config, b, 2).outcome == "wrong"
+
+
+def _stars_of(config, b, index):
+    from starnav.starlist import check_star_list
+
+    solver = runner.config_solver(config)
+    frame, _ = make_frame(
+        config.kind(index),
+        solver.catalog,
+        solver.camera,
+        frame_rng(config.seed, index),
+        ra_deg=float(b.ra_deg[index]),
+        dec_deg=float(b.dec_deg[index]),
+        roll_deg=float(b.roll_deg[index]),
+        noise_px=config.noise_px,
+        false_stars=config.false_stars,
+        missing_frac=config.missing_frac,
+        mag_noise=config.mag_noise,
+        mag_limit=config.mag_limit,
+    )
+    w, h = solver.camera.width, solver.camera.height
+    return (check_star_list(frame.xy, width=w, height=h, brightness=frame.brightness),)
+
+
+def test_cli_evaluate_kinds_json_breakdown_and_csv(tmp_path, capsys):
+    csv_path = tmp_path / "frames.csv"
+    args = ["evaluate", "--kind", "random,true", "--frames", "40", "--sampling", "uniform"]
+    args += ["--workers", "1", "--seed", "3", "--frames-csv", str(csv_path)]
+    assert main([*args, "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["config"]["kinds"] == ["random", "true"]
+    assert list(out["by_kind"]) == ["true", "random"]
+    random, true = out["by_kind"]["random"], out["by_kind"]["true"]
+    assert random["frames"] == true["frames"] == 20
+    assert random["correct"] == 0 and random["wrong"] == 0 and random["none"] == 20
+    assert true["correct"] >= 18 and true["wrong"] == 0
+    stars = out["by_true_stars"]
+    assert list(stars) == ["true"]
+    assert sum(c["frames"] for c in stars["true"].values()) == 20
+    assert set(stars["true"]) <= {"0-2", "3", "4", "5", "6", ">=7"}
+    with csv_path.open() as fh:
+        rows = list(csv.DictReader(fh))
+    assert [r["kind"] for r in rows[:4]] == ["random", "true", "random", "true"]
+    solved = [float(r["false_match_probability"]) for r in rows if r["outcome"] == "correct"]
+    assert len(solved) == true["correct"] and all(0.0 <= p < 1e-4 for p in solved)
+    assert all(r["false_match_probability"] == "nan" for r in rows if r["outcome"] == "none")
+    assert main(args) == 0
+    text = capsys.readouterr().out
+    assert "| random | 20 | 0 | 0 | 20 |" in text and "| true, " in text

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 from dataclasses import asdict
 
+from starnav.api import DEFAULT_MAX_FALSE_MATCH_PROBABILITY
 from starnav.catalog import DEFAULT_MAG_LIMIT
 from starnav.cli.common import (
     EXIT_OK,
@@ -57,6 +58,21 @@ def add_parser(subparsers: Subparsers) -> None:
         "--sigma-px", type=finite, help="centroid sigma told to the solver (default: the noise)"
     )
     add_algorithm(p)
+    p.add_argument(
+        "--kind",
+        action="append",
+        metavar="KIND[,KIND]",
+        help="frame kinds, repeatable or a comma list, taken in turn: true (default: the "
+        "simulated sky), random, scrambled, mirrored, fov-off, crowded, few "
+        "(docs: starnav.evaluate.kinds)",
+    )
+    p.add_argument(
+        "--max-false-match-probability",
+        type=finite,
+        default=DEFAULT_MAX_FALSE_MATCH_PROBABILITY,
+        metavar="P",
+        help=f"refuse less certain answers (default {DEFAULT_MAX_FALSE_MATCH_PROBABILITY:g})",
+    )
     p.add_argument("--seed", type=int, default=0)
     p.add_argument(
         "--workers", type=positive_int, help="processes (default: all cores; 1: this process)"
@@ -78,6 +94,7 @@ def run(args: argparse.Namespace) -> int:
         grid_boresights,
         uniform_boresights,
     )
+    from starnav.evaluate.kinds import parse_kinds
     from starnav.evaluate.report import describe, markdown, plot_sky_map, write_frames_csv
 
     size = {k: getattr(args, k) for k in ("fov_deg", "width", "height")}
@@ -103,7 +120,9 @@ def run(args: argparse.Namespace) -> int:
         algorithm=args.algorithm,
         algorithm_options=tuple(algorithm_options(args).items()),
         sigma_px=args.sigma_px,
+        max_false_match_probability=args.max_false_match_probability,
         seed=args.seed,
+        kinds=parse_kinds(args.kind or ["true"]),
     )
     check_parent_dir("--frames-csv", args.frames_csv)
     check_parent_dir("--sky-map", args.sky_map)

@@ -9,8 +9,9 @@ from pathlib import Path
 
 import numpy as np
 
-from starnav.evaluate.runner import EvalConfig, FrameResult, Summary
+from starnav.evaluate.runner import EvalConfig, FrameResult, OutcomeCounts, Summary
 from starnav.identify.options import describe_options
+from starnav.pipeline import DEFAULT_MAX_FALSE_MATCH_PROBABILITY
 
 TABLE_HEADER = (
     "| algorithm | frames | correct | wrong | none | correct % | correct % (>= 4 stars) "
@@ -43,8 +44,40 @@ def describe(config: EvalConfig, sampling: str) -> str:
         f"{sampling}; {lens}, Hipparcos Hp <= "
         f"{config.mag_limit:g}; noise {config.noise_px:g} px, {config.false_stars} false stars, "
         f"{config.missing_frac:.0%} missing, magnitude noise {config.mag_noise:g}; "
-        f"{algo}, sigma_px {config.solver_sigma_px:g}, seed {config.seed}"
+        f"{algo}, sigma_px {config.solver_sigma_px:g}, seed {config.seed}" + _kinds_note(config)
     )
+
+
+def _kinds_note(config: EvalConfig) -> str:
+    note = ""
+    if config.max_false_match_probability != DEFAULT_MAX_FALSE_MATCH_PROBABILITY:
+        note += f", max false-match probability {config.max_false_match_probability:g}"
+    if tuple(config.kinds) != ("true",):
+        note += f"; frame kinds {', '.join(config.kinds)} in turn"
+    return note
+
+
+def breakdown_tables(summary: Summary) -> str:
+    """Markdown tables of the outcomes by kind, and by true stars among the points."""
+
+    def row(first: str, c: OutcomeCounts) -> str:
+        return (
+            f"| {first} | {c.frames} | {c.correct} | {c.wrong} | {c.none} | "
+            f"{c.median_ms:.2f} | {c.p95_ms:.2f} |"
+        )
+
+    rule = "|---|---|---|---|---|---|---|"
+    lines = ["| kind | frames | correct | wrong | none | median ms | p95 ms |", rule]
+    lines += [row(c.kind, c) for c in summary.by_kind]
+    if summary.by_true_stars:
+        lines += [
+            "",
+            "| kind, true stars among the points | frames | correct | wrong | none "
+            "| median ms | p95 ms |",
+            rule,
+        ]
+        lines += [row(f"{c.kind}, {c.true_stars}", c) for c in summary.by_true_stars]
+    return "\n".join(lines)
 
 
 def markdown(config: EvalConfig, sampling: str, summary: Summary) -> str:
@@ -63,6 +96,8 @@ def markdown(config: EvalConfig, sampling: str, summary: Summary) -> str:
             "",
             f"{summary.frames_ge4} frames have >= 4 real stars; {wrong_note}; "
             f"wall time {summary.wall_s:.1f} s.",
+            "",
+            breakdown_tables(summary),
         ]
     )
 

@@ -3,7 +3,8 @@
 Frames are remade from (seed, index) wherever they are solved, so a run is the same on one core,
 on N processes or on a Dask cluster. Each frame's outcome is data (``FrameResult``), never an
 exception half way through a run (the sgp4 batch style): a frame the simulator leaves with fewer
-than 3 points is scored "none" with that reason.
+than 3 points is scored "none" with that reason. Besides the simulated sky, frames can be
+adversarial (``starnav.evaluate.kinds``): frame i is of kind ``kinds[i % len(kinds)]``.
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ from tqdm import tqdm
 from starnav.camera import Camera, CameraModel, camera_from_dict
 from starnav.catalog import load_catalog
 from starnav.errors import StarnavError
+from starnav.evaluate.kinds import KINDS, NO_ANSWER_KINDS, make_frame, parse_kinds
 from starnav.evaluate.sampling import Boresights, frame_rng
 from starnav.geometry import angle_between, attitude_difference_deg
 from starnav.identify import make_identifier
@@ -39,6 +41,8 @@ CORRECT_BORESIGHT_DEG = 0.05  # a solution is correct within this and ...
 CORRECT_ROLL_DEG = 0.5  # ... this of the truth,
 CORRECT_SIGMAS = 5.0  # or within this many of its own reported 1-sigma errors; else wrong
 OUTCOMES = ("correct", "wrong", "none")
+STAR_COUNT_BINS = ("0-2", "3", "4", "5", "6", ">=7")  # true stars among a frame's points
+STAR_COUNT_KINDS = ("true", "few", "crowded")  # kinds broken down by those bins
 _CHUNK = 40  # frames per task sent to a worker
 
 
@@ -52,7 +56,8 @@ class EvalConfig:
     Errors: ``noise_px`` (1-sigma centroid noise), ``false_stars`` per frame, ``missing_frac``
     of stars dropped, ``mag_noise`` (1-sigma, magnitudes; changes the brightness order).
     Solver: ``algorithm``, its ``algorithm_options`` ((name, value) pairs), ``sigma_px`` told to it,
-    ``max_false_match_probability``. ``seed`` makes every frame reproducible.
+    ``max_false_match_probability``. ``seed`` makes every frame reproducible; ``kinds``: the
+    kinds of frame (``starnav.evaluate.kinds.KINDS``), frame i of ``kinds[i % len(kinds)]``.
     """
 
     fov_deg: float = 12.0
@@ -69,6 +74,11 @@ class EvalConfig:
     max_false_match_probability: float = DEFAULT_MAX_FALSE_MATCH_PROBABILITY
     seed: int = 0
     camera: tuple[tuple[str, object], ...] = ()  # (key, value): hashable and picklable
+    kinds: tuple[str, ...] = ("true",)
+
+    def kind(self, index: int) -> str:
+        """The kind of frame ``index``."""
+        return self.kinds[index % len(self.kinds)]
 
     def make_camera(self) -> CameraModel:
         """The camera the frames are simulated and solved with."""
@@ -89,6 +99,9 @@ class EvalConfig:
             raise StarnavError(f"mag limit must be between -2 and 12, got {self.mag_limit!r}")
         if self.sigma_px is not None and not (np.isfinite(self.sigma_px) and self.sigma_px > 0):
             raise StarnavError(f"sigma_px must be a positive number of pixels, got {self.sigma_px}")
+        if parse_kinds(",".join(self.kinds)) != tuple(self.kinds):
+            raise StarnavError(f"kinds must be distinct names of {KINDS}, got {self.kinds!r}")
+        SolveSettings(max_false_match_probability=self.max_false_match_probability)
         # the simulator checks noise, false stars and the missing fraction
         simulate_frame(
             load_catalog(None, mag_limit=self.mag_limit),
@@ -118,7 +131,10 @@ class FrameResult:
     identified and wrongly identified, attitude errors (None when not solved), whether the
     errors are beyond the fixed tolerance (0.05° / 0.5°: "correct" then means within 5 of
     the solver's own 1-sigma, as with 2 px noise and few stars), and the solver's reason
-    when it refused."""
+    when it refused. ``kind``: the kind of frame (``starnav.evaluate.kinds``);
+    ``false_match_probability``: the solver's claim for its answer (NaN when not solved);
+    ``focal_factor``: the focal length that made the points over the solver's (1 but for
+    ``fov-off`` frames)."""
 
     index: int
     ra_deg: float
@@ -135,6 +151,9 @@ class FrameResult:
     roll_error_arcsec: float | None
     beyond_tolerance: bool
     reason: str
+    kind: str = "true"
+    false_match_probability: float = float("nan")
+    focal_factor: float = 1.0
 
 
 _SOLVERS: dict[EvalConfig, Solver] = {}  # per process
@@ -166,9 +185,12 @@ def solve_frame(config: EvalConfig, boresights: Boresights, index: int) -> Frame
         float(boresights.dec_deg[index]),
         float(boresights.roll_deg[index]),
     )
-    frame = simulate_frame(
+    kind = config.kind(index)
+    frame, focal_factor = make_frame(
+        kind,
         catalog,
         camera,
+        frame_rng(config.seed, index),
         ra_deg=ra,
         dec_deg=dec,
         roll_deg=roll,
@@ -176,7 +198,7 @@ def solve_frame(config: EvalConfig, boresights: Boresights, index: int) -> Frame
         false_stars=config.false_stars,
         missing_frac=config.missing_frac,
         mag_noise=config.mag_noise,
-        seed=frame_rng(config.seed, index),
+        mag_limit=config.mag_limit,
     )
     n_true = int(np.sum(frame.true_id != FALSE_STAR_ID))
     common = dict(
@@ -187,6 +209,8 @@ def solve_frame(config: EvalConfig, boresights: Boresights, index: int) -> Frame
         n_in_view=frame.n_in_view,
         n_points=len(frame.xy),
         n_true=n_true,
+        kind=kind,
+        focal_factor=focal_factor,
     )
     if len(frame.xy) < 3:
         return FrameResult(
@@ -225,7 +249,9 @@ def solve_frame(config: EvalConfig, boresights: Boresights, index: int) -> Frame
         boresight_deg * 3600.0 <= CORRECT_SIGMAS * s.sigma_boresight_arcsec
         and roll_deg * 3600.0 <= CORRECT_SIGMAS * s.sigma_roll_arcsec
     )
-    correct = within_tolerance or within_sigmas
+    # a mirrored attitude differs from its unmirrored twin by no angle: the parity must agree
+    same_parity = s.parity == (1 if np.linalg.det(frame.R_cam_from_icrs) > 0 else -1)
+    correct = kind not in NO_ANSWER_KINDS and same_parity and (within_tolerance or within_sigmas)
     return FrameResult(
         **common,
         outcome="correct" if correct else "wrong",
@@ -236,6 +262,7 @@ def solve_frame(config: EvalConfig, boresights: Boresights, index: int) -> Frame
         roll_error_arcsec=roll_deg * 3600.0,
         beyond_tolerance=not within_tolerance,
         reason="",
+        false_match_probability=float(s.false_match_probability),
     )
 
 
@@ -342,11 +369,69 @@ def run_evaluation(
 
 
 @dataclass(frozen=True)
+class OutcomeCounts:
+    """Outcomes of the frames of one ``kind`` (and, when ``true_stars`` is not empty, of
+    those with that many true stars among their points, one of ``STAR_COUNT_BINS``); times
+    in ms over the frames that reached the solver (NaN when none did)."""
+
+    kind: str
+    true_stars: str
+    frames: int
+    correct: int
+    wrong: int
+    none: int
+    median_ms: float
+    p95_ms: float
+
+    def to_dict(self) -> dict:
+        return {k: v for k, v in asdict(self).items() if k not in ("kind", "true_stars")}
+
+
+def star_count_bin(n_true: int) -> str:
+    """The ``STAR_COUNT_BINS`` label of ``n_true`` true stars."""
+    return "0-2" if n_true < 3 else ">=7" if n_true >= 7 else str(n_true)
+
+
+def _counts(kind: str, true_stars: str, results: Sequence[FrameResult]) -> OutcomeCounts:
+    times = np.array([r.time_ms for r in results if r.n_points >= 3] or [np.nan])
+    return OutcomeCounts(
+        kind=kind,
+        true_stars=true_stars,
+        frames=len(results),
+        correct=sum(r.outcome == "correct" for r in results),
+        wrong=sum(r.outcome == "wrong" for r in results),
+        none=sum(r.outcome == "none" for r in results),
+        median_ms=float(np.nanmedian(times)) if np.isfinite(times).any() else float("nan"),
+        p95_ms=float(np.nanpercentile(times, 95)) if np.isfinite(times).any() else float("nan"),
+    )
+
+
+def breakdown(
+    results: Sequence[FrameResult],
+) -> tuple[tuple[OutcomeCounts, ...], tuple[OutcomeCounts, ...]]:
+    """Outcomes by kind (kinds in ``KINDS`` order), and for the kinds of
+    ``STAR_COUNT_KINDS`` by the number of true stars among the points (empty bins left out)."""
+    by_kind, by_stars = [], []
+    for kind in KINDS:
+        rs = [r for r in results if r.kind == kind]
+        if not rs:
+            continue
+        by_kind.append(_counts(kind, "", rs))
+        if kind in STAR_COUNT_KINDS:
+            for label in STAR_COUNT_BINS:
+                in_bin = [r for r in rs if star_count_bin(r.n_true) == label]
+                if in_bin:
+                    by_stars.append(_counts(kind, label, in_bin))
+    return tuple(by_kind), tuple(by_stars)
+
+
+@dataclass(frozen=True)
 class Summary:
     """Counts and rates of an evaluation (rates are fractions of ``frames``); ``*_ge4``: the
     same over frames with at least 4 real stars among the points; ``imprecise``: correct
     frames beyond the fixed tolerance (within 5 of their reported sigmas); times in ms over
-    frames that reached the solver; ``db_bytes``: the tables searched; ``wall_s``: elapsed time."""
+    frames that reached the solver; ``db_bytes``: the tables searched; ``wall_s``: elapsed time;
+    ``by_kind``, ``by_true_stars``: the outcomes broken down (``breakdown``)."""
 
     frames: int
     correct: int
@@ -364,9 +449,19 @@ class Summary:
     median_boresight_error_arcsec: float | None
     db_bytes: int
     wall_s: float
+    by_kind: tuple[OutcomeCounts, ...] = ()
+    by_true_stars: tuple[OutcomeCounts, ...] = ()
 
     def to_dict(self) -> dict:
-        return asdict(self)
+        """The fields; ``by_kind`` as {kind: counts}, ``by_true_stars`` as
+        {kind: {bin: counts}}."""
+        d = {k: v for k, v in asdict(self).items() if k not in ("by_kind", "by_true_stars")}
+        d["by_kind"] = {c.kind: c.to_dict() for c in self.by_kind}
+        stars: dict[str, dict] = {}
+        for c in self.by_true_stars:
+            stars.setdefault(c.kind, {})[c.true_stars] = c.to_dict()
+        d["by_true_stars"] = stars
+        return d
 
 
 def summarize(results: Sequence[FrameResult], *, db_bytes: int, wall_s: float) -> Summary:
@@ -376,6 +471,7 @@ def summarize(results: Sequence[FrameResult], *, db_bytes: int, wall_s: float) -
     ge4 = [r for r in results if r.n_true >= 4]
     times = np.array([r.time_ms for r in results if r.n_points >= 3] or [np.nan])
     errors = [r.boresight_error_arcsec for r in results if r.outcome == "correct"]
+    by_kind, by_true_stars = breakdown(results)
     return Summary(
         frames=n,
         correct=count["correct"],
@@ -393,6 +489,8 @@ def summarize(results: Sequence[FrameResult], *, db_bytes: int, wall_s: float) -
         median_boresight_error_arcsec=float(np.median(errors)) if errors else None,
         db_bytes=db_bytes,
         wall_s=wall_s,
+        by_kind=by_kind,
+        by_true_stars=by_true_stars,
     )
 
 
