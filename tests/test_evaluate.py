@@ -15,7 +15,6 @@ from starnav.evaluate import (
     EvalConfig,
     camera_items,
     grid_boresights,
-    make_frame,
     run_evaluation,
     runner,
     solve_frame,
@@ -24,7 +23,6 @@ from starnav.evaluate import (
 )
 from starnav.evaluate.kinds import MIRROR
 from starnav.evaluate.report import describe
-from starnav.evaluate.sampling import frame_rng
 from starnav.simulate import FALSE_STAR_ID
 
 
@@ -237,23 +235,8 @@ def test_cli_evaluate_with_a_camera_file(tmp_path, capsys):
 
 
 def _kind_frame(kind: str, index: int = 3, seed: int = 7):
-    config = EvalConfig(seed=seed)
-    solver = runner.config_solver(config)
-    b = uniform_boresights(index + 1, seed=seed)
-    return make_frame(
-        kind,
-        solver.catalog,
-        solver.camera,
-        frame_rng(seed, index),
-        ra_deg=float(b.ra_deg[index]),
-        dec_deg=float(b.dec_deg[index]),
-        roll_deg=float(b.roll_deg[index]),
-        noise_px=config.noise_px,
-        false_stars=config.false_stars,
-        missing_frac=config.missing_frac,
-        mag_noise=config.mag_noise,
-        mag_limit=config.mag_limit,
-    )
+    config = EvalConfig(seed=seed, kinds=(kind,))
+    return runner.config_frame(config, uniform_boresights(index + 1, seed=seed), index)
 
 
 @pytest.mark.parametrize("kind", KINDS)
@@ -327,22 +310,9 @@ def test_a_solved_random_frame_is_wrong_and_a_mirrored_one_needs_parity_minus_1(
 def _stars_of(config, b, index):
     from starnav.starlist import check_star_list
 
-    solver = runner.config_solver(config)
-    frame, _ = make_frame(
-        config.kind(index),
-        solver.catalog,
-        solver.camera,
-        frame_rng(config.seed, index),
-        ra_deg=float(b.ra_deg[index]),
-        dec_deg=float(b.dec_deg[index]),
-        roll_deg=float(b.roll_deg[index]),
-        noise_px=config.noise_px,
-        false_stars=config.false_stars,
-        missing_frac=config.missing_frac,
-        mag_noise=config.mag_noise,
-        mag_limit=config.mag_limit,
-    )
-    w, h = solver.camera.width, solver.camera.height
+    camera = runner.config_solver(config).camera
+    frame, _ = runner.config_frame(config, b, index)
+    w, h = camera.width, camera.height
     return (check_star_list(frame.xy, width=w, height=h, brightness=frame.brightness),)
 
 

@@ -34,13 +34,12 @@ from starnav.pipeline import (
     get_database,
 )
 from starnav.pipeline.cluster import dask_client, one_blas_thread
-from starnav.simulate import FALSE_STAR_ID, simulate_frame
+from starnav.simulate import FALSE_STAR_ID, SimulatedFrame, simulate_frame
 from starnav.starlist import check_star_list
 
 CORRECT_BORESIGHT_DEG = 0.05  # a solution is correct within this and ...
 CORRECT_ROLL_DEG = 0.5  # ... this of the truth,
 CORRECT_SIGMAS = 5.0  # or within this many of its own reported 1-sigma errors; else wrong
-OUTCOMES = ("correct", "wrong", "none")
 STAR_COUNT_BINS = ("0-2", "3", "4", "5", "6", ">=7")  # true stars among a frame's points
 STAR_COUNT_KINDS = ("true", "few", "crowded")  # kinds broken down by those bins
 _CHUNK = 40  # frames per task sent to a worker
@@ -176,6 +175,28 @@ def config_solver(config: EvalConfig) -> Solver:
     return solver
 
 
+def config_frame(
+    config: EvalConfig, boresights: Boresights, index: int
+) -> tuple[SimulatedFrame, float]:
+    """Frame ``index`` of ``boresights`` as ``config`` makes it (its kind, errors and
+    generator ``frame_rng(seed, index)``) and its focal factor (``kinds.make_frame``)."""
+    solver = config_solver(config)
+    return make_frame(
+        config.kind(index),
+        solver.catalog,
+        solver.camera,
+        frame_rng(config.seed, index),
+        ra_deg=float(boresights.ra_deg[index]),
+        dec_deg=float(boresights.dec_deg[index]),
+        roll_deg=float(boresights.roll_deg[index]),
+        noise_px=config.noise_px,
+        false_stars=config.false_stars,
+        missing_frac=config.missing_frac,
+        mag_noise=config.mag_noise,
+        mag_limit=config.mag_limit,
+    )
+
+
 def solve_frame(config: EvalConfig, boresights: Boresights, index: int) -> FrameResult:
     """Simulate frame ``index`` of ``boresights`` and score the solver's answer."""
     solver = config_solver(config)
@@ -186,20 +207,7 @@ def solve_frame(config: EvalConfig, boresights: Boresights, index: int) -> Frame
         float(boresights.roll_deg[index]),
     )
     kind = config.kind(index)
-    frame, focal_factor = make_frame(
-        kind,
-        catalog,
-        camera,
-        frame_rng(config.seed, index),
-        ra_deg=ra,
-        dec_deg=dec,
-        roll_deg=roll,
-        noise_px=config.noise_px,
-        false_stars=config.false_stars,
-        missing_frac=config.missing_frac,
-        mag_noise=config.mag_noise,
-        mag_limit=config.mag_limit,
-    )
+    frame, focal_factor = config_frame(config, boresights, index)
     n_true = int(np.sum(frame.true_id != FALSE_STAR_ID))
     common = dict(
         index=index,
@@ -392,8 +400,13 @@ def star_count_bin(n_true: int) -> str:
     return "0-2" if n_true < 3 else ">=7" if n_true >= 7 else str(n_true)
 
 
+def _solver_times(results: Sequence[FrameResult]) -> np.ndarray:
+    """Times (ms) of the frames that reached the solver ([NaN] when none did)."""
+    return np.array([r.time_ms for r in results if r.n_points >= 3] or [np.nan])
+
+
 def _counts(kind: str, true_stars: str, results: Sequence[FrameResult]) -> OutcomeCounts:
-    times = np.array([r.time_ms for r in results if r.n_points >= 3] or [np.nan])
+    times = _solver_times(results)
     return OutcomeCounts(
         kind=kind,
         true_stars=true_stars,
@@ -467,25 +480,24 @@ class Summary:
 def summarize(results: Sequence[FrameResult], *, db_bytes: int, wall_s: float) -> Summary:
     """Aggregate frame results."""
     n = len(results)
-    count = {k: sum(r.outcome == k for r in results) for k in OUTCOMES}
+    every = _counts("", "", results)
     ge4 = [r for r in results if r.n_true >= 4]
-    times = np.array([r.time_ms for r in results if r.n_points >= 3] or [np.nan])
     errors = [r.boresight_error_arcsec for r in results if r.outcome == "correct"]
     by_kind, by_true_stars = breakdown(results)
     return Summary(
         frames=n,
-        correct=count["correct"],
-        wrong=count["wrong"],
-        none=count["none"],
+        correct=every.correct,
+        wrong=every.wrong,
+        none=every.none,
         imprecise=sum(r.outcome == "correct" and r.beyond_tolerance for r in results),
-        correct_rate=count["correct"] / n if n else 0.0,
-        wrong_rate=count["wrong"] / n if n else 0.0,
+        correct_rate=every.correct / n if n else 0.0,
+        wrong_rate=every.wrong / n if n else 0.0,
         frames_ge4=len(ge4),
         correct_rate_ge4=(sum(r.outcome == "correct" for r in ge4) / len(ge4)) if ge4 else 0.0,
         wrong_ids=sum(r.n_wrong_ids for r in results),
-        median_ms=float(np.nanmedian(times)),
-        p95_ms=float(np.nanpercentile(times, 95)),
-        max_ms=float(np.nanmax(times)),
+        median_ms=every.median_ms,
+        p95_ms=every.p95_ms,
+        max_ms=float(np.nanmax(_solver_times(results))),
         median_boresight_error_arcsec=float(np.median(errors)) if errors else None,
         db_bytes=db_bytes,
         wall_s=wall_s,
