@@ -5,6 +5,7 @@ import sys
 import numpy as np
 import pytest
 
+from cli_helpers import run_cli
 from conftest import CONTEST
 from starnav.cli import main
 from starnav.identify import ALGORITHMS
@@ -31,16 +32,7 @@ EXPECTED_KEYS = {
 def _identify(capsys, path, *extra):
     """``starnav identify PATH`` with the 12° / 512 px camera and the contest catalog."""
     argv = ["identify", str(path), "--fov-deg", "12", "--width", "512", "--catalog", CATALOG]
-    return _run(capsys, *argv, *extra)
-
-
-def _run(capsys, *argv):
-    try:
-        code = main(list(argv))
-    except SystemExit as exc:  # argparse's own usage errors
-        code = exc.code
-    out, err = capsys.readouterr()
-    return code, out, err
+    return run_cli(capsys, *argv, *extra)
 
 
 def test_identify_json_contest_map(capsys):
@@ -125,7 +117,7 @@ def test_bad_options_exit_2(capsys, argv, needle):
     for k, v in zip(argv[::2], argv[1::2], strict=True):
         base[k] = v
     args = ["identify", MAP1] + [x for kv in base.items() for x in kv]
-    code, out, err = _run(capsys, *args)
+    code, out, err = run_cli(capsys, *args)
     assert code == 2 and out == ""
     assert needle in err and len(err.strip().splitlines()) == 1
 
@@ -166,13 +158,13 @@ def test_bad_options_exit_2(capsys, argv, needle):
 )
 def test_bad_simulate_and_demo_options(capsys, tmp_path, monkeypatch, argv, needle):
     monkeypatch.chdir(tmp_path)
-    code, _, err = _run(capsys, *argv)
+    code, _, err = run_cli(capsys, *argv)
     assert code == 2 and needle in err and len(err.strip().splitlines()) == 1
 
 
 def test_simulate_then_identify(capsys, tmp_path):
     out_csv = tmp_path / "frame.csv"
-    code, out, _ = _run(
+    code, out, _ = run_cli(
         capsys,
         "simulate",
         "--ra-deg",
@@ -202,7 +194,7 @@ def test_simulate_then_identify(capsys, tmp_path):
     assert code == 0
     truth = json.loads(out)
     assert truth["n_false"] == 2 and out_csv.exists()
-    code, out, _ = _run(
+    code, out, _ = run_cli(
         capsys,
         "identify",
         str(out_csv),
@@ -222,12 +214,12 @@ def test_simulate_then_identify(capsys, tmp_path):
 
 
 def test_demo_and_database(capsys):
-    code, out, _ = _run(capsys, "demo", "--seed", "3", "--json")
+    code, out, _ = run_cli(capsys, "demo", "--seed", "3", "--json")
     result = json.loads(out)
     assert code == 0 and result["solution"]["solved"]
     assert result["comparison"]["ids_wrong"] == 0
     assert result["comparison"]["boresight_error_arcsec"] < 60
-    code, out, _ = _run(capsys, "database", "--fov-deg", "12", "--width", "512", "--json")
+    code, out, _ = run_cli(capsys, "database", "--fov-deg", "12", "--width", "512", "--json")
     info = json.loads(out)
     assert code == 0 and info["stars"] == 4559 and info["pairs"] > 100000 and info["bytes"] > 0
 
@@ -277,7 +269,7 @@ def test_identify_plot_writes_png(capsys, tmp_path):
 
 def test_flux_column_orders_the_search(capsys, tmp_path):
     """A flux column is read as brightness: the frame solves with the rows shuffled."""
-    code, out, _ = _run(
+    code, out, _ = run_cli(
         capsys,
         "simulate",
         "--ra-deg",
@@ -309,7 +301,7 @@ def test_flux_column_orders_the_search(capsys, tmp_path):
             for r in (rows[k] for k in rng.permutation(len(rows)))
         )
     )
-    code, out, _ = _run(
+    code, out, _ = run_cli(
         capsys,
         "identify",
         str(flux_csv),

@@ -7,8 +7,8 @@ from pathlib import Path
 
 import pytest
 
+from cli_helpers import run_cli
 from conftest import CONTEST
-from starnav.cli import main
 
 CATALOG = str(CONTEST / "catalog.csv")
 MAP1 = str(CONTEST / "images" / "xingtu01.csv")
@@ -16,21 +16,12 @@ IDENTIFY = ["identify", MAP1, "--fov-deg", "12", "--width", "512", "--catalog", 
 CLI = Path(__file__).resolve().parents[1] / "src" / "starnav" / "cli"
 
 
-def _run(capsys, *argv):
-    try:
-        code = main(list(argv))
-    except SystemExit as exc:  # argparse's own usage errors
-        code = exc.code
-    out, err = capsys.readouterr()
-    return code, out, err
-
-
 @pytest.mark.parametrize(
     "options",
     [["--algorithm-option", "selection=brightest"], ["--triangle-selection", "brightest"]],
 )
 def test_an_option_by_name_or_by_its_shorthand(capsys, options):
-    code, out, _ = _run(capsys, *IDENTIFY, "--algorithm", "triangle", "--json", *options)
+    code, out, _ = run_cli(capsys, *IDENTIFY, "--algorithm", "triangle", "--json", *options)
     result = json.loads(out)
     assert code == 0 and result["algorithm"] == "triangle" and result["n_matched"] == 15
 
@@ -49,17 +40,17 @@ def test_an_option_by_name_or_by_its_shorthand(capsys, options):
     ],
 )
 def test_a_bad_option_is_one_line_naming_it(capsys, argv, needle):
-    code, out, err = _run(capsys, *IDENTIFY, *argv)
+    code, out, err = run_cli(capsys, *IDENTIFY, *argv)
     assert code == 2 and out == "" and needle in err
     assert len(err.strip().splitlines()) == 1 and "Traceback" not in err
 
 
 def test_options_need_a_known_fov_and_evaluate_checks_them_too(capsys):
-    code, _, err = _run(
+    code, _, err = run_cli(
         capsys, "identify", MAP1, "--width", "512", "--algorithm-option", "selection=brightest"
     )
     assert code == 2 and "--algorithm-option needs --fov-deg" in err
-    code, _, err = _run(capsys, "evaluate", "--workers", "1", "--algorithm-option", "x=1")
+    code, _, err = run_cli(capsys, "evaluate", "--workers", "1", "--algorithm-option", "x=1")
     assert code == 2 and "pyramid has no option 'x'" in err and "\n" not in err.strip()
 
 

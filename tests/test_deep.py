@@ -6,10 +6,10 @@ import json
 import numpy as np
 import pytest
 
+from cli_helpers import run_cli
 from starnav import api
 from starnav.camera import Camera
 from starnav.catalog import Catalog, load_catalog
-from starnav.cli import main
 from starnav.errors import StarnavError
 from starnav.geometry import attitude_from_radec_roll, unit_to_radec
 from starnav.pipeline.deep import deep_match, match_probability
@@ -204,15 +204,6 @@ def test_bad_deep_mag_limit_is_a_one_line_error():
         api.solve_verbose(xy, width=512, fov_deg=6.0, deep_mag_limit=99.0)
 
 
-def _run(capsys, *argv):
-    try:
-        code = main(list(argv))
-    except SystemExit as exc:  # argparse's own usage errors
-        code = exc.code
-    out, err = capsys.readouterr()
-    return code, out, err
-
-
 def test_cli_deep_mag_limit(capsys, tmp_path, frame):
     path = tmp_path / "stars.csv"
     points = zip(frame.xy, frame.mag, strict=True)
@@ -220,17 +211,17 @@ def test_cli_deep_mag_limit(capsys, tmp_path, frame):
     path.write_text("x,y,mag\n" + rows)
     base = ["identify", str(path), "--fov-deg", "6", "--width", "1024", "--sigma-px", "0.5"]
     base += ["--mag-limit", str(BRIGHT_MAG), "--time-budget", "30"]
-    code, out, err = _run(capsys, *base, "--deep-mag-limit", "12", "--json")
+    code, out, err = run_cli(capsys, *base, "--deep-mag-limit", "12", "--json")
     assert code == 0, err
     result = json.loads(out)
     ids = np.array([-1 if s["catalog_id"] is None else s["catalog_id"] for s in result["stars"]])
     real = frame.true_id != FALSE_STAR_ID
     assert np.mean(ids[real] == frame.true_id[real]) > 0.97
     assert all(0.0 <= s["match_probability"] <= 1.0 for s in result["stars"] if s["catalog_id"])
-    code, out, _ = _run(capsys, *base, "--deep-mag-limit", "12")
+    code, out, _ = run_cli(capsys, *base, "--deep-mag-limit", "12")
     assert code == 0 and "match_probability" in out
     for bad in ("abc", "40"):
-        code, out, err = _run(capsys, *base, "--deep-mag-limit", bad)
+        code, out, err = run_cli(capsys, *base, "--deep-mag-limit", bad)
         assert code == 2 and out == "" and len(err.strip().splitlines()) == 1, err
         assert "deep-mag-limit" in err or "deep_mag_limit" in err
 
@@ -238,6 +229,6 @@ def test_cli_deep_mag_limit(capsys, tmp_path, frame):
 def test_cli_solve_takes_deep_mag_limit(capsys, tmp_path):
     image = tmp_path / "frame.png"
     image.write_bytes(b"")  # never read: the bad value is refused first
-    code, out, err = _run(capsys, "solve", str(image), "--deep-mag-limit", "abc")
+    code, out, err = run_cli(capsys, "solve", str(image), "--deep-mag-limit", "abc")
     assert code == 2 and out == "" and len(err.strip().splitlines()) == 1
     assert "--deep-mag-limit" in err

@@ -61,10 +61,12 @@ class Catalog:
     def _row_of_id(self) -> dict[int, int]:
         return {int(i): n for n, i in enumerate(self.ids)}
 
-    def rows(self, ids) -> np.ndarray:
+    def rows(self, ids, *, missing: int | None = None) -> np.ndarray:
         """Row indices of the stars with these catalog ids; ``CatalogError`` naming an id
-        the catalog does not hold."""
+        the catalog does not hold, or ``missing`` for it when given (e.g. -1)."""
         row_of = self._row_of_id
+        if missing is not None:
+            return np.array([row_of.get(int(i), missing) for i in ids], dtype=np.intp)
         try:
             return np.array([row_of[int(i)] for i in ids], dtype=np.intp)
         except KeyError as exc:

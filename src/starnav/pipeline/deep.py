@@ -62,6 +62,7 @@ import numpy as np
 from starnav.catalog import Catalog, load_catalog
 from starnav.errors import StarnavError
 from starnav.identify.database import sky_grid
+from starnav.identify.verify import kernels
 from starnav.results import Solution, StarTable
 from starnav.starlist import StarList
 
@@ -93,13 +94,6 @@ def deep_catalog(
     return load_catalog(catalog, mag_limit=float(m), epoch_year=epoch_year)
 
 
-def kernels():
-    """The identification kernels (imported on first use: numba takes ~0.2 s to load)."""
-    from starnav.identify import kernels
-
-    return kernels
-
-
 @functools.lru_cache(maxsize=4)
 def _deep_sky(catalog: Catalog) -> tuple:
     """The sky grid of a deep catalog (built once per catalog, ~50 ms for 117 000 stars)."""
@@ -127,15 +121,6 @@ def match_probability(residual_px: np.ndarray, sigma_px: float, chance_per_px2):
     return f / (f + chance_per_px2)
 
 
-def _rows_of_ids(catalog: Catalog, ids: np.ndarray) -> np.ndarray:
-    """Rows of ``ids`` in ``catalog`` (-1 for ids it does not hold)."""
-    order = np.argsort(catalog.ids, kind="stable")
-    pos = np.searchsorted(catalog.ids, ids, sorter=order)
-    pos = np.minimum(pos, len(order) - 1)
-    rows = order[pos]
-    return np.where(catalog.ids[rows] == ids, rows, -1)
-
-
 def deep_match(solution: Solution, stars: StarList, deep: Catalog, *, sigma_px: float) -> Solution:
     """``solution`` with every point matched to the ``deep`` catalog at its fitted attitude
     and camera (the rules in the module docstring): the star table's ``catalog_id`` and
@@ -158,7 +143,7 @@ def deep_match(solution: Solution, stars: StarList, deep: Catalog, *, sigma_px: 
     # the bright identification's stars, as deep rows (taken: not paired again)
     row_of = np.full(n, -1, dtype=np.int64)
     bright = np.flatnonzero(table.catalog_id >= 0)
-    row_of[bright] = _rows_of_ids(deep, table.catalog_id[bright])
+    row_of[bright] = deep.rows(table.catalog_id[bright], missing=-1)
     owner = np.full(len(deep), -1, dtype=np.int64)
     held = bright[row_of[bright] >= 0]
     owner[row_of[held]] = held
