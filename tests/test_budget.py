@@ -60,7 +60,9 @@ def test_a_refusal_with_the_fov_known_stops_at_its_budget(warm, budget_s):
     assert wall <= budget_s * OVERRUN + 2 * SLACK_S
 
 
-@pytest.mark.parametrize("budget_s", [0.3, 1.0])
+# the blind search gives up by itself in ~1.2 s on a 2-core EPYC (1 s budget was too close:
+# a faster CI machine finished the search first)
+@pytest.mark.parametrize("budget_s", [0.15, 0.4])
 def test_a_blind_search_stops_at_its_budget(warm, budget_s):
     r = solve_fov(random_points(2), width=1024, time_budget_s=budget_s)
     assert r.solution is None
