@@ -23,7 +23,8 @@ def _settings(sigma_px, **options):
     px = 1.0 / CAMERA.focal_px
     return MatchSettings(
         pair_tol_rad=max(3.0 * np.sqrt(2.0) * sigma_px, 1.0) * px,
-        match_radii_rad=(max(sigma_px, 0.5) * px, max(3.5 * sigma_px, 1.0) * px),
+        match_radius_rad=max(3.5 * sigma_px, 1.0) * px,
+        sigmas_rad=(sigma_px * px,),
         pixel_rad=px,
         **options,
     )

@@ -192,7 +192,8 @@ def test_hypothesis_budget_bounds_the_search(hip_1991, database, table):
     bearings = CAMERA.pixels_to_bearings(xy)
     settings = MatchSettings(
         pair_tol_rad=40.0 / CAMERA.focal_px,
-        match_radii_rad=(1.0 / CAMERA.focal_px,),
+        match_radius_rad=1.0 / CAMERA.focal_px,
+        sigmas_rad=(0.3 / CAMERA.focal_px,),
         max_hypotheses=200,
     )
     t0 = time.perf_counter()

@@ -90,7 +90,8 @@ def test_max_triangles_limits_the_brightest_search(hip_1991):
     database = get_database(hip_1991, camera)
     settings = MatchSettings(
         pair_tol_rad=1.0 / camera.focal_px,
-        match_radii_rad=(0.5 / camera.focal_px, 1.0 / camera.focal_px),
+        match_radius_rad=1.0 / camera.focal_px,
+        sigmas_rad=(0.2 / camera.focal_px,),
         pixel_rad=1.0 / camera.focal_px,
     )
     bearings = camera.pixels_to_bearings(xy)

@@ -1,8 +1,8 @@
 """Independent oracles for the solver's primitives, through their public functions only.
 
 Each test compares a public function with a separate computation of the same thing: brute
-force over the catalog, scipy's assignment, binomial, rotation-fit and least-squares
-routines, or a formula written out here. The primitives are compiled
+force over the catalog, scipy's assignment, rotation-fit and least-squares
+routines, or a formula written out here (the false-match probability's). The primitives are compiled
 kernels; these tests pin what the results must be, whatever computes them. Nothing here
 imports a private name or relies on the order of an unordered result.
 """
@@ -15,7 +15,6 @@ from scipy.optimize import least_squares, linear_sum_assignment
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components, maximum_bipartite_matching
 from scipy.spatial.transform import Rotation
-from scipy.stats import binom
 
 import starnav
 from starnav.api import get_database
@@ -32,8 +31,10 @@ from starnav.geometry import (
     radec_to_unit,
 )
 from starnav.identify import ALGORITHMS
+from starnav.identify.base import MatchSettings
+from starnav.identify.kernels import Q_STARS
 from starnav.identify.pyramid import catalog_triangles
-from starnav.identify.verify import false_match_probability, match_catalog
+from starnav.identify.verify import Verification, match_catalog
 from starnav.simulate import FALSE_STAR_ID, simulate_frame
 
 CAMERA = Camera.from_fov(12.0, 512)
@@ -264,33 +265,46 @@ def test_match_catalog_on_an_empty_field(catalog, database):
 
 # ------------------------------------------------------------------- false_match_probability
 
-GRID = [
-    (n_stars, n_agree, n_used, p, hyp)
-    for n_stars in (2, 3, 4, 8, 30, 200)
-    for n_used in (2, 3, 4)
-    for n_agree in sorted({0, n_used - 1, n_used, n_used + 1, n_used + 3, n_stars})
-    for p in (0.0, 1e-9, 1e-3, 0.05, 0.5, 1.0)
-    for hyp in (0, 1, 17, 10**9)
-    if n_agree <= n_stars
-]
+PX = 1.0 / CAMERA.focal_px
 
 
-def test_false_match_probability_is_a_binomial_tail_times_the_hypotheses():
-    """P(X >= n_agree - n_used) for X ~ Binomial(n_stars - n_used, p), times the number of
-    hypotheses (at least 1), capped at 1; 1 when there is no extra agreement or no trial."""
-    assert len(GRID) > 1000
-    for n_stars, n_agree, n_used, p, hyp in GRID:
-        trials, extra = n_stars - n_used, n_agree - n_used
-        if extra <= 0 or trials <= 0:
-            expected = 1.0
-        else:
-            expected = min(1.0, binom.sf(extra - 1, trials, p) * max(hyp, 1))
-        got = false_match_probability(n_stars, n_agree, n_used, p, hyp)
-        assert got == pytest.approx(expected, rel=1e-9, abs=1e-300), (
-            (n_stars, n_agree, n_used, p, hyp),
-            got,
-            expected,
-        )
+def _oracle_p(dist, n_cone, area, n_stars, n_used, hyp, sigmas, radius):
+    """len(sigmas) len(qs) hypotheses / Lambda, Lambda the best over the centroid sigmas and
+    star fractions q of the product of the per-point likelihood ratios, written out from
+    docs/verification.md."""
+    best = -np.inf
+    rho = n_cone / area
+    for sigma in sigmas:
+        for q in Q_STARS:
+            s = 2.0 * np.sin(0.5 * dist) ** 2  # 1 - cos, without its cancellation
+            lam = rho * sigma**2
+            logs = np.sort(np.log((1 - q) + q * np.exp(rho * s - s / sigma**2) / lam))
+            dropped = min(n_used, len(dist))
+            kept = logs[: len(dist) - dropped]
+            s_r = 2.0 * np.sin(0.5 * radius) ** 2
+            miss = np.log((1 - q) + q * np.exp(rho * s_r - s_r / sigma**2))
+            n_unmatched = n_stars - len(dist) - (n_used - dropped)
+            best = max(best, kept.sum() + n_unmatched * miss)
+    return min(1.0, len(Q_STARS) * len(sigmas) * max(hyp, 1) * np.exp(-best))
+
+
+def test_false_match_probability_is_hypotheses_over_the_likelihood_ratio():
+    rng = np.random.default_rng(3)
+    for _ in range(300):
+        n_pairs = int(rng.integers(0, 12))
+        n_stars = n_pairs + int(rng.integers(0, 5))
+        sigmas = tuple(PX * rng.choice([0.25, 0.5, 1.0], size=int(rng.integers(1, 4))))
+        radius = 3.5 * max(sigmas)
+        dist = 2 * np.sin(0.5 * rng.uniform(0, radius, n_pairs))  # chords
+        n_cone, area = int(rng.integers(1, 60)), float(rng.uniform(1e-3, 3e-2))
+        hyp = int(rng.integers(0, 10**5))
+        settings = MatchSettings(1e-3, radius, sigmas)
+        got = Verification(
+            np.arange(n_pairs), np.arange(n_pairs), dist, n_cone, area
+        ).false_match_probability(n_stars, 3, hyp, settings)
+        angles = 2 * np.arcsin(dist / 2)
+        expected = _oracle_p(angles, n_cone, area, n_stars, 3, hyp, sigmas, radius)
+        assert got == pytest.approx(expected, rel=1e-9, abs=1e-300)
         assert 0.0 <= got <= 1.0
 
 

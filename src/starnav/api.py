@@ -118,7 +118,7 @@ def solve_verbose(
     mag_limit: float | None = None,
     epoch_year: float | None = None,
     parity: int | None = None,
-    sigma_px: float = DEFAULT_SIGMA_PX,
+    sigma_px: float | None = None,
     fit_focal: bool = False,
     max_false_match_probability: float = DEFAULT_MAX_FALSE_MATCH_PROBABILITY,
     min_matched_fraction: float = DEFAULT_MIN_MATCHED_FRACTION,
@@ -136,7 +136,9 @@ def solve_verbose(
     ``width`` px (``height`` defaults to width).
     ``labels``: a name per star (default "1", "2", ...); ``mag_limit``, ``epoch_year``: for
     the embedded Hipparcos catalog (see ``load_catalog``); ``parity``: +1 / -1 when known;
-    ``sigma_px``: 1-sigma centroid error, which sets the matching tolerances;
+    ``sigma_px``: 1-sigma centroid error (px), which sets the matching tolerances (None:
+    not known; the tolerances allow ``DEFAULT_SIGMA_PX`` and the false-match probability
+    takes the sigma the residuals fit best);
     ``fit_focal``: fit the focal length with the attitude;
     ``max_false_match_probability``: refuse less certain identifications;
     ``min_matched_fraction``: refuse when fewer of the stars that should be seen (the smaller

@@ -32,13 +32,12 @@ from starnav.pipeline.solver import (
     DEFAULT_MIN_MATCHED_FRACTION,
     Solver,
     SolveSettings,
-    brightness_order,
     check_prior,
     first_use,
     fit_identification,
 )
 from starnav.results import SolveResult
-from starnav.starlist import StarList, check_star_list
+from starnav.starlist import StarList, brightness_order, check_star_list
 
 DEFAULT_FOV_RANGE_DEG = (5.0, 40.0)
 # the narrowest horizontal field searched: a 3° field holds about 12 Hipparcos stars to the
@@ -257,7 +256,7 @@ def solve_fov(
     catalog: Catalog | str | Path | None = None,
     epoch_year: float | None = None,
     parity: int | None = None,
-    sigma_px: float = 1.0,
+    sigma_px: float | None = None,
     max_false_match_probability: float = DEFAULT_MAX_FALSE_MATCH_PROBABILITY,
     min_matched_fraction: float = DEFAULT_MIN_MATCHED_FRACTION,
     pattern_stars: int = DEFAULT_PATTERN_STARS,
@@ -498,6 +497,7 @@ def _search_and_fit(
                 max_false_match_probability=settings.max_false_match_probability,
                 pattern_stars=pattern_stars,
                 deadline=share,
+                ranked=stars.brightness is not None,
                 near=where,
             ),
             stars,

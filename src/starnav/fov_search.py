@@ -21,6 +21,7 @@ first few patterns, whatever their field of view.
 
 from __future__ import annotations
 
+import functools
 import math
 import time
 from collections.abc import Iterator
@@ -160,7 +161,7 @@ def search_fov(
     height: int,
     cx: float,
     cy: float,
-    sigma_px: float,
+    sigma_px: float | None,
     focal_range_px: tuple[float, float],
     parity: int | None = None,
     max_false_match_probability: float = 1e-4,
@@ -168,6 +169,7 @@ def search_fov(
     max_hypotheses: int = 20000,
     deadline: Deadline | None = None,
     near: tuple[np.ndarray, float] | None = None,
+    ranked: bool = False,
 ) -> Iterator[FovMatch]:
     """Identify the stars at ``xy`` (n, 2, px, distortion removed, brightest first) with the
     focal length unknown within ``focal_range_px`` (px), searching ``bands``. Yields every
@@ -176,7 +178,8 @@ def search_fov(
     ended. ``deadline``: the search ends when it passes (looked at before each band's
     look-up and after each hypothesis). ``near``: (unit vector, radius in rad): only catalog
     patterns whose first star lies within the radius plus the band's half diagonal of the
-    vector (a position hint) are hypotheses."""
+    vector (a position hint) are hypotheses. ``sigma_px``: px, None if unknown; ``ranked``:
+    the rows are in brightness order."""
     n = len(xy)
     if n < 4:
         yield FovMatch(None, "fewer than 4 stars", 0, float("nan"), None)
@@ -192,6 +195,9 @@ def search_fov(
     ends = [math.comb(m, 4) for m in range(5, stars, 2)] + [len(combos)]
     tally = Tally()
     tester: HypothesisTester | None = None
+    everyone = np.arange(n)
+    at_focal = functools.partial(_settings, sigma_px, max_false_match_probability, parity,
+                                 max_hypotheses, deadline, ranked)  # fmt: skip
     work = {id(band): np.empty(len(band.catalog), dtype=np.int64) for band, _ in plans}
     start = 0
     for end in ends:
@@ -222,11 +228,10 @@ def search_fov(
                 tester = HypothesisTester(
                     pinhole_bearings(xy, cx, cy, f),
                     band.database,
-                    _settings(
-                        sigma_px, f, max_false_match_probability, parity, max_hypotheses, deadline
-                    ),
+                    at_focal(f),
                     tally,
                     work=work[id(band)],
+                    order=everyone,
                 )
                 outcome = tester.test(obs_rows[h], cat_rows[h], int(parities[h]))
                 if outcome is not None:
@@ -250,7 +255,7 @@ def search_fov(
     yield FovMatch(None, tester.outcome().reason, tally.hypotheses, float("nan"), None)
 
 
-def _informative(rows: np.ndarray, xy: np.ndarray, sigma_px: float) -> np.ndarray:
+def _informative(rows: np.ndarray, xy: np.ndarray, sigma_px: float | None) -> np.ndarray:
     """The 4-star patterns (rows of ``xy``) whose longest edge spans at least
     ``MIN_PATTERN_TOLS`` pair tolerances: the edge ratios of a smaller one are known too
     loosely to pick catalog patterns (a tight cluster of bright stars, the Pleiades in a 10°
@@ -261,12 +266,13 @@ def _informative(rows: np.ndarray, xy: np.ndarray, sigma_px: float) -> np.ndarra
     return rows[d.reshape(len(rows), -1).max(axis=1) >= MIN_PATTERN_TOLS * tol_px]
 
 
-def _settings(sigma_px, focal_px, max_false_match_probability, parity, max_hypotheses, deadline):
+def _settings(sigma_px, max_false_match_probability, parity, max_hypotheses, deadline, ranked,
+              focal_px):  # fmt: skip
     """The verification settings of one hypothesis's focal length."""
     settings = MatchSettings.for_focal(
         sigma_px, focal_px, max_false_match_probability=max_false_match_probability, parity=parity
     )
-    return replace(settings, max_hypotheses=max_hypotheses, deadline=deadline)
+    return replace(settings, max_hypotheses=max_hypotheses, deadline=deadline, ranked=ranked)
 
 
 def _near(band: Band, cat_rows: np.ndarray, near: tuple[np.ndarray, float]) -> np.ndarray:

@@ -97,7 +97,7 @@ def solve_image(
     fit_distortion: bool = False,
     max_stars: int | None = None,
     threshold_sigma: float = DEFAULT_THRESHOLD_SIGMA,
-    sigma_px: float = 1.0,
+    sigma_px: float | None = None,
     catalog: Catalog | str | Path | None = None,
     epoch_year: float | None = None,
     parity: int | None = None,
@@ -115,7 +115,7 @@ def solve_image(
     is scanned, see ``starnav.fov.scan_focal``). ``max_stars``: the brightest this many
     detections are used (default ``DEFAULT_MAX_STARS``, for a fisheye ``FISHEYE_MAX_STARS``);
     ``threshold_sigma``: detection threshold over the background noise; ``sigma_px``:
-    centroid 1-sigma assumed by the matching tolerances. With a fisheye lens (any model but
+    centroid 1-sigma (px; None: unknown). With a fisheye lens (any model but
     the pinhole), detections outside the image circle found in the image
     (``starnav.detect.circle``) are not made: the dark frame around an all-sky camera's disc
     often holds burned-in text. ``hints``: what the file's header says

@@ -13,7 +13,6 @@ import numpy as np
 
 from starnav.api import (
     DEFAULT_MAX_FALSE_MATCH_PROBABILITY,
-    DEFAULT_SIGMA_PX,
     solve_batch,
     solve_verbose,
 )
@@ -39,7 +38,7 @@ def solve_star_list(
     mag_limit: float | None = None,
     epoch_year: float | None = None,
     parity: int | None = None,
-    sigma_px: float = DEFAULT_SIGMA_PX,
+    sigma_px: float | None = None,
     fit_focal: bool = False,
     max_false_match_probability: float = DEFAULT_MAX_FALSE_MATCH_PROBABILITY,
     algorithm: str = DEFAULT_ALGORITHM,

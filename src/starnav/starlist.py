@@ -174,3 +174,10 @@ def read_known_stars_csv(path: str | Path) -> KnownStars:
         r_px=None if has_xy else values[:, 2],
         labels=labels,
     )
+
+
+def brightness_order(stars: StarList) -> np.ndarray:
+    """Rows of ``stars`` brightest first (as given when there is no brightness)."""
+    if stars.brightness is None:
+        return np.arange(len(stars.xy))
+    return np.argsort(-stars.brightness, kind="stable")

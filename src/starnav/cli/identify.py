@@ -53,8 +53,9 @@ def add_parser(subparsers: Subparsers) -> None:
     p.add_argument(
         "--sigma-px",
         type=finite,
-        default=DEFAULT_SIGMA_PX,
-        help=f"centroid error, 1 sigma (px; default {DEFAULT_SIGMA_PX:g}): sets the tolerances",
+        help=f"centroid error, 1 sigma (px): sets the tolerances (default: not known; the "
+        f"tolerances allow {DEFAULT_SIGMA_PX:g} px, the false-match probability takes the sigma "
+        "the stars fit best)",
     )
     p.add_argument("--parity", type=int, choices=(1, -1), help="force parity (default: find)")
     p.add_argument("--fit-focal", action="store_true", help="fit the focal length too")

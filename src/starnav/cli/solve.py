@@ -62,7 +62,9 @@ def add_parser(subparsers: Subparsers) -> None:
         help="detection threshold over the background noise (default %(default)g)",
     )
     p.add_argument(
-        "--sigma-px", type=finite, default=1.0, help="centroid error assumed (default 1 px)"
+        "--sigma-px",
+        type=finite,
+        help="centroid error, 1 sigma (px; default: not known, estimated as by identify)",
     )
     p.add_argument("--parity", type=int, choices=(1, -1), help="force parity (default: find)")
     p.add_argument(

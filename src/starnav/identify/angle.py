@@ -119,7 +119,7 @@ class AngleMatch:
         tol = settings.pair_tol_rad
         vectors = database.catalog.vectors
         n_cat = len(vectors)
-        tester = HypothesisTester(bearings, database, settings)
+        tester = HypothesisTester(bearings, database, settings, order=order)
         b = bearings[stars]
         windows = PairWindows.measure(b, database, tol)
         covered = np.zeros((len(stars), len(stars)), dtype=bool)

@@ -16,10 +16,15 @@ from starnav.identify.database import PairDatabase
 # MIN_PAIR_TOL_PX
 PAIR_TOL_SIGMAS = 3.0
 MIN_PAIR_TOL_PX = 1.0
-# radial distance of a 2-D Gaussian error: beyond 3.5 sigma in 0.2 % of cases; the agreement
-# is also scored within 1 and 2 sigma, each radius at least its floor (px)
-MATCH_RADII_SIGMAS = (1.0, 2.0, 3.5)
-MIN_MATCH_RADII_PX = (0.5, 0.5, 1.0)
+# radial distance of a 2-D Gaussian error: beyond 3.5 sigma in 0.2 % of cases; points are
+# paired with catalog stars within MATCH_RADIUS_SIGMAS sigma, at least MIN_MATCH_RADIUS_PX
+MATCH_RADIUS_SIGMAS = 3.5
+MIN_MATCH_RADIUS_PX = 1.0
+# with no centroid sigma told, the tolerances are made for SEARCH_SIGMA_PX and the false-match
+# probability takes the best of these fractions of it (an estimate from the data, paid for by
+# the factor 4 on the probability)
+SEARCH_SIGMA_PX = 1.0
+SIGMA_FRACTIONS = (0.125, 0.25, 0.5, 1.0)
 
 
 @dataclass(frozen=True)
@@ -27,17 +32,21 @@ class MatchSettings:
     """Tolerances and limits of an identification.
 
     ``pair_tol_rad``: how far a measured inter-star angle may be from the catalog's
-    (radians); ``match_radii_rad``: how close a reprojected catalog star must be to count as
-    agreeing (radians; the false-match probability is evaluated at each, the largest sets
-    the pairing); ``max_false_match_probability``: refuse any answer less certain than this;
-    ``parity``: +1 or -1 when known, None to find it; ``max_stars``: triangles are made of
-    the first (brightest) this many stars; ``max_screen_stars``: identification uses the
-    first this many (the attitude fit then takes in the rest); ``max_hypotheses``: give up
-    after testing this many; ``deadline``: give up when it passes (``starnav.budget``).
+    (radians); ``match_radius_rad``: how close a reprojected catalog star must be to pair with
+    a point (radians); ``sigmas_rad``: the centroid sigmas (radians) the false-match
+    probability is evaluated at, the best taken (one when the sigma is known);
+    ``max_false_match_probability``: refuse any answer less certain than this; ``parity``:
+    +1 or -1 when known, None to find it; ``max_stars``: triangles are made of the first
+    (brightest) this many stars; ``max_screen_stars``: identification uses the first this
+    many (the attitude fit then takes in the rest); ``max_hypotheses``: give up after testing
+    this many; ``deadline``: give up when it passes (``starnav.budget``); ``ranked``: the
+    ``order`` an identifier is given is the brightness order (the false-match probability
+    then weighs the brightness).
     """
 
     pair_tol_rad: float
-    match_radii_rad: tuple[float, ...]
+    match_radius_rad: float
+    sigmas_rad: tuple[float, ...]
     max_false_match_probability: float = 1e-4
     parity: int | None = None
     max_stars: int = 25
@@ -45,38 +54,35 @@ class MatchSettings:
     max_hypotheses: int = 20000
     pixel_rad: float | None = None
     deadline: Deadline | None = None
+    ranked: bool = False
 
     @classmethod
     def for_focal(
         cls,
-        sigma_px: float,
+        sigma_px: float | None,
         focal_px: float,
         *,
         max_false_match_probability: float = 1e-4,
         parity: int | None = None,
     ) -> MatchSettings:
         """Tolerances for centroids good to ``sigma_px`` (1-sigma, px) seen with a focal
-        length of ``focal_px``."""
+        length of ``focal_px``; ``sigma_px`` None: not known, the tolerances are
+        ``SEARCH_SIGMA_PX``'s and the false-match probability takes the best of
+        ``SIGMA_FRACTIONS`` of it."""
+        fractions = SIGMA_FRACTIONS if sigma_px is None else (1.0,)
+        sigma_px = SEARCH_SIGMA_PX if sigma_px is None else sigma_px
         return cls(
             pair_tol_rad=max(PAIR_TOL_SIGMAS * np.sqrt(2.0) * sigma_px, MIN_PAIR_TOL_PX) / focal_px,
-            match_radii_rad=tuple(
-                r / focal_px
-                for r in sorted(
-                    {
-                        max(k * sigma_px, floor)
-                        for k, floor in zip(MATCH_RADII_SIGMAS, MIN_MATCH_RADII_PX, strict=True)
-                    }
-                )
-            ),
+            match_radius_rad=max(MATCH_RADIUS_SIGMAS * sigma_px, MIN_MATCH_RADIUS_PX) / focal_px,
+            sigmas_rad=tuple(f * sigma_px / focal_px for f in fractions),
             max_false_match_probability=max_false_match_probability,
             parity=parity,
             pixel_rad=1.0 / focal_px,
         )
 
-    @property
-    def match_radius_rad(self) -> float:
-        """The largest match radius (radians): stars within it are paired."""
-        return max(self.match_radii_rad)
+    def kernel_args(self) -> tuple[float, np.ndarray]:
+        """``(match_radius_rad, sigmas_rad)`` as the verification kernels take them."""
+        return float(self.match_radius_rad), np.asarray(self.sigmas_rad, dtype=np.float64)
 
 
 @dataclass(frozen=True)
@@ -85,8 +91,10 @@ class Identification:
 
     ``obs_index``/``cat_index``: matched bearing rows and catalog rows; ``R_cam_from_icrs``:
     the attitude of the accepted hypothesis (from its star triangle); ``parity``;
-    ``false_match_probability``: the chance that a wrong hypothesis would agree this well
-    (corrected for the ``hypotheses`` tried).
+    ``false_match_probability``: the chance that the identification is wrong (over the
+    ``hypotheses`` tried); ``log_sides``: the natural-log likelihood ratio of its star
+    triangle's sides (0 when it was not a triangle looked up within a tolerance), which the
+    fit's false-match probability counts again.
     """
 
     obs_index: np.ndarray
@@ -95,6 +103,7 @@ class Identification:
     parity: int
     false_match_probability: float
     hypotheses: int
+    log_sides: float = 0.0
 
 
 @dataclass(frozen=True)

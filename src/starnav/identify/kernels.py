@@ -1,7 +1,7 @@
 """Kernels of the identification stage (numba; plain Python under ``NUMBA_DISABLE_JIT=1``).
 
 Cone searches on the catalog's RA / Dec grid, the one-to-one pairing of bearings with
-reprojected catalog stars, the binomial tail of the false-match model, the catalog triangle
+reprojected catalog stars, the false-match probability (likelihood ratios), the catalog triangle
 join on the pair table, the test of one hypothesis (attitude, agreement, mirror check) and
 Mortari's triangle loop over an array of star triples, shared by Pyramid, Triangle and
 tracking. Every decision of the verification is written here once; the Python modules
@@ -33,8 +33,8 @@ _NO_EDGE = 1e6  # cost of a pair that is not within the radius (chord^2 is at mo
 SMALL_GROUP = 8  # contested groups of up to this many pairs: every subset tried (2^8)
 
 Pairs = namedtuple("Pairs", "obs cat dist n_cone field_area")
-Tested = namedtuple("Tested", "status obs cat R p")
-Search = namedtuple("Search", "status obs cat R parity p hypotheses proposed best_p")
+Tested = namedtuple("Tested", "status obs cat R p log_sides")
+Search = namedtuple("Search", "status obs cat R parity p log_sides hypotheses proposed best_p")
 
 
 @njit(cache=True)
@@ -105,59 +105,197 @@ def cone(axis, chord2, sky, allowed, out):
     return n
 
 
+# the chances that a measured point is a star of the catalog under a right hypothesis (the
+# rest: false stars, stars fainter than the catalog, stars that miss under an approximate
+# camera) the statistic takes the best of (an estimate from the data, paid for by the factor
+# on the probability). Any value keeps each likelihood ratio's expectation 1 under a wrong
+# hypothesis; at 1/2 a false point halves the odds, at 1/16 it costs 6 %
+Q_STARS = (0.5,)
+# brightness: a point of brightness rank r (0: the brightest) is, under a right hypothesis, with
+# chance BRIGHT_WEIGHT a star among the BRIGHT_WINDOW[0] r + BRIGHT_WINDOW[1] brightest
+# catalog stars of the field cone (the cone holds ~1.6x the image's stars), otherwise any
+BRIGHT_WEIGHT = 0.5
+BRIGHT_WINDOW = (2, 4)
+BRIGHT_MAX_RATIO = 50.0  # a star's brightness ratio is capped at (1 - w) + w x this
+# the points scored: the first SCORED_PER_STAR x the catalog stars of the field cone in the
+# order (at least MIN_SCORED); the fainter ones are expected to be fainter than the catalog
+SCORED_PER_STAR = 2.0
+MIN_SCORED = 8
+
+
 @njit(cache=True)
-def binomial_tail(trials, extra, p):
-    """P(X >= extra), X ~ Binomial(trials, p) (= scipy's betainc(extra, trials-extra+1, p))."""
-    if p >= 1.0:
-        return 1.0
-    if p <= 0.0:
+def _log_add(a, b):
+    """log(e^a + e^b) without overflow."""
+    m = max(a, b)
+    return m + math.log(math.exp(a - m) + math.exp(b - m))
+
+
+@njit(cache=True)
+def star_log_ratios(dist, n_cone, field_area, sigma, q, radius, out):
+    """Natural-log likelihood ratios, right hypothesis against wrong, of the paired points
+    (chords ``dist``) written to ``out``, and returned: that of one unmatched point.
+
+    A wrong hypothesis drops a point anywhere on the field: the ``n_cone`` catalog stars of
+    a field cone whose ``1 - cos(half-angle)`` is ``field_area`` are a Poisson field to it,
+    so in s = 1 - cos d its nearest star is exponential of rate rho = n_cone / field_area
+    (u = rho s; no star within ``radius``: e^(-u_R)). Under the right one a point is a
+    catalog star with chance ``q``, its offset a 2-D Gaussian of ``sigma`` (rad): s is
+    exponential with mean sigma^2; otherwise it falls as under the wrong one. So a pair at s
+    scores (1 - q) + q e^(u - s / sigma^2) / lambda, lambda = rho sigma^2, and a point with
+    no star within the radius (1 - q) + q e^(u_R - s_R / sigma^2)."""
+    rho = n_cone / field_area
+    log_q, log_rest = math.log(q), math.log(1.0 - q)
+    log_lam = math.log(max(rho * sigma * sigma, 1e-300))
+    for k in range(len(dist)):
+        s = 0.5 * dist[k] * dist[k]
+        out[k] = _log_add(log_rest, log_q - log_lam + rho * s - s / (sigma * sigma))
+    s_r = 2.0 * math.sin(0.5 * radius) ** 2  # 1 - cos(radius)
+    return _log_add(log_rest, log_q + rho * s_r - s_r / (sigma * sigma))
+
+
+@njit(cache=True)
+def brightness_log_ratio(obs, cat, rank, mags, cone_rows, n_cone):
+    """Natural-log likelihood ratio, right hypothesis against wrong, of the brightness of the
+    pairs (points ``obs`` of brightness ranks ``rank``, -1: none; catalog rows ``cat`` of
+    magnitudes ``mags``, empty: the brightness is not known) among the ``n_cone`` catalog
+    stars ``cone_rows`` of the field. A
+    wrong hypothesis pairs a point with any star of the field (its rank among them uniform);
+    a right one, with chance ``BRIGHT_WEIGHT``, with one among the window of its rank
+    (``BRIGHT_WINDOW``). In the window a pair scores (1 - w) + w n_cone / window (at most
+    ``BRIGHT_MAX_RATIO``), outside it 1 - w: expectation 1 under a wrong hypothesis."""
+    total = 0.0
+    w = BRIGHT_WEIGHT
+    if len(mags) == 0:
+        return total
+    for k in range(len(obs)):
+        r = rank[obs[k]]
+        window = BRIGHT_WINDOW[0] * r + BRIGHT_WINDOW[1]
+        if r < 0 or window >= n_cone:
+            continue
+        m = mags[cat[k]]
+        brighter = 0
+        for c in range(n_cone):
+            brighter += mags[cone_rows[c]] < m
+        if brighter < window:
+            total += math.log((1.0 - w) + w * min(n_cone / window, BRIGHT_MAX_RATIO))
+        else:
+            total += math.log(1.0 - w)
+    return total
+
+
+@njit(cache=True)
+def brightness_log_bound(n_agree, n_cone, ranked):
+    """The largest ``brightness_log_ratio`` ``n_agree`` pairs can have among ``n_cone``
+    catalog stars (0 when the brightness is not known)."""
+    if not ranked or n_cone <= BRIGHT_WINDOW[1]:
         return 0.0
-    lp, lq = math.log(p), math.log1p(-p)
-    top = math.lgamma(trials + 1.0)
-    s = 0.0
-    for j in range(extra, trials + 1):
-        s += math.exp(
-            top - math.lgamma(j + 1.0) - math.lgamma(trials - j + 1.0) + j * lp + (trials - j) * lq
-        )
-    return min(1.0, s)
+    ratio = min(n_cone / BRIGHT_WINDOW[1], BRIGHT_MAX_RATIO)
+    return n_agree * math.log((1.0 - BRIGHT_WEIGHT) + BRIGHT_WEIGHT * ratio)
 
 
 @njit(cache=True)
-def false_match(n_stars, n_agree, n_used, p_chance, hypotheses):
-    """Chance that a wrong hypothesis makes ``n_agree`` of ``n_stars`` agree: ``n_used``
-    built it, each of the others agrees by chance with probability ``p_chance``; times the
-    ``hypotheses`` tried (Bonferroni)."""
-    trials = n_stars - n_used
-    extra = n_agree - n_used
-    if extra <= 0 or trials <= 0:
-        return 1.0
-    return min(1.0, binomial_tail(trials, extra, p_chance) * max(hypotheses, 1))
+def side_log_ratio(tri, cat_tri, sigma, tol):
+    """Natural-log likelihood ratio of the sides of a measured star triangle ``tri`` (3, 3)
+    against those of its catalog triangle ``cat_tri`` (3, 3): a wrong hypothesis's catalog
+    sides fall anywhere within ``tol`` (rad) of the measured ones, a right one's differ by a
+    Gaussian of sqrt(2) ``sigma`` (two centroid errors): 2 tol N(delta) per side, whose
+    expectation over the window is at most 1. 0 without a window (``tol`` 0)."""
+    if tol <= 0.0:
+        return 0.0
+    s = math.sqrt(2.0) * sigma
+    total = 0.0
+    for i in range(3):
+        for j in range(i + 1, 3):
+            d = angle(tri[i], tri[j]) - angle(cat_tri[i], cat_tri[j])
+            total += math.log(2.0 * tol / (math.sqrt(2.0 * math.pi) * s)) - 0.5 * (d / s) ** 2
+    return total
 
 
 @njit(cache=True)
-def p_chance(n_cone, field_area, radius):
-    """Chance that a random point lands within ``radius`` (rad) of one of ``n_cone`` catalog
-    stars spread over a field cone whose ``1 - cos(half-angle)`` is ``field_area``."""
-    if field_area <= 0:
-        return 1.0
-    return min(1.0, n_cone * (1.0 - math.cos(radius)) / field_area)
+def side_log_bound(sigma, tol):
+    """The largest ``side_log_ratio`` (every side exact)."""
+    if tol <= 0.0:
+        return 0.0
+    return 3.0 * math.log(2.0 * tol / (math.sqrt(2.0 * math.pi) * math.sqrt(2.0) * sigma))
 
 
 @njit(cache=True)
-def false_match_radii(dist, n_cone, field_area, n_stars, n_used, hypotheses, radii):
-    """The false-match probability at each match radius (stars with chord ``dist`` within
-    it agree; chance per star n_cone (1 - cos r) / field_area), the best one times the
-    number of radii (Bonferroni again)."""
-    best = 1.0
-    for radius in radii:
-        limit = chord(radius) * (1 + 1e-12)
-        n_agree = 0
-        for d in dist:
-            if d <= limit:
-                n_agree += 1
-        chance = p_chance(n_cone, field_area, radius)
-        best = min(best, false_match(n_stars, n_agree, n_used, chance, hypotheses))
-    return min(1.0, best * len(radii))
+def scored_count(rank, n_cone):
+    """How many points the statistic scores: those of ``rank`` (their place in the order)
+    below max(``MIN_SCORED``, ``SCORED_PER_STAR`` ``n_cone``)."""
+    limit = max(MIN_SCORED, SCORED_PER_STAR * n_cone)
+    n = 0
+    for r in rank:
+        n += 0 <= r < limit
+    return n
+
+
+@njit(cache=True)
+def scored_pairs(dist, obs, rank, n_cone):
+    """The chords of the pairs whose points are scored (``scored_count``)."""
+    limit = max(MIN_SCORED, SCORED_PER_STAR * n_cone)
+    keep = np.empty(len(dist), dtype=np.bool_)
+    for k in range(len(dist)):
+        keep[k] = 0 <= rank[obs[k]] < limit
+    return dist[keep]
+
+
+@njit(cache=True)
+def field_false_match(dist, obs, rank, n_cone, field_area, n_used, hypotheses, sigmas, radius,
+                      log_other):  # fmt: skip
+    """``false_match`` of the scored points only (``scored_count``): pairs ``obs`` (rows of
+    the points) at chords ``dist``, the points' places ``rank`` in the order."""
+    return false_match(scored_pairs(dist, obs, rank, n_cone), n_cone, field_area,
+                       scored_count(rank, n_cone), n_used, hypotheses, sigmas, radius,
+                       log_other)  # fmt: skip
+
+
+@njit(cache=True)
+def false_match(dist, n_cone, field_area, n_stars, n_used, hypotheses, sigmas, radius,
+                log_other):  # fmt: skip
+    """The false-match probability of a hypothesis whose pairs are at chords ``dist`` (rad),
+    ``n_stars`` points in all: ``len(sigmas) len(Q_STARS) hypotheses / Lambda``, Lambda the
+    product of the points' likelihood ratios (``star_log_ratios``) at the centroid sigma of
+    ``sigmas`` (rad) and the star fraction of ``Q_STARS`` that give the largest, times
+    e^``log_other`` (the brightness and triangle-side ratios). The ``n_used`` points that
+    built a hypothesis agree by construction: the best-scoring ``n_used`` pairs are left out
+    (unmatched points when fewer paired). Each ratio has expectation 1 (at most) under a
+    wrong hypothesis, so P(Lambda >= t) <= 1/t (Markov); over the hypotheses tried and the
+    sigmas and fractions taken the best of, P(p <= alpha) <= alpha: a probability of being
+    wrong that can only err high."""
+    n_pairs = len(dist)
+    dropped = min(n_used, n_pairs)
+    n_unmatched = max(n_stars - n_pairs - (n_used - dropped), 0)
+    best = -math.inf
+    logs = np.empty(n_pairs)
+    for sigma in sigmas:
+        for q in Q_STARS:
+            miss = star_log_ratios(dist, n_cone, field_area, sigma, q, radius, logs)
+            logs.sort()
+            total = n_unmatched * miss
+            for k in range(n_pairs - dropped):
+                total += logs[k]
+            best = max(best, total)
+    log_p = math.log(len(sigmas) * len(Q_STARS) * max(hypotheses, 1)) - best - log_other
+    return math.exp(min(log_p, 0.0))
+
+
+@njit(cache=True)
+def best_case_false_match(n_stars, n_agree, n_used, n_cone, field_area, hypotheses, sigmas,
+                          radius, max_other):  # fmt: skip
+    """The smallest ``false_match`` a hypothesis can reach with ``n_agree`` of ``n_stars``
+    points within ``radius`` of a catalog star, ``n_cone`` (at least 1) catalog stars on the
+    field: every agreeing point exactly on its star, or (in a field so crowded that missing
+    is the rarer event) none agreeing; ``max_other``: the largest brightness and side log
+    ratios it can have. For a screen: a hypothesis that cannot beat the threshold even so is
+    not verified."""
+    n_agree = min(n_agree, n_stars)
+    n_cone = max(n_cone, 1)
+    on_stars = false_match(np.zeros(n_agree), n_cone, field_area, n_stars, n_used, hypotheses,
+                           sigmas, radius, max_other)  # fmt: skip
+    none = false_match(np.zeros(0), n_cone, field_area, n_stars, n_used, hypotheses, sigmas,
+                       radius, max_other)  # fmt: skip
+    return min(on_stars, none)
 
 
 @njit(cache=True)
@@ -376,29 +514,39 @@ def pair_catalog(bearings, R, sky, allowed, radius, cov, gate, work):
 
 
 @njit(cache=True)
-def test_hypothesis(bearings, obs_rows, cat_rows, parity, sky, allowed, radii, hypotheses,
-                    max_p, parity_known, work):  # fmt: skip
+def test_hypothesis(bearings, obs_rows, cat_rows, parity, sky, allowed, radius, sigmas, tol,
+                    rank, mags, hypotheses, max_p, parity_known, work):  # fmt: skip
     """Verify one hypothesis (bearing rows paired with catalog rows, with a parity): its
     attitude (Wahba), the agreeing stars of the whole field, the false-match probability
-    over ``hypotheses``; accepted (``FOUND``) below ``max_p`` unless the parity is unknown
-    (``parity_known`` 0) and the mirror image verifies too (``AMBIGUOUS``: collinear stars)."""
+    over ``hypotheses`` (``false_match``: pairs within ``radius``, the centroid sigma the best
+    of ``sigmas``, rad; ``rank``: the points' places in the order, -1: not in it, the first
+    ``scored_count`` scored; ``mags``: the catalog's, empty when the points' brightness is not
+    known; with the triangle's sides when it is a triangle looked up within
+    ``tol``, rad, 0: not); accepted (``FOUND``) below ``max_p`` unless the parity is unknown
+    (``parity_known`` 0) and the mirror image verifies too (``AMBIGUOUS``: collinear
+    stars)."""
     vectors = sky[0]
     no_cov = np.zeros((3, 3))
-    radius = radii.max()
     n_used = len(obs_rows)
+    log_sides = 0.0
+    if n_used == 3:
+        log_sides = side_log_ratio(bearings[obs_rows], vectors[cat_rows], sigmas.max(), tol)
     R = wahba(bearings[obs_rows], vectors[cat_rows], np.ones(n_used), parity)
     v = pair_catalog(bearings, R, sky, allowed, radius, no_cov, False, work)
-    p = false_match_radii(v.dist, v.n_cone, v.field_area, len(bearings), n_used, hypotheses, radii)
+    log_other = log_sides + brightness_log_ratio(v.obs, v.cat, rank, mags, work, v.n_cone)
+    p = field_false_match(v.dist, v.obs, rank, v.n_cone, v.field_area, n_used, hypotheses,
+                          sigmas, radius, log_other)  # fmt: skip
     if p > max_p:
-        return Tested(REJECTED, v.obs, v.cat, R, p)
+        return Tested(REJECTED, v.obs, v.cat, R, p, log_sides)
     if parity_known == 0:
         R_m = wahba(bearings[v.obs], vectors[v.cat], np.ones(len(v.obs)), -parity)
         m = pair_catalog(bearings, R_m, sky, allowed, radius, no_cov, False, work)
-        p_m = false_match_radii(m.dist, m.n_cone, m.field_area, len(bearings), n_used,
-                                hypotheses, radii)  # fmt: skip
+        log_m = log_sides + brightness_log_ratio(m.obs, m.cat, rank, mags, work, m.n_cone)
+        p_m = field_false_match(m.dist, m.obs, rank, m.n_cone, m.field_area, n_used,
+                                hypotheses, sigmas, radius, log_m)  # fmt: skip
         if p_m <= max_p:
-            return Tested(AMBIGUOUS, v.obs, v.cat, R, p)
-    return Tested(FOUND, v.obs, v.cat, R, p)
+            return Tested(AMBIGUOUS, v.obs, v.cat, R, p, log_sides)
+    return Tested(FOUND, v.obs, v.cat, R, p, log_sides)
 
 
 @njit(cache=True)
@@ -478,11 +626,13 @@ def catalog_triangles(pair_a, pair_b, pair_angle, vectors, allowed, s_ij, s_ik, 
 def _screen(bearings, tri, triples, parities, sky, allowed, field_rad, screen2, work, cam,
             end_time):  # fmt: skip
     """Per hypothesis, how many bearings land near some catalog star under its attitude (a
-    quick count that may only err high); stops early (the rest counted 0) after
-    ``end_time`` (``clock`` seconds)."""
+    quick count that may only err high), and how many catalog stars its field cone holds (as
+    ``pair_catalog`` counts them; 0 when not counted: wide fields); stops early (the rest
+    counted 0) after ``end_time`` (``clock`` seconds)."""
     vectors = sky[0]
     m = len(triples)
     agree = np.zeros(m, dtype=np.int64)
+    in_cone = np.zeros(m, dtype=np.int64)
     ones = np.ones(3)
     sky_b = np.empty(3)
     for h in range(m):
@@ -500,6 +650,7 @@ def _screen(bearings, tri, triples, parities, sky, allowed, field_rad, screen2, 
                 agree[h] += cone(sky_b, screen2, sky, allowed, work) > 0
             continue
         n_cone = cone(R[2], chord(field_rad) ** 2, sky, allowed, work)
+        in_cone[h] = n_cone
         for c in range(n_cone):
             row = work[c]
             v0, v1, v2 = vectors[row, 0], vectors[row, 1], vectors[row, 2]
@@ -515,7 +666,7 @@ def _screen(bearings, tri, triples, parities, sky, allowed, field_rad, screen2, 
                 if dx * dx + dy * dy + dz * dz < screen2:
                     agree[h] += 1
                     break
-    return agree
+    return agree, in_cone
 
 
 @njit(cache=True)
@@ -544,20 +695,36 @@ def _orientations(tri, triples, vectors, tol, longest, parity_known):
 
 
 @njit(cache=True)
+def _shortest_sides_first(bearings, idx):
+    """The triangle ``idx`` (3 rows of ``bearings``) with its first star opposite its longest
+    side: the catalog join scans the pairs of the two sides at the first star, and there are
+    fewer pairs at shorter angles (about in proportion)."""
+    s01 = angle(bearings[idx[0]], bearings[idx[1]])
+    s02 = angle(bearings[idx[0]], bearings[idx[2]])
+    s12 = angle(bearings[idx[1]], bearings[idx[2]])
+    out = idx.copy()
+    if s01 >= s02 and s01 >= s12:  # longest 01: star 2 first
+        out[0], out[1], out[2] = idx[2], idx[0], idx[1]
+    elif s02 >= s01 and s02 >= s12:  # longest 02: star 1 first
+        out[0], out[1], out[2] = idx[1], idx[0], idx[2]
+    return out
+
+
+@njit(cache=True)
 def triangle_search(bearings, triangles, pair_a, pair_b, pair_angle, max_angle, sky, allowed,
-                    tol, radii, max_p, parity_known, max_hypotheses, end_time):  # fmt: skip
+                    tol, radius, sigmas, rank, mags, max_p, parity_known, max_hypotheses,
+                    end_time):  # fmt: skip
     """Try the measured ``triangles`` (rows of ``bearings``, (t, 3)) in order: look up the
     catalog triangles of each, screen all their hypotheses, verify the best (by the screen)
     until one is accepted, nothing left can be, ``max_hypotheses`` are spent or the
     ``clock`` passes ``end_time`` (s; looked at for every triangle and every ``CLOCK_EVERY``
     hypotheses screened or verified; status ``OUT_OF_TIME``)."""
     vectors = sky[0]
-    n_total = len(bearings)
-    radius = radii.max()
     field_rad = field_radius(bearings, radius)
-    # the smallest chance agreement per star any hypothesis can have (a field holding one
-    # catalog star): a screen count that cannot beat the threshold even so is not verified
-    p_floor = (1.0 - math.cos(radii.min())) / (1.0 - math.cos(field_rad))
+    field_area = 1.0 - math.cos(field_rad)
+    ranked = len(mags) > 0
+    n_ranked = scored_count(rank, 1e18)
+    sides_bound = side_log_bound(sigmas.max(), tol)
     screen2 = chord(radius) ** 2
     work = np.empty(len(vectors), dtype=np.int64)
     head = np.full(len(vectors), -1, dtype=np.int64)
@@ -572,11 +739,11 @@ def triangle_search(bearings, triangles, pair_a, pair_b, pair_angle, max_angle, 
         if timed and clock() > end_time:
             status = OUT_OF_TIME
             break
-        idx = triangles[t]
+        idx = _shortest_sides_first(bearings, triangles[t])
         for k in range(3):
             tri[k] = bearings[idx[k]]
         s01, s02, s12 = angle(tri[0], tri[1]), angle(tri[0], tri[2]), angle(tri[1], tri[2])
-        longest = max(s01, s02, s12)
+        longest = s12
         # a side within the tolerance of zero matches nearly every catalog pair
         if min(s01, s02, s12) < 2.0 * tol or longest > max_angle + tol:
             continue
@@ -588,28 +755,39 @@ def triangle_search(bearings, triangles, pair_a, pair_b, pair_angle, max_angle, 
         if len(triples) == 0:
             continue
         hypotheses += len(triples)
-        agree = _screen(bearings, tri, triples, parities, sky, allowed, field_rad, screen2,
-                        work, cam, end_time)  # fmt: skip
+        agree, n_cone = _screen(bearings, tri, triples, parities, sky, allowed, field_rad,
+                                screen2, work, cam, end_time)  # fmt: skip
         if timed and clock() > end_time:
             status = OUT_OF_TIME
             break
         for h in np.argsort(-agree, kind="mergesort"):
-            p_best = len(radii) * false_match(n_total, agree[h], 3, p_floor, hypotheses)
-            if p_best > max_p:
-                break  # neither this nor any later (lower) count can be convincing
+            # even on a field of one catalog star, the brightness at its best: neither this nor
+            # any later (lower) count can be convincing; on its own field: not this one
+            best_other = sides_bound + brightness_log_bound(agree[h], 1e9, ranked)
+            if best_case_false_match(n_ranked, agree[h], 3, 1, field_area, hypotheses, sigmas,
+                                     radius, best_other) > max_p:  # fmt: skip
+                break
+            own = sides_bound + brightness_log_bound(agree[h], n_cone[h], ranked)
+            n_scored = scored_count(rank, n_cone[h])
+            if n_cone[h] > 0 and best_case_false_match(n_scored, agree[h], 3, n_cone[h],
+                                                       field_area, hypotheses, sigmas, radius,
+                                                       own) > max_p:  # fmt: skip
+                continue
             if timed and proposed % CLOCK_EVERY == CLOCK_EVERY - 1 and clock() > end_time:
                 status = OUT_OF_TIME
                 break
             proposed += 1
-            r = test_hypothesis(bearings, idx, triples[h], parities[h], sky, allowed, radii,
-                                hypotheses, max_p, parity_known, work)  # fmt: skip
+            r = test_hypothesis(bearings, idx, triples[h], parities[h], sky, allowed, radius,
+                                sigmas, tol, rank, mags, hypotheses, max_p, parity_known,
+                                work)  # fmt: skip
             best_p = min(best_p, r.p)
             if r.status != REJECTED:
-                return Search(r.status, r.obs, r.cat, r.R, parities[h], r.p, hypotheses,
-                              proposed, best_p)  # fmt: skip
+                return Search(r.status, r.obs, r.cat, r.R, parities[h], r.p, r.log_sides,
+                              hypotheses, proposed, best_p)  # fmt: skip
         if status == OUT_OF_TIME or hypotheses >= max_hypotheses:
             break
-    return Search(status, empty, empty, np.zeros((3, 3)), 0, 1.0, hypotheses, proposed, best_p)
+    return Search(status, empty, empty, np.zeros((3, 3)), 0, 1.0, 0.0, hypotheses, proposed,
+                  best_p)  # fmt: skip
 
 
 @njit(cache=True)

@@ -29,7 +29,7 @@ from starnav.identify.base import IdentifyOutcome, MatchSettings, screen_stars_o
 from starnav.identify.database import PairDatabase
 from starnav.identify.verify import (
     HypothesisTester,
-    false_match_probability,
+    best_case_probability,
     field_radius_rad,
 )
 
@@ -159,12 +159,11 @@ class NeighborSum:
         member = np.zeros((len(candidates), len(database.catalog)), dtype=bool)
         for ci in range(len(candidates)):
             member[ci, cat_rows[lo[ci] : hi[ci]]] = True
-        tester = HypothesisTester(bearings, database, settings)
+        tester = HypothesisTester(bearings, database, settings, order=order)
         parities = (1, -1) if settings.parity is None else (settings.parity,)
-        # the smallest chance agreement per star any hypothesis can have (as in pyramid): a
-        # hypothesis whose support could not beat the threshold even then is not verified
+        # a hypothesis whose support could not beat the threshold on any field is not
+        # verified (``best_case_probability``)
         field_rad = field_radius_rad(bearings, settings.match_radius_rad)
-        p_floor = (1.0 - np.cos(min(settings.match_radii_rad))) / (1.0 - np.cos(field_rad))
         for ci, cj in pair_order(len(candidates)):
             if lo[ci] == hi[ci] or lo[cj] == hi[cj]:
                 continue
@@ -182,7 +181,7 @@ class NeighborSum:
             if len(a) == 0:
                 continue
             tester.count(len(a) * len(parities))
-            outcome = self._test_pairs(i, j, a, b, bearings, angles, database, tester, p_floor)
+            outcome = self._test_pairs(i, j, a, b, bearings, angles, database, tester, field_rad)
             if outcome is not None:
                 return outcome
             if tester.exhausted:
@@ -199,7 +198,7 @@ class NeighborSum:
         angles: np.ndarray,
         database: PairDatabase,
         tester: HypothesisTester,
-        p_floor: float,
+        field_rad: float,
     ) -> IdentifyOutcome | None:
         """Test the pair hypotheses (i -> a, j -> b), each extended by a third star.
 
@@ -252,7 +251,6 @@ class NeighborSum:
         flat = np.abs(det_obs) < 3.0 * tol * longest  # too flat to tell the side
         parities = (1, -1) if settings.parity is None else (settings.parity,)
         n_total = len(bearings)
-        n_radii = len(settings.match_radii_rad)
         hypotheses = []  # (support, parity, pair index, row of the third star, its catalog row)
         abs_det = np.abs(det_obs)
         for parity in parities:
@@ -271,8 +269,8 @@ class NeighborSum:
                 hypotheses.append((int(support[h]), parity, h, l_of[best], int(c_of[best])))
         hypotheses.sort(key=lambda t: -t[0])
         for support, parity, h, third, c in hypotheses:
-            p_best_case = n_radii * false_match_probability(
-                n_total, support + 2, 3, p_floor, tester.hypotheses
+            p_best_case = best_case_probability(
+                n_total, support + 2, tester.hypotheses, field_rad, settings
             )
             if p_best_case > settings.max_false_match_probability:
                 break  # neither this nor any later (less supported) pair can convince

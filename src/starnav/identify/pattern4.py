@@ -689,7 +689,7 @@ class Pattern4:
             return IdentifyOutcome(None, "fewer than 4 stars", 0)
         table = self.table(database)
         vectors = database.catalog.vectors
-        tester = HypothesisTester(bearings, database, settings)
+        tester = HypothesisTester(bearings, database, settings, order=order)
         combos = breadth_first_combinations(len(order))
         # batches end where a new star joins (C(m, 4) for m = 5, 7, 9, ...): most fields are
         # identified by the first few patterns, so the first batch is small

@@ -28,7 +28,7 @@ from starnav.identify.base import IdentifyOutcome, MatchSettings, screen_stars_o
 from starnav.identify.database import PairDatabase
 from starnav.identify.verify import (
     HypothesisTester,
-    false_match_probability,
+    best_case_probability,
     field_radius_rad,
 )
 
@@ -92,10 +92,8 @@ class StarLines:
         tol = settings.pair_tol_rad
         min_arc = max(2.0 * tol, MIN_ARC_PX * (settings.pixel_rad or 0.0))
         angles = angle_between(bearings[:, None, :], bearings[None, :, :])
-        tester = HypothesisTester(bearings, database, settings)
+        tester = HypothesisTester(bearings, database, settings, order=order)
         field_rad = field_radius_rad(bearings, settings.match_radius_rad)
-        # the smallest chance agreement per star any hypothesis can have (as in pyramid)
-        p_floor = (1.0 - np.cos(min(settings.match_radii_rad))) / (1.0 - np.cos(field_rad))
         for ref in np.asarray(order)[: settings.max_stars]:
             by_distance = np.argsort(angles[ref], kind="stable")
             d = angles[ref, by_distance]
@@ -107,7 +105,7 @@ class StarLines:
             nearest = arcs[0]
             others = by_distance[by_distance != nearest][: self.neighbors - 1]
             outcome = self._try_reference(
-                ref, nearest, others, bearings, angles, database, tester, p_floor
+                ref, nearest, others, bearings, angles, database, tester, field_rad
             )
             if outcome is not None:
                 return outcome
@@ -124,7 +122,7 @@ class StarLines:
         angles: np.ndarray,
         database: PairDatabase,
         tester: HypothesisTester,
-        p_floor: float,
+        field_rad: float,
     ) -> IdentifyOutcome | None:
         """Match the star lines about ``ref`` (reference arc to ``nearest``, votes from
         ``others``) and verify the best supported arrangements; an outcome when one is
@@ -187,7 +185,6 @@ class StarLines:
         # the rest of its agreeing neighbours are evidence like any star of the field
         tester.count(int(support.sum()))
         n_total = len(bearings)
-        n_radii = len(settings.match_radii_rad)
         # the best-conditioned third star: the largest triangle volume
         volume = np.abs(
             np.einsum("i,ni->n", np.cross(bearings[ref], bearings[nearest]), bearings[others])
@@ -196,8 +193,12 @@ class StarLines:
         for h in np.argsort(-support[ch, ph], kind="stable"):
             c, p = ch[h], ph[h]
             # the stars that are not neighbours could all agree too
-            p_best_case = n_radii * false_match_probability(
-                n_total, n_total - len(others) + support[c, p], 3, p_floor, tester.hypotheses
+            p_best_case = best_case_probability(
+                n_total,
+                n_total - len(others) + support[c, p],
+                tester.hypotheses,
+                field_rad,
+                settings,
             )
             if p_best_case > settings.max_false_match_probability:
                 break  # neither this nor any later (less supported) arrangement can convince

@@ -57,4 +57,5 @@ class Tracking:
             database,
             replace(settings, parity=self.parity),
             allowed=allowed,
+            order=order,
         )

@@ -215,4 +215,4 @@ class Triangle:
         if min(len(order), settings.max_stars) < 3:
             return IdentifyOutcome(None, "fewer than 3 stars", 0)
         triangles = self.triangles(bearings, order, settings)
-        return match_triangles(bearings, triangles, database, settings)
+        return match_triangles(bearings, triangles, database, settings, order=order)

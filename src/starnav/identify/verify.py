@@ -1,17 +1,20 @@
-"""Verification of an attitude hypothesis: reproject the catalog, count agreeing stars, and
-compute the probability that a wrong hypothesis would agree as well.
+"""Verification of an attitude hypothesis: reproject the catalog, pair the agreeing stars, and
+compute the probability that the answer is wrong.
 
-False-match model: with an attitude that is wrong, every measured star that was not used to
-make the hypothesis lands within the match radius of some catalog star with probability
-``p = n_catalog_in_field * (solid angle of the match circle) / (solid angle of the field)``.
-The number of such chance agreements is binomial; the probability of at least the observed
-count is multiplied by the number of hypotheses tried (a Bonferroni bound). It is evaluated
-at a few match radii (1, 2 and 3.5 sigma): close agreement of few stars and loose agreement of
-many both count, and the best is multiplied by the number of radii (Bonferroni again).
+The false-match probability is ``len(sigmas) * hypotheses / Lambda``: Lambda is the product
+over the points (but the ones that built the hypothesis) of the likelihood ratio of "right
+hypothesis" (a point is a catalog star with chance 1/2, off it by a 2-D Gaussian of the
+centroid sigma; or a false point) against "wrong hypothesis" (points fall anywhere on the
+field, near a catalog star at the field's catalog density). Every ratio has expectation 1
+under a wrong hypothesis, so by Markov's inequality, over the hypotheses tried, a wrong answer
+reaches p <= alpha with probability at most alpha. A star's score grows as its residual
+shrinks relative to the sigma, and falls with the catalog density; a point with no star
+near it lowers the odds. With no sigma told, the best of a few sigmas is taken (their number
+multiplies p). Derivation and calibration: docs/verification.md.
 
 The arithmetic and the accept / mirror decision are the kernels of ``identify.kernels``
-(``pair_catalog``, ``false_match_radii``, ``test_hypothesis``); this module is their Python
-face for the algorithms that propose hypotheses one at a time.
+(``pair_catalog``, ``false_match``, ``test_hypothesis``); this module is their Python face
+for the algorithms that propose hypotheses one at a time.
 """
 
 from __future__ import annotations
@@ -48,24 +51,29 @@ class Verification:
     n_cone: int
     field_area: float
 
-    def p_chance(self, radius_rad: float) -> float:
-        """Chance that a random point lands within ``radius_rad`` of a catalog star."""
-        return float(kernels().p_chance(self.n_cone, self.field_area, radius_rad))
-
     def false_match_probability(
-        self, n_stars: int, n_used: int, hypotheses: int, radii_rad: tuple[float, ...]
+        self,
+        n_stars: int,
+        n_used: int,
+        hypotheses: int,
+        settings: MatchSettings,
+        log_other: float = 0.0,
     ) -> float:
-        """False-match probability, the best over the match radii ``radii_rad`` (stars
-        agreeing within each), corrected for the number of radii tried."""
+        """False-match probability of these pairs among ``n_stars`` points, ``n_used`` of
+        which built the hypothesis, ``hypotheses`` tried, with other evidence of natural-log
+        likelihood ratio ``log_other`` (``identify.kernels.false_match``)."""
+        radius, sigmas = settings.kernel_args()
         return float(
-            kernels().false_match_radii(
+            kernels().false_match(
                 self.distance_rad,
                 self.n_cone,
                 self.field_area,
                 n_stars,
                 n_used,
                 hypotheses,
-                np.asarray(radii_rad, dtype=np.float64),
+                sigmas,
+                radius,
+                log_other,
             )
         )
 
@@ -110,15 +118,40 @@ def match_catalog(
     )
 
 
-def false_match_probability(
-    n_stars: int, n_agree: int, n_used: int, p_chance: float, hypotheses: int
-) -> float:
-    """Chance that a wrong hypothesis makes ``n_agree`` of ``n_stars`` agree.
+def point_ranks(order: np.ndarray | None, n: int) -> np.ndarray:
+    """The place (0: first) of each of ``n`` points in their ``order`` (rows best-first;
+    None: as given), -1 for the rows it leaves out."""
+    if order is None:
+        return np.arange(n, dtype=np.int64)
+    rank = np.full(n, -1, dtype=np.int64)
+    order = np.asarray(order, dtype=np.int64)
+    rank[order] = np.arange(len(order))
+    return rank
 
-    ``n_used`` stars built the hypothesis (they agree by construction); each of the other
-    ``n_stars - n_used`` agrees by chance with probability ``p_chance``.
-    """
-    return float(kernels().false_match(n_stars, n_agree, n_used, p_chance, hypotheses))
+
+def catalog_mags(database: PairDatabase, ranked: bool) -> np.ndarray:
+    """The magnitudes of the database's catalog rows as the kernels take them when the
+    points' order is their brightness's (``ranked``), else none (no brightness evidence)."""
+    if not ranked:
+        return np.empty(0)
+    return np.ascontiguousarray(database.catalog.mag, dtype=np.float64)
+
+
+def best_case_probability(
+    n_stars: int, n_agree: int, hypotheses: int, field_rad: float, settings: MatchSettings
+) -> float:
+    """The smallest false-match probability a three-star hypothesis with ``n_agree`` of
+    ``n_stars`` points agreeing could reach on a field cone of half-angle ``field_rad``
+    holding a single catalog star, with the brightness at its best on any field (no field
+    scores better): a screen bound; a hypothesis that cannot beat the threshold even so is not
+    verified."""
+    k = kernels()
+    radius, sigmas = settings.kernel_args()
+    area = 1.0 - np.cos(field_rad)
+    bright = k.brightness_log_bound(n_agree, 1e9, settings.ranked)
+    return float(
+        k.best_case_false_match(n_stars, n_agree, 3, 1, area, hypotheses, sigmas, radius, bright)
+    )
 
 
 @dataclass
@@ -142,6 +175,8 @@ class HypothesisTester:
     hypotheses with ``count`` as they are generated (before screening), so the correction
     covers all of them. A ``tally`` may be shared by the testers of one search (the FOV
     search tests each focal length with its own bearings), and with it the ``work`` space.
+    ``order``: the rows best-first, whose brightness the statistic weighs when
+    ``settings.ranked``.
     """
 
     def __init__(
@@ -152,13 +187,15 @@ class HypothesisTester:
         tally: Tally | None = None,
         allowed: np.ndarray | None = None,
         work: np.ndarray | None = None,
+        order: np.ndarray | None = None,
     ) -> None:
         self.bearings = np.ascontiguousarray(bearings, dtype=np.float64)
         self.database = database
         self.settings = settings
         self.tally = tally if tally is not None else Tally()
         self.allowed = database.everything if allowed is None else allowed
-        self._radii = np.asarray(settings.match_radii_rad, dtype=np.float64)
+        self.rank = point_ranks(order, len(self.bearings))
+        self.mags = catalog_mags(database, settings.ranked)
         # one int64 per catalog row: the kernels' work space (a search may share one; made
         # on the first test, as the triangle search only uses the tally and outcome)
         self._work = work
@@ -195,7 +232,10 @@ class HypothesisTester:
             int(parity),
             self.database.sky,
             self.allowed,
-            self._radii,
+            *s.kernel_args(),
+            0.0,  # hypotheses not from a triangle look-up: no side evidence
+            self.rank,
+            self.mags,
             self.tally.hypotheses,
             s.max_false_match_probability,
             s.parity or 0,
@@ -203,7 +243,9 @@ class HypothesisTester:
         )
         return self.tested(r.status, r.obs, r.cat, r.R, int(parity), float(r.p))
 
-    def tested(self, status, obs, cat, R, parity: int, p: float) -> IdentifyOutcome | None:
+    def tested(
+        self, status, obs, cat, R, parity: int, p: float, log_sides: float = 0.0
+    ) -> IdentifyOutcome | None:
         """The outcome of a kernel's test (None when rejected), the tally updated."""
         k = kernels()
         self.tally.best_p = min(self.tally.best_p, p)
@@ -212,7 +254,13 @@ class HypothesisTester:
         if status == k.AMBIGUOUS:
             return IdentifyOutcome(None, AMBIGUOUS_PARITY, self.tally.hypotheses)
         found = Identification(
-            obs.astype(np.intp), cat.astype(np.intp), R, parity, p, self.tally.hypotheses
+            obs.astype(np.intp),
+            cat.astype(np.intp),
+            R,
+            parity,
+            p,
+            self.tally.hypotheses,
+            float(log_sides),
         )
         return IdentifyOutcome(found, "", self.tally.hypotheses)
 

@@ -344,7 +344,7 @@ class GeometricVoting:
         tol = settings.pair_tol_rad
         vectors = database.catalog.vectors
         n_cat = len(vectors)
-        tester = HypothesisTester(bearings, database, settings)
+        tester = HypothesisTester(bearings, database, settings, order=order)
         b = bearings[stars]
         windows = PairWindows.measure(b, database, tol)
         n, hypotheses = self._vote_stars(b, windows, settings, n_cat)

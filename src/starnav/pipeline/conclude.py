@@ -17,8 +17,9 @@ from starnav.catalog import Catalog
 from starnav.geometry import radec_roll_from_attitude
 from starnav.identify.base import Identification, MatchSettings
 from starnav.identify.database import PairDatabase
+from starnav.identify.verify import catalog_mags, point_ranks
 from starnav.results import Solution, StarTable
-from starnav.starlist import StarList
+from starnav.starlist import StarList, brightness_order
 
 
 def kernels():
@@ -45,6 +46,7 @@ def conclude(
     identification used; ``settings``: its tolerances."""
     k = kernels()
     xy = np.ascontiguousarray(stars.xy, dtype=np.float64)
+    rank = point_ranks(brightness_order(stars), len(xy))
     done = k.conclude(
         np.ascontiguousarray(found.obs_index, dtype=np.int64),
         np.ascontiguousarray(found.cat_index, dtype=np.int64),
@@ -58,7 +60,10 @@ def conclude(
         float(camera.height),
         bool(fit_focal),
         bool(fit_distortion),
-        np.asarray(settings.match_radii_rad, dtype=np.float64),
+        *settings.kernel_args(),
+        float(found.log_sides),
+        rank,
+        catalog_mags(database, stars.brightness is not None),
         float(sigma_px),
         int(found.hypotheses),
         settings.max_false_match_probability,

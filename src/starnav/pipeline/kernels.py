@@ -17,7 +17,13 @@ from numba import njit
 
 from starnav.attitude.kernels import fit, free_focal_step, studentized
 from starnav.camera.kernels import N_INTRINSIC, field_cos, pixels_to_bearings, sees
-from starnav.identify.kernels import chord, cone, false_match_radii, pair_catalog
+from starnav.identify.kernels import (
+    brightness_log_ratio,
+    chord,
+    cone,
+    field_false_match,
+    pair_catalog,
+)
 
 MAX_REMATCH = 5  # fit / rematch rounds
 MIN_FIT_STARS = 4  # outliers are only looked for when a fit keeps at least this many stars
@@ -123,11 +129,16 @@ def expected_stars(R, sky, model, p, width, height, work):
 
 @njit(cache=True)
 def conclude(obs, cat, R, xy, sky, allowed, model, p0, width, height, fit_focal,
-             fit_distortion, radii, sigma_px, hypotheses, max_p, min_matched_fraction):  # fmt: skip
+             fit_distortion, radius, sigmas, log_sides, rank, mags, sigma_px, hypotheses, max_p,
+             min_matched_fraction):  # fmt: skip
     """From an identification (pairs ``obs`` / ``cat``, attitude ``R``) to the fitted
-    solution and its refusal code (``ACCEPTED`` or why not)."""
+    solution and its refusal code (``ACCEPTED`` or why not). ``radius`` (rad): the pairing
+    radius; ``sigmas`` (rad): the centroid sigmas the false-match probability takes the best
+    of; ``log_sides``: the identification's triangle-side log ratio; ``rank``: the points'
+    places in the brightness order, ``mags`` the catalog's (empty: the brightness is not
+    known; ``identify.kernels.field_false_match``); ``sigma_px``: the sigma the outlier and
+    rematch rules use."""
     vectors = sky[0]
-    radius = radii.max()
     work = np.empty(len(vectors), dtype=np.int64)
     a = converge(obs, cat, R, xy, sky, allowed, model, p0, width, height, fit_focal,
                  fit_distortion, radius, sigma_px, work)  # fmt: skip
@@ -157,7 +168,13 @@ def conclude(obs, cat, R, xy, sky, allowed, model, p0, width, height, fit_focal,
             )
             d2 += (bearings[a.obs[s], k] - ck) ** 2
         dist[s] = math.sqrt(d2)
-    p_false = false_match_radii(dist, a.n_cone, a.field_area, len(xy), N_USED, hypotheses, radii)
+    # the fitted attitude has the hypothesis's freedom, and the focal length's when fitted
+    n_fitted = N_USED + (1 if fit_focal else 0)
+    field_rad = math.acos(1.0 - a.field_area)
+    n_cone = cone(f.R[2], chord(field_rad) ** 2, sky, allowed, work)
+    log_other = log_sides + brightness_log_ratio(a.obs, a.cat, rank, mags, work, n_cone)
+    p_false = field_false_match(dist, a.obs, rank, a.n_cone, a.field_area, n_fitted, hypotheses,
+                                sigmas, radius, log_other)  # fmt: skip
     refusal = ACCEPTED
     f_scale = 0.0
     if not fit_focal and len(a.obs) >= MIN_STARS_SCALE_CHECK:

@@ -24,15 +24,15 @@ from starnav.camera import CameraModel
 from starnav.catalog import Catalog
 from starnav.errors import CatalogError, StarnavError
 from starnav.identify import DEFAULT_ALGORITHM, MatchSettings, PairDatabase, make_identifier
-from starnav.identify.base import Identification, Identifier, IdentifyOutcome
+from starnav.identify.base import SEARCH_SIGMA_PX, Identification, Identifier, IdentifyOutcome
 from starnav.identify.database import build_database, database_angle_deg
 from starnav.identify.tracking import Tracking
 from starnav.pipeline.conclude import conclude, elapsed_ms
 from starnav.pipeline.deep import deep_match
 from starnav.results import Solution, SolveResult
-from starnav.starlist import StarList
+from starnav.starlist import StarList, brightness_order
 
-DEFAULT_SIGMA_PX = 1.0
+DEFAULT_SIGMA_PX = SEARCH_SIGMA_PX  # the tolerances' sigma when none is told
 DEFAULT_MAX_FALSE_MATCH_PROBABILITY = 1e-4
 DEFAULT_MIN_MATCHED_FRACTION = 0.5
 MAX_PAIRS = 3e7  # largest pair database built (about 0.5 GB)
@@ -44,7 +44,9 @@ _LOADED: set[str] = set()  # what this process has run once (its machine code is
 
 @dataclass(frozen=True)
 class SolveSettings:
-    """Options of a solve. ``sigma_px``: 1-sigma centroid error (px; sets the tolerances);
+    """Options of a solve. ``sigma_px``: 1-sigma centroid error (px; sets the tolerances;
+    None: not known, the tolerances are ``DEFAULT_SIGMA_PX``'s and the false-match
+    probability takes the sigma the data fit best, ``identify.base.SIGMA_FRACTIONS`` of it);
     ``parity``: +1 / -1 when known; ``fit_focal``: fit the focal length with the attitude;
     ``fit_distortion``: and the distortion coefficients (from 12 matched stars on);
     ``max_false_match_probability``: refuse less certain identifications;
@@ -52,7 +54,7 @@ class SolveSettings:
     ``deep_catalog``: match every point to this (fainter) catalog after the fit
     (``pipeline.deep``; None: no deep stage)."""
 
-    sigma_px: float = DEFAULT_SIGMA_PX
+    sigma_px: float | None = None
     parity: int | None = None
     fit_focal: bool = False
     fit_distortion: bool = False
@@ -62,7 +64,7 @@ class SolveSettings:
 
     def __post_init__(self) -> None:
         s = self.sigma_px
-        if not (np.isfinite(s) and s > 0):
+        if s is not None and not (np.isfinite(s) and s > 0):
             raise StarnavError(f"sigma_px must be a positive number of pixels, got {s!r}")
         if self.parity not in (None, 1, -1):
             raise StarnavError(f"parity must be +1, -1 or None, got {self.parity!r}")
@@ -73,6 +75,12 @@ class SolveSettings:
         p = self.max_false_match_probability
         if not 0.0 < p < 1.0:
             raise StarnavError(f"max_false_match_probability must be in (0, 1), got {p!r}")
+
+    @property
+    def search_sigma_px(self) -> float:
+        """The centroid sigma the tolerances are made for (px): the one told, or
+        ``DEFAULT_SIGMA_PX``."""
+        return DEFAULT_SIGMA_PX if self.sigma_px is None else self.sigma_px
 
     def match_settings(self, camera: CameraModel) -> MatchSettings:
         """The identification's tolerances through ``camera`` (its coarsest angular scale)."""
@@ -173,13 +181,6 @@ def steady_malloc() -> None:
         np.empty(16 << 20, dtype=np.uint8)
 
 
-def brightness_order(stars: StarList) -> np.ndarray:
-    """Rows of ``stars`` brightest first (as given when there is no brightness)."""
-    if stars.brightness is None:
-        return np.arange(len(stars.xy))
-    return np.argsort(-stars.brightness, kind="stable")
-
-
 class Solver:
     """Star lists of one camera to verified attitudes.
 
@@ -239,7 +240,7 @@ class Solver:
             bearings = self.camera.pixels_to_bearings(stars.xy)
             order = brightness_order(stars)
             t1 = time.perf_counter()
-            settings = self.match_settings
+            settings = replace(self.match_settings, ranked=stars.brightness is not None)
             if deadline is not None:
                 settings = replace(settings, deadline=deadline)
             outcome, algorithm = self._identify(bearings, order, prior, prior_sigma_deg, settings)
@@ -316,7 +317,7 @@ def fit_identification(
         camera,
         database,
         match_settings,
-        sigma_px=settings.sigma_px,
+        sigma_px=settings.search_sigma_px,
         fit_focal=settings.fit_focal,
         fit_distortion=settings.fit_distortion,
         min_matched_fraction=settings.min_matched_fraction,
@@ -324,7 +325,9 @@ def fit_identification(
     stages = {**stages, "fit": elapsed_ms(t_fit)}
     if solution is not None and settings.deep_catalog is not None:
         t_deep = time.perf_counter()
-        solution = deep_match(solution, stars, settings.deep_catalog, sigma_px=settings.sigma_px)
+        solution = deep_match(
+            solution, stars, settings.deep_catalog, sigma_px=settings.search_sigma_px
+        )
         stages["deep"] = elapsed_ms(t_deep)
     ms = elapsed_ms(t0)
     if solution is not None:
