@@ -19,6 +19,7 @@ every wrong answer (kind, chunk, index, claim) and the solver's time per kind.
 from __future__ import annotations
 
 import argparse
+import itertools
 import json
 import os
 import sys
@@ -101,7 +102,7 @@ def report(state: dict, kinds: tuple[str, ...]) -> str:
             lines.append(f"| {kind} | " + " | ".join(cells) + " |")
     lines += ["", "Claimed false-match probability of the right answers:", ""]
     labels = [f"< {DECADES[1]:.0e}"] + [
-        f"{lo:.0e} - {hi:.0e}" for lo, hi in zip(DECADES[1:-1], DECADES[2:], strict=True)
+        f"{lo:.0e} - {hi:.0e}" for lo, hi in itertools.pairwise(DECADES[1:])
     ]
     claims = state["claims"]
     lines += ["| claimed p | " + " | ".join(labels) + " |", "|---|" + "---|" * len(labels)]
