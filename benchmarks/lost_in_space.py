@@ -143,7 +143,7 @@ def main() -> None:
         f"sky per row, seed {args.seed}. Machine: {machine()}; one process.",
         "",
         "`sigma_px` is the centroid error the solver is told (its tolerances follow from it; "
-        "1.0 is the default).",
+        "untold, the default, they are those of 1 px).",
         "",
         "| scenario | sigma_px | correct | wrong | none | correct % | median ms | p95 ms | max ms "
         "| frames with < 6 true stars (solved) |",

@@ -131,12 +131,17 @@ def test_cli_evaluate_markdown(capsys):
 
 def test_cli_evaluate_on_a_local_dask_cluster(capsys):
     pytest.importorskip("distributed")
-    args = ["evaluate", "--sampling", "uniform", "--frames", "20", "--json", "--seed", "5"]
+    args = ["evaluate", "--sampling", "uniform", "--frames", "20", "--json", "--seed", "5",
+            "--kind", "true,random,mirrored,few"]  # fmt: skip
     assert main([*args, "--dask", "local", "--workers", "2"]) == 0
     dask = json.loads(capsys.readouterr().out)
     assert main([*args, "--workers", "1"]) == 0
     serial = json.loads(capsys.readouterr().out)
     assert (dask["correct"], dask["none"]) == (serial["correct"], serial["none"])
+    for kind in ("true", "random", "mirrored", "few"):  # every frame remade from (seed, index)
+        assert dask["by_kind"][kind]["frames"] == 5
+        assert dask["by_kind"][kind]["correct"] == serial["by_kind"][kind]["correct"]
+    assert dask["by_kind"]["random"]["correct"] == 0 and dask["wrong"] == 0
 
 
 @pytest.mark.parametrize(

@@ -97,7 +97,7 @@ def test_brightness_and_side_ratios_have_expectation_at_most_one():
             [
                 math.exp(
                     K.brightness_log_ratio(
-                        np.array([0]), np.array([k]), np.array([r]), mags, cone_rows, n_cone
+                        np.array([0]), np.array([k]), np.array([r]), mags, cone_rows, n_cone, 0
                     )
                 )
                 for k in range(n_cone)
@@ -105,10 +105,16 @@ def test_brightness_and_side_ratios_have_expectation_at_most_one():
         )
         assert mean == pytest.approx(1.0, abs=1e-12) or mean < 1.0
     # a right one's bright point on a bright star: evidence; unknown brightness: none
-    first = K.brightness_log_ratio(np.array([0]), np.array([0]), np.array([0]), mags, cone_rows, 30)
-    assert first == pytest.approx(math.log(0.5 + 0.5 * 30 / 4))
-    none = K.brightness_log_ratio(np.array([0]), np.array([0]), np.array([-1]), mags, cone_rows, 30)
-    assert none == 0.0
+    one = (np.array([0]), np.array([0]), np.array([0]), mags, cone_rows, 30)
+    assert K.brightness_log_ratio(*one, 0) == pytest.approx(math.log(0.5 + 0.5 * 30 / 4))
+    # the stars that built a hypothesis may come from tables of bright stars: left out
+    assert K.brightness_log_ratio(*one, 1) == 0.0
+    unknown = (np.array([0]), np.array([0]), np.array([-1]), mags, cone_rows, 30)
+    assert K.brightness_log_ratio(*unknown, 0) == 0.0
+    # tied magnitudes are ranked by row: a star tied with all the others is not "brightest"
+    tied = np.zeros(n_cone)
+    assert K.brightness_log_ratio(np.array([0]), np.array([29]), np.array([0]), tied,
+                                  cone_rows, 30, 0) == pytest.approx(math.log(0.5))  # fmt: skip
     # the sides: a catalog triangle's side uniform within the tolerance window (one side moved,
     # the two exact ones taken out at their bound, a third of the triangle's each)
     tol = 3.0 * math.sqrt(2.0) * SIGMA

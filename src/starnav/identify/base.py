@@ -94,7 +94,9 @@ class Identification:
     ``false_match_probability``: the chance that the identification is wrong (over the
     ``hypotheses`` tried); ``log_sides``: the natural-log likelihood ratio of its star
     triangle's sides (0 when it was not a triangle looked up within a tolerance), which the
-    fit's false-match probability counts again.
+    fit's false-match probability counts again; ``bright_drop``: how many of its pairs'
+    brightness scores that probability leaves out (the stars that built it, when they came
+    from tables of bright stars; 0 when from a pair table of the whole catalog).
     """
 
     obs_index: np.ndarray
@@ -104,6 +106,7 @@ class Identification:
     false_match_probability: float
     hypotheses: int
     log_sides: float = 0.0
+    bright_drop: int = 4
 
 
 @dataclass(frozen=True)

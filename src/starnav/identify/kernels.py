@@ -105,11 +105,10 @@ def cone(axis, chord2, sky, allowed, out):
     return n
 
 
-# the chances that a measured point is a star of the catalog under a right hypothesis (the
-# rest: false stars, stars fainter than the catalog, stars that miss under an approximate
-# camera) the statistic takes the best of (an estimate from the data, paid for by the factor
-# on the probability). Any value keeps each likelihood ratio's expectation 1 under a wrong
-# hypothesis; at 1/2 a false point halves the odds, at 1/16 it costs 6 %
+# the chance that a measured point is a star of the catalog under a right hypothesis (the
+# rest: false stars, stars fainter than the catalog); the statistic would take the best of
+# several at the cost of their number on the probability. Any value keeps each likelihood
+# ratio's expectation 1 under a wrong hypothesis; at 1/2 a false point halves the odds
 Q_STARS = (0.5,)
 # brightness: a point of brightness rank r (0: the brightest) is, under a right hypothesis, with
 # chance BRIGHT_WEIGHT a star among the BRIGHT_WINDOW[0] r + BRIGHT_WINDOW[1] brightest
@@ -154,43 +153,47 @@ def star_log_ratios(dist, n_cone, field_area, sigma, q, radius, out):
 
 
 @njit(cache=True)
-def brightness_log_ratio(obs, cat, rank, mags, cone_rows, n_cone):
+def brightness_log_ratio(obs, cat, rank, mags, cone_rows, n_cone, n_used):
     """Natural-log likelihood ratio, right hypothesis against wrong, of the brightness of the
     pairs (points ``obs`` of brightness ranks ``rank``, -1: none; catalog rows ``cat`` of
     magnitudes ``mags``, empty: the brightness is not known) among the ``n_cone`` catalog
-    stars ``cone_rows`` of the field. A
-    wrong hypothesis pairs a point with any star of the field (its rank among them uniform);
-    a right one, with chance ``BRIGHT_WEIGHT``, with one among the window of its rank
-    (``BRIGHT_WINDOW``). In the window a pair scores (1 - w) + w n_cone / window (at most
-    ``BRIGHT_MAX_RATIO``), outside it 1 - w: expectation 1 under a wrong hypothesis."""
-    total = 0.0
+    stars ``cone_rows`` of the field. A wrong hypothesis pairs a point with any star of the
+    field (its rank among them uniform, ties broken by row); a right one, with chance
+    ``BRIGHT_WEIGHT``, with one among the window of its rank (``BRIGHT_WINDOW``). In the
+    window a pair scores (1 - w) + w n_cone / window (at most ``BRIGHT_MAX_RATIO``), outside
+    it 1 - w: expectation 1 under a wrong hypothesis, if the hypothesis's own stars were
+    drawn from the whole catalog; when they come from tables of the brightest stars (the FOV
+    search's, wide fields'), the ``n_used`` largest scores are left out."""
     w = BRIGHT_WEIGHT
     if len(mags) == 0:
-        return total
+        return 0.0
+    scores = np.zeros(len(obs))
     for k in range(len(obs)):
         r = rank[obs[k]]
         window = BRIGHT_WINDOW[0] * r + BRIGHT_WINDOW[1]
         if r < 0 or window >= n_cone:
             continue
-        m = mags[cat[k]]
+        m, row = mags[cat[k]], cat[k]
         brighter = 0
         for c in range(n_cone):
-            brighter += mags[cone_rows[c]] < m
+            other = cone_rows[c]
+            brighter += mags[other] < m or (mags[other] == m and other < row)
         if brighter < window:
-            total += math.log((1.0 - w) + w * min(n_cone / window, BRIGHT_MAX_RATIO))
+            scores[k] = math.log((1.0 - w) + w * min(n_cone / window, BRIGHT_MAX_RATIO))
         else:
-            total += math.log(1.0 - w)
-    return total
+            scores[k] = math.log(1.0 - w)
+    scores.sort()
+    return scores[: max(len(obs) - n_used, 0)].sum()
 
 
 @njit(cache=True)
-def brightness_log_bound(n_agree, n_cone, ranked):
-    """The largest ``brightness_log_ratio`` ``n_agree`` pairs can have among ``n_cone``
-    catalog stars (0 when the brightness is not known)."""
+def brightness_log_bound(n_agree, n_used, n_cone, ranked):
+    """The largest ``brightness_log_ratio`` ``n_agree`` pairs, ``n_used`` of them left out,
+    can have among ``n_cone`` catalog stars (0 when the brightness is not known)."""
     if not ranked or n_cone <= BRIGHT_WINDOW[1]:
         return 0.0
     ratio = min(n_cone / BRIGHT_WINDOW[1], BRIGHT_MAX_RATIO)
-    return n_agree * math.log((1.0 - BRIGHT_WEIGHT) + BRIGHT_WEIGHT * ratio)
+    return max(n_agree - n_used, 0) * math.log((1.0 - BRIGHT_WEIGHT) + BRIGHT_WEIGHT * ratio)
 
 
 @njit(cache=True)
@@ -261,7 +264,8 @@ def false_match(dist, n_cone, field_area, n_stars, n_used, hypotheses, sigmas, r
     built a hypothesis agree by construction: the best-scoring ``n_used`` pairs are left out
     (unmatched points when fewer paired). Each ratio has expectation 1 (at most) under a
     wrong hypothesis, so P(Lambda >= t) <= 1/t (Markov); over the hypotheses tried and the
-    sigmas and fractions taken the best of, P(p <= alpha) <= alpha: a probability of being
+    sigmas and fractions taken the best of, P(p <= alpha) <= alpha (alpha (1 + ln H) over a
+    search that stops at its first acceptance, H counted as it goes): a probability of being
     wrong that can only err high."""
     n_pairs = len(dist)
     dropped = min(n_used, n_pairs)
@@ -285,10 +289,10 @@ def best_case_false_match(n_stars, n_agree, n_used, n_cone, field_area, hypothes
                           radius, max_other):  # fmt: skip
     """The smallest ``false_match`` a hypothesis can reach with ``n_agree`` of ``n_stars``
     points within ``radius`` of a catalog star, ``n_cone`` (at least 1) catalog stars on the
-    field: every agreeing point exactly on its star, or (in a field so crowded that missing
-    is the rarer event) none agreeing; ``max_other``: the largest brightness and side log
-    ratios it can have. For a screen: a hypothesis that cannot beat the threshold even so is
-    not verified."""
+    field: every agreeing point exactly on its star, or none agreeing (better when a field is
+    so dense that a match scores less than a miss, lambda > ~1); ``max_other``: the largest
+    brightness and side log ratios it can have. For a screen: a hypothesis that cannot beat
+    the threshold even so is not verified."""
     n_agree = min(n_agree, n_stars)
     n_cone = max(n_cone, 1)
     on_stars = false_match(np.zeros(n_agree), n_cone, field_area, n_stars, n_used, hypotheses,
@@ -515,16 +519,18 @@ def pair_catalog(bearings, R, sky, allowed, radius, cov, gate, work):
 
 @njit(cache=True)
 def test_hypothesis(bearings, obs_rows, cat_rows, parity, sky, allowed, radius, sigmas, tol,
-                    rank, mags, hypotheses, max_p, parity_known, work):  # fmt: skip
+                    rank, mags, bright_drop, hypotheses, max_p, parity_known,
+                    work):  # fmt: skip
     """Verify one hypothesis (bearing rows paired with catalog rows, with a parity): its
     attitude (Wahba), the agreeing stars of the whole field, the false-match probability
     over ``hypotheses`` (``false_match``: pairs within ``radius``, the centroid sigma the best
     of ``sigmas``, rad; ``rank``: the points' places in the order, -1: not in it, the first
     ``scored_count`` scored; ``mags``: the catalog's, empty when the points' brightness is not
-    known; with the triangle's sides when it is a triangle looked up within
-    ``tol``, rad, 0: not); accepted (``FOUND``) below ``max_p`` unless the parity is unknown
-    (``parity_known`` 0) and the mirror image verifies too (``AMBIGUOUS``: collinear
-    stars)."""
+    known, ``bright_drop`` of the pairs' brightness scores left out: the built stars', when
+    they come from tables of bright stars; with the triangle's sides when it is a triangle
+    looked up within ``tol``, rad, 0: not); accepted (``FOUND``) below ``max_p`` unless the
+    parity is unknown (``parity_known`` 0) and the mirror image verifies too (``AMBIGUOUS``:
+    collinear stars)."""
     vectors = sky[0]
     no_cov = np.zeros((3, 3))
     n_used = len(obs_rows)
@@ -533,7 +539,8 @@ def test_hypothesis(bearings, obs_rows, cat_rows, parity, sky, allowed, radius, 
         log_sides = side_log_ratio(bearings[obs_rows], vectors[cat_rows], sigmas.max(), tol)
     R = wahba(bearings[obs_rows], vectors[cat_rows], np.ones(n_used), parity)
     v = pair_catalog(bearings, R, sky, allowed, radius, no_cov, False, work)
-    log_other = log_sides + brightness_log_ratio(v.obs, v.cat, rank, mags, work, v.n_cone)
+    log_other = log_sides + brightness_log_ratio(v.obs, v.cat, rank, mags, work, v.n_cone,
+                                                 bright_drop)  # fmt: skip
     p = field_false_match(v.dist, v.obs, rank, v.n_cone, v.field_area, n_used, hypotheses,
                           sigmas, radius, log_other)  # fmt: skip
     if p > max_p:
@@ -541,7 +548,8 @@ def test_hypothesis(bearings, obs_rows, cat_rows, parity, sky, allowed, radius, 
     if parity_known == 0:
         R_m = wahba(bearings[v.obs], vectors[v.cat], np.ones(len(v.obs)), -parity)
         m = pair_catalog(bearings, R_m, sky, allowed, radius, no_cov, False, work)
-        log_m = log_sides + brightness_log_ratio(m.obs, m.cat, rank, mags, work, m.n_cone)
+        log_m = log_sides + brightness_log_ratio(m.obs, m.cat, rank, mags, work, m.n_cone,
+                                                 bright_drop)  # fmt: skip
         p_m = field_false_match(m.dist, m.obs, rank, m.n_cone, m.field_area, n_used,
                                 hypotheses, sigmas, radius, log_m)  # fmt: skip
         if p_m <= max_p:
@@ -712,8 +720,8 @@ def _shortest_sides_first(bearings, idx):
 
 @njit(cache=True)
 def triangle_search(bearings, triangles, pair_a, pair_b, pair_angle, max_angle, sky, allowed,
-                    tol, radius, sigmas, rank, mags, max_p, parity_known, max_hypotheses,
-                    end_time):  # fmt: skip
+                    tol, radius, sigmas, rank, mags, bright_drop, max_p, parity_known,
+                    max_hypotheses, end_time):  # fmt: skip
     """Try the measured ``triangles`` (rows of ``bearings``, (t, 3)) in order: look up the
     catalog triangles of each, screen all their hypotheses, verify the best (by the screen)
     until one is accepted, nothing left can be, ``max_hypotheses`` are spent or the
@@ -761,13 +769,15 @@ def triangle_search(bearings, triangles, pair_a, pair_b, pair_angle, max_angle, 
             status = OUT_OF_TIME
             break
         for h in np.argsort(-agree, kind="mergesort"):
-            # even on a field of one catalog star, the brightness at its best: neither this nor
-            # any later (lower) count can be convincing; on its own field: not this one
-            best_other = sides_bound + brightness_log_bound(agree[h], 1e9, ranked)
-            if best_case_false_match(n_ranked, agree[h], 3, 1, field_area, hypotheses, sigmas,
+            # on a field of one catalog star, the brightness at its best, no point scored but
+            # the agreeing ones (no field does better): neither this nor any later (lower)
+            # count can be convincing; on its own field: not this one
+            best_other = sides_bound + brightness_log_bound(agree[h], bright_drop, 1e9, ranked)
+            n_best = min(agree[h], n_ranked)
+            if best_case_false_match(n_best, n_best, 3, 1, field_area, hypotheses, sigmas,
                                      radius, best_other) > max_p:  # fmt: skip
                 break
-            own = sides_bound + brightness_log_bound(agree[h], n_cone[h], ranked)
+            own = sides_bound + brightness_log_bound(agree[h], bright_drop, n_cone[h], ranked)
             n_scored = scored_count(rank, n_cone[h])
             if n_cone[h] > 0 and best_case_false_match(n_scored, agree[h], 3, n_cone[h],
                                                        field_area, hypotheses, sigmas, radius,
@@ -778,8 +788,8 @@ def triangle_search(bearings, triangles, pair_a, pair_b, pair_angle, max_angle, 
                 break
             proposed += 1
             r = test_hypothesis(bearings, idx, triples[h], parities[h], sky, allowed, radius,
-                                sigmas, tol, rank, mags, hypotheses, max_p, parity_known,
-                                work)  # fmt: skip
+                                sigmas, tol, rank, mags, bright_drop, hypotheses, max_p,
+                                parity_known, work)  # fmt: skip
             best_p = min(best_p, r.p)
             if r.status != REJECTED:
                 return Search(r.status, r.obs, r.cat, r.R, parities[h], r.p, r.log_sides,

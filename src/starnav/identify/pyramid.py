@@ -92,6 +92,9 @@ def match_triangles(
     bearings = np.ascontiguousarray(bearings, dtype=np.float64)
     triangles = np.ascontiguousarray(triangles, dtype=np.int64).reshape(-1, 3)
     tester = HypothesisTester(bearings, database, settings, Tally(), allowed, order=order)
+    # catalog triangles of a pair table of the whole catalog are made of any stars: their
+    # brightness is evidence; of the brightest stars only (wide fields), it is not
+    bright_drop = 0 if database.pair_stars in (0, len(database.catalog)) else 3
     search = kernels().triangle_search
     args = (
         bearings,
@@ -106,6 +109,7 @@ def match_triangles(
         *settings.kernel_args(),
         tester.rank,
         tester.mags,
+        bright_drop,
         settings.max_false_match_probability,
         settings.parity or 0,
         settings.max_hypotheses,
@@ -126,7 +130,7 @@ def match_triangles(
     if r.status == kernels().NOT_FOUND:
         return tester.outcome(NO_TRIANGLE)
     outcome = tester.tested(
-        r.status, r.obs, r.cat, r.R, int(r.parity), float(r.p), float(r.log_sides)
+        r.status, r.obs, r.cat, r.R, int(r.parity), float(r.p), float(r.log_sides), bright_drop
     )
     return outcome or tester.outcome(NO_TRIANGLE)
 

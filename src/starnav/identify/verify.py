@@ -142,16 +142,15 @@ def best_case_probability(
 ) -> float:
     """The smallest false-match probability a three-star hypothesis with ``n_agree`` of
     ``n_stars`` points agreeing could reach on a field cone of half-angle ``field_rad``
-    holding a single catalog star, with the brightness at its best on any field (no field
-    scores better): a screen bound; a hypothesis that cannot beat the threshold even so is not
-    verified."""
+    holding a single catalog star, with the brightness at its best on any field and no point
+    scored but the agreeing ones (no field scores better): a screen bound; a hypothesis that
+    cannot beat the threshold even so is not verified."""
     k = kernels()
     radius, sigmas = settings.kernel_args()
     area = 1.0 - np.cos(field_rad)
-    bright = k.brightness_log_bound(n_agree, 1e9, settings.ranked)
-    return float(
-        k.best_case_false_match(n_stars, n_agree, 3, 1, area, hypotheses, sigmas, radius, bright)
-    )
+    bright = k.brightness_log_bound(n_agree, 3, 1e9, settings.ranked)
+    n = min(n_agree, n_stars)
+    return float(k.best_case_false_match(n, n, 3, 1, area, hypotheses, sigmas, radius, bright))
 
 
 @dataclass
@@ -236,15 +235,26 @@ class HypothesisTester:
             0.0,  # hypotheses not from a triangle look-up: no side evidence
             self.rank,
             self.mags,
+            len(obs_rows),  # their own stars may be from tables of bright stars
             self.tally.hypotheses,
             s.max_false_match_probability,
             s.parity or 0,
             self._work,
         )
-        return self.tested(r.status, r.obs, r.cat, r.R, int(parity), float(r.p))
+        return self.tested(
+            r.status, r.obs, r.cat, r.R, int(parity), float(r.p), bright_drop=len(obs_rows)
+        )
 
     def tested(
-        self, status, obs, cat, R, parity: int, p: float, log_sides: float = 0.0
+        self,
+        status,
+        obs,
+        cat,
+        R,
+        parity: int,
+        p: float,
+        log_sides: float = 0.0,
+        bright_drop: int = 4,
     ) -> IdentifyOutcome | None:
         """The outcome of a kernel's test (None when rejected), the tally updated."""
         k = kernels()
@@ -261,6 +271,7 @@ class HypothesisTester:
             p,
             self.tally.hypotheses,
             float(log_sides),
+            int(bright_drop),
         )
         return IdentifyOutcome(found, "", self.tally.hypotheses)
 

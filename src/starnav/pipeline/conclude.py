@@ -64,6 +64,7 @@ def conclude(
         float(found.log_sides),
         rank,
         catalog_mags(database, stars.brightness is not None),
+        int(found.bright_drop),
         float(sigma_px),
         int(found.hypotheses),
         settings.max_false_match_probability,

@@ -38,6 +38,7 @@ MIN_STARS_SCALE_CHECK = 6  # the focal length given is tested from this many mat
 SCALE_SIGMAS = 5.0  # a focal length this many sigma off ...
 SCALE_TOLERANCE = 0.005  # ... and more than this (relative) is refused without --fit-focal
 N_USED = 3  # stars a hypothesis is built from (they agree by construction)
+N_DISTORTION = 2  # the distortion coefficients a fit may free (k1, k2)
 # refusals
 ACCEPTED, WRONG_SCALE, UNCONVINCING, TOO_FEW = 0, 1, 2, 3
 
@@ -129,15 +130,15 @@ def expected_stars(R, sky, model, p, width, height, work):
 
 @njit(cache=True)
 def conclude(obs, cat, R, xy, sky, allowed, model, p0, width, height, fit_focal,
-             fit_distortion, radius, sigmas, log_sides, rank, mags, sigma_px, hypotheses, max_p,
-             min_matched_fraction):  # fmt: skip
+             fit_distortion, radius, sigmas, log_sides, rank, mags, bright_drop, sigma_px,
+             hypotheses, max_p, min_matched_fraction):  # fmt: skip
     """From an identification (pairs ``obs`` / ``cat``, attitude ``R``) to the fitted
     solution and its refusal code (``ACCEPTED`` or why not). ``radius`` (rad): the pairing
     radius; ``sigmas`` (rad): the centroid sigmas the false-match probability takes the best
     of; ``log_sides``: the identification's triangle-side log ratio; ``rank``: the points'
     places in the brightness order, ``mags`` the catalog's (empty: the brightness is not
-    known; ``identify.kernels.field_false_match``); ``sigma_px``: the sigma the outlier and
-    rematch rules use."""
+    known; ``identify.kernels.field_false_match``), ``bright_drop`` of the pairs' brightness
+    scores left out; ``sigma_px``: the sigma the outlier and rematch rules use."""
     vectors = sky[0]
     work = np.empty(len(vectors), dtype=np.int64)
     a = converge(obs, cat, R, xy, sky, allowed, model, p0, width, height, fit_focal,
@@ -169,10 +170,12 @@ def conclude(obs, cat, R, xy, sky, allowed, model, p0, width, height, fit_focal,
             d2 += (bearings[a.obs[s], k] - ck) ** 2
         dist[s] = math.sqrt(d2)
     # the fitted attitude has the hypothesis's freedom, and the focal length's when fitted
-    n_fitted = N_USED + (1 if fit_focal else 0)
+    n_fitted = N_USED + (1 if fit_focal else 0) + (N_DISTORTION if fit_distortion else 0)
+    # the field cone's stars again, for their brightness ranks (pairing left them elsewhere)
     field_rad = math.acos(1.0 - a.field_area)
     n_cone = cone(f.R[2], chord(field_rad) ** 2, sky, allowed, work)
-    log_other = log_sides + brightness_log_ratio(a.obs, a.cat, rank, mags, work, n_cone)
+    log_other = log_sides + brightness_log_ratio(a.obs, a.cat, rank, mags, work, n_cone,
+                                                 bright_drop)  # fmt: skip
     p_false = field_false_match(dist, a.obs, rank, a.n_cone, a.field_area, n_fitted, hypotheses,
                                 sigmas, radius, log_other)  # fmt: skip
     refusal = ACCEPTED
