@@ -32,7 +32,7 @@ from starnav.geometry import (
 )
 from starnav.identify import ALGORITHMS
 from starnav.identify.base import MatchSettings
-from starnav.identify.kernels import Q_STARS
+from starnav.identify.kernels import Q_STAR
 from starnav.identify.pyramid import catalog_triangles
 from starnav.identify.verify import Verification, match_catalog
 from starnav.simulate import FALSE_STAR_ID, simulate_frame
@@ -269,23 +269,23 @@ PX = 1.0 / CAMERA.focal_px
 
 
 def _oracle_p(dist, n_cone, area, n_stars, n_used, hyp, sigmas, radius):
-    """len(sigmas) len(qs) hypotheses / Lambda, Lambda the best over the centroid sigmas and
-    star fractions q of the product of the per-point likelihood ratios, written out from
+    """len(sigmas) hypotheses / Lambda, Lambda the best over the centroid sigmas of the
+    product of the per-point likelihood ratios (star fraction q), written out from
     docs/verification.md."""
     best = -np.inf
     rho = n_cone / area
+    q = Q_STAR
     for sigma in sigmas:
-        for q in Q_STARS:
-            s = 2.0 * np.sin(0.5 * dist) ** 2  # 1 - cos, without its cancellation
-            lam = rho * sigma**2
-            logs = np.sort(np.log((1 - q) + q * np.exp(rho * s - s / sigma**2) / lam))
-            dropped = min(n_used, len(dist))
-            kept = logs[: len(dist) - dropped]
-            s_r = 2.0 * np.sin(0.5 * radius) ** 2
-            miss = np.log((1 - q) + q * np.exp(rho * s_r - s_r / sigma**2))
-            n_unmatched = n_stars - len(dist) - (n_used - dropped)
-            best = max(best, kept.sum() + n_unmatched * miss)
-    return min(1.0, len(Q_STARS) * len(sigmas) * max(hyp, 1) * np.exp(-best))
+        s = 2.0 * np.sin(0.5 * dist) ** 2  # 1 - cos, without its cancellation
+        lam = rho * sigma**2
+        logs = np.sort(np.log((1 - q) + q * np.exp(rho * s - s / sigma**2) / lam))
+        dropped = min(n_used, len(dist))
+        kept = logs[: len(dist) - dropped]
+        s_r = 2.0 * np.sin(0.5 * radius) ** 2
+        miss = np.log((1 - q) + q * np.exp(rho * s_r - s_r / sigma**2))
+        n_unmatched = n_stars - len(dist) - (n_used - dropped)
+        best = max(best, kept.sum() + n_unmatched * miss)
+    return min(1.0, len(sigmas) * max(hyp, 1) * np.exp(-best))
 
 
 def test_false_match_probability_is_hypotheses_over_the_likelihood_ratio():

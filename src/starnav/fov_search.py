@@ -195,7 +195,6 @@ def search_fov(
     ends = [math.comb(m, 4) for m in range(5, stars, 2)] + [len(combos)]
     tally = Tally()
     tester: HypothesisTester | None = None
-    everyone = np.arange(n)
     at_focal = functools.partial(_settings, sigma_px, max_false_match_probability, parity,
                                  max_hypotheses, deadline, ranked)  # fmt: skip
     work = {id(band): np.empty(len(band.catalog), dtype=np.int64) for band, _ in plans}
@@ -230,8 +229,7 @@ def search_fov(
                     band.database,
                     at_focal(f),
                     tally,
-                    work=work[id(band)],
-                    order=everyone,
+                    work=work[id(band)],  # no order: the rows are brightest first
                 )
                 outcome = tester.test(obs_rows[h], cat_rows[h], int(parities[h]))
                 if outcome is not None:

@@ -106,10 +106,9 @@ def cone(axis, chord2, sky, allowed, out):
 
 
 # the chance that a measured point is a star of the catalog under a right hypothesis (the
-# rest: false stars, stars fainter than the catalog); the statistic would take the best of
-# several at the cost of their number on the probability. Any value keeps each likelihood
-# ratio's expectation 1 under a wrong hypothesis; at 1/2 a false point halves the odds
-Q_STARS = (0.5,)
+# rest: false stars, stars fainter than the catalog). Any value keeps each likelihood ratio's
+# expectation 1 under a wrong hypothesis; at 1/2 a false point halves the odds
+Q_STAR = 0.5
 # brightness: a point of brightness rank r (0: the brightest) is, under a right hypothesis, with
 # chance BRIGHT_WEIGHT a star among the BRIGHT_WINDOW[0] r + BRIGHT_WINDOW[1] brightest
 # catalog stars of the field cone (the cone holds ~1.6x the image's stars), otherwise any
@@ -223,10 +222,16 @@ def side_log_bound(sigma, tol):
 
 
 @njit(cache=True)
+def _scored_limit(n_cone):
+    """The place in the order below which points are scored."""
+    return max(MIN_SCORED, SCORED_PER_STAR * n_cone)
+
+
+@njit(cache=True)
 def scored_count(rank, n_cone):
     """How many points the statistic scores: those of ``rank`` (their place in the order)
     below max(``MIN_SCORED``, ``SCORED_PER_STAR`` ``n_cone``)."""
-    limit = max(MIN_SCORED, SCORED_PER_STAR * n_cone)
+    limit = _scored_limit(n_cone)
     n = 0
     for r in rank:
         n += 0 <= r < limit
@@ -236,7 +241,7 @@ def scored_count(rank, n_cone):
 @njit(cache=True)
 def scored_pairs(dist, obs, rank, n_cone):
     """The chords of the pairs whose points are scored (``scored_count``)."""
-    limit = max(MIN_SCORED, SCORED_PER_STAR * n_cone)
+    limit = _scored_limit(n_cone)
     keep = np.empty(len(dist), dtype=np.bool_)
     for k in range(len(dist)):
         keep[k] = 0 <= rank[obs[k]] < limit
@@ -257,14 +262,14 @@ def field_false_match(dist, obs, rank, n_cone, field_area, n_used, hypotheses, s
 def false_match(dist, n_cone, field_area, n_stars, n_used, hypotheses, sigmas, radius,
                 log_other):  # fmt: skip
     """The false-match probability of a hypothesis whose pairs are at chords ``dist`` (rad),
-    ``n_stars`` points in all: ``len(sigmas) len(Q_STARS) hypotheses / Lambda``, Lambda the
-    product of the points' likelihood ratios (``star_log_ratios``) at the centroid sigma of
-    ``sigmas`` (rad) and the star fraction of ``Q_STARS`` that give the largest, times
+    ``n_stars`` points in all: ``len(sigmas) hypotheses / Lambda``, Lambda the product of the
+    points' likelihood ratios (``star_log_ratios``, star fraction ``Q_STAR``) at the centroid
+    sigma of ``sigmas`` (rad) that gives the largest, times
     e^``log_other`` (the brightness and triangle-side ratios). The ``n_used`` points that
     built a hypothesis agree by construction: the best-scoring ``n_used`` pairs are left out
     (unmatched points when fewer paired). Each ratio has expectation 1 (at most) under a
     wrong hypothesis, so P(Lambda >= t) <= 1/t (Markov); over the hypotheses tried and the
-    sigmas and fractions taken the best of, P(p <= alpha) <= alpha (alpha (1 + ln H) over a
+    sigmas taken the best of, P(p <= alpha) <= alpha (alpha (1 + ln H) over a
     search that stops at its first acceptance, H counted as it goes): a probability of being
     wrong that can only err high."""
     n_pairs = len(dist)
@@ -273,14 +278,13 @@ def false_match(dist, n_cone, field_area, n_stars, n_used, hypotheses, sigmas, r
     best = -math.inf
     logs = np.empty(n_pairs)
     for sigma in sigmas:
-        for q in Q_STARS:
-            miss = star_log_ratios(dist, n_cone, field_area, sigma, q, radius, logs)
-            logs.sort()
-            total = n_unmatched * miss
-            for k in range(n_pairs - dropped):
-                total += logs[k]
-            best = max(best, total)
-    log_p = math.log(len(sigmas) * len(Q_STARS) * max(hypotheses, 1)) - best - log_other
+        miss = star_log_ratios(dist, n_cone, field_area, sigma, Q_STAR, radius, logs)
+        logs.sort()
+        total = n_unmatched * miss
+        for k in range(n_pairs - dropped):
+            total += logs[k]
+        best = max(best, total)
+    log_p = math.log(len(sigmas) * max(hypotheses, 1)) - best - log_other
     return math.exp(min(log_p, 0.0))
 
 
