@@ -435,7 +435,7 @@ def exact_log_tail(m, lam, q, t_r, log_t, y_max, sides_max, log_sides_k):
             total = _log_add(total, log_w + _log_deficit_tail(beta, log_k, log_cap, a, b))
         # the binomial terms beyond fall by at least this ratio each: bound them by their mass
         ratio = (m - j) / (j + 1.0) * math.exp(log_pi - log_miss)
-        if ratio < 0.5 and log_binom + math.log(2.0 * ratio) < total - 7.0:
+        if 0.0 < ratio < 0.5 and log_binom + math.log(2.0 * ratio) < total - 7.0:
             total = _log_add(total, log_binom + math.log(2.0 * ratio))
             break
     return total
