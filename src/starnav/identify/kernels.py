@@ -119,18 +119,12 @@ BRIGHT_MAX_RATIO = 50.0  # a star's brightness ratio is capped at (1 - w) + w x 
 # order (at least MIN_SCORED); the fainter ones are expected to be fainter than the catalog
 SCORED_PER_STAR = 2.0
 MIN_SCORED = 8
-# an observed pair counts as at least this far off, in s / sigma^2 (0.7 sigma): its ratio is
-# then at most that of a pair at that offset, so the exact tail of a best case stays above 0
-STAR_FLOOR = 0.25
-SIDE_FLOOR = 0.25  # and a triangle's sides at least this much (log) below their best
 
 
 @njit(cache=True)
 def _log_add(a, b):
-    """log(e^a + e^b) without overflow (-inf when both are)."""
+    """log(e^a + e^b) without overflow."""
     m = max(a, b)
-    if m == -math.inf:
-        return m
     return m + math.log(math.exp(a - m) + math.exp(b - m))
 
 
@@ -146,15 +140,12 @@ def star_log_ratios(dist, n_cone, field_area, sigma, q, radius, out):
     catalog star with chance ``q``, its offset a 2-D Gaussian of ``sigma`` (rad): s is
     exponential with mean sigma^2; otherwise it falls as under the wrong one. So a pair at s
     scores (1 - q) + q e^(u - s / sigma^2) / lambda, lambda = rho sigma^2, and a point with
-    no star within the radius (1 - q) + q e^(u_R - s_R / sigma^2). Where the ratio falls with
-    s (lambda < 1), s counts as at least ``STAR_FLOOR`` sigma^2 (which only lowers it)."""
+    no star within the radius (1 - q) + q e^(u_R - s_R / sigma^2)."""
     rho = n_cone / field_area
     log_q, log_rest = math.log(q), math.log(1.0 - q)
-    lam = rho * sigma * sigma
-    log_lam = math.log(max(lam, 1e-300))
-    floor = STAR_FLOOR * sigma * sigma if lam < 1.0 else 0.0
+    log_lam = math.log(max(rho * sigma * sigma, 1e-300))
     for k in range(len(dist)):
-        s = max(0.5 * dist[k] * dist[k], floor)
+        s = 0.5 * dist[k] * dist[k]
         out[k] = _log_add(log_rest, log_q - log_lam + rho * s - s / (sigma * sigma))
     s_r = 2.0 * math.sin(0.5 * radius) ** 2  # 1 - cos(radius)
     return _log_add(log_rest, log_q + rho * s_r - s_r / (sigma * sigma))
@@ -202,26 +193,6 @@ def brightness_log_bound(n_agree, n_used, n_cone, ranked):
         return 0.0
     ratio = min(n_cone / BRIGHT_WINDOW[1], BRIGHT_MAX_RATIO)
     return max(n_agree - n_used, 0) * math.log((1.0 - BRIGHT_WEIGHT) + BRIGHT_WEIGHT * ratio)
-
-
-@njit(cache=True)
-def brightness_log_max(rank, n_cone, n_drop, ranked):
-    """The largest ``brightness_log_ratio`` of the points of ``rank`` (-1: not in the order)
-    among ``n_cone`` catalog stars, its ``n_drop`` largest scores left out, a hypothesis can
-    have with k points paired, at k = 0, 1, ..: the k with the largest scores each in its
-    window. 0 when the brightness is not known (``ranked`` false)."""
-    w = BRIGHT_WEIGHT
-    best = np.zeros(len(rank))
-    if ranked:
-        for k in range(len(rank)):
-            window = BRIGHT_WINDOW[0] * rank[k] + BRIGHT_WINDOW[1]
-            if rank[k] >= 0 and window < n_cone:
-                best[k] = math.log((1.0 - w) + w * min(n_cone / window, BRIGHT_MAX_RATIO))
-    best = -np.sort(-best)
-    out = np.zeros(len(rank) + 1)
-    for k in range(n_drop, len(rank)):
-        out[k + 1] = out[k] + best[k]
-    return out
 
 
 @njit(cache=True)
@@ -279,239 +250,59 @@ def scored_pairs(dist, obs, rank, n_cone):
 
 @njit(cache=True)
 def field_false_match(dist, obs, rank, n_cone, field_area, n_used, hypotheses, sigmas, radius,
-                      log_other, max_other, log_sides, sides_tol):  # fmt: skip
+                      log_other):  # fmt: skip
     """``false_match`` of the scored points only (``scored_count``): pairs ``obs`` (rows of
     the points) at chords ``dist``, the points' places ``rank`` in the order."""
     return false_match(scored_pairs(dist, obs, rank, n_cone), n_cone, field_area,
                        scored_count(rank, n_cone), n_used, hypotheses, sigmas, radius,
-                       log_other, max_other, log_sides, sides_tol)  # fmt: skip
-
-
-_GAMMA_EPS = 1e-13
-_TINY = 1e-300
-
-
-@njit(cache=True)
-def _log_lower_gamma(s, x):
-    """log P(s, x), the regularized lower incomplete gamma function, by its series (accurate
-    for x < s + 1)."""
-    if x <= 0.0:
-        return -math.inf
-    term = total = 1.0 / s
-    ap = s
-    for _ in range(1000):
-        ap += 1.0
-        term *= x / ap
-        total += term
-        if term < total * _GAMMA_EPS:
-            break
-    return math.log(total) - x + s * math.log(x) - math.lgamma(s)
-
-
-@njit(cache=True)
-def _log_upper_gamma(s, x):
-    """log Q(s, x) = log(1 - P(s, x)) by its continued fraction (accurate for x > s + 1;
-    modified Lentz)."""
-    b = x + 1.0 - s
-    c = 1.0 / _TINY
-    d = 1.0 / b
-    h = d
-    for i in range(1, 1000):
-        an = -i * (i - s)
-        b += 2.0
-        d = an * d + b
-        d = _TINY if abs(d) < _TINY else d
-        c = b + an / c
-        c = _TINY if abs(c) < _TINY else c
-        d = 1.0 / d
-        h *= d * c
-        if abs(d * c - 1.0) < _GAMMA_EPS:
-            break
-    return math.log(h) - x + s * math.log(x) - math.lgamma(s)
-
-
-@njit(cache=True)
-def _log_sub(a, b):
-    """log(e^a - e^b), a >= b (-inf when equal)."""
-    if b == -math.inf:
-        return a
-    if b >= a:
-        return -math.inf
-    return a + math.log(-math.expm1(b - a))
-
-
-@njit(cache=True)
-def _log_power_integral(beta, lo, hi):
-    """log of the integral of u^``beta`` e^-u over [``lo``, ``hi``], 0 <= lo < hi: the lower
-    function's difference below s + 1 = beta + 2, the upper one's above (no cancellation)."""
-    s = beta + 1.0
-    split = s + 1.0
-    if hi <= split:
-        out = _log_sub(_log_lower_gamma(s, hi), _log_lower_gamma(s, lo))
-    elif lo >= split:
-        out = _log_sub(_log_upper_gamma(s, lo), _log_upper_gamma(s, hi))
-    else:
-        out = _log_add(_log_sub(_log_lower_gamma(s, split), _log_lower_gamma(s, lo)),
-                       _log_sub(_log_upper_gamma(s, split), _log_upper_gamma(s, hi)))  # fmt: skip
-    return out + math.lgamma(s)
-
-
-@njit(cache=True)
-def _log_deficit_tail(beta, log_k, log_cap, a, b):
-    """log of E[psi(D)], psi(d) = min(1, e^(a - d)) for d <= ``b``, 0 beyond, for a deficit D
-    whose distribution function (its mass: the chance the points hit) is
-    F(d) <= min(cap, K d^``beta``), through F: E[psi(D)] = the integral of F against -d psi
-    (e^(a - u) du on (max(a, 0), b), a jump e^(a - b) at b). ``beta`` 0: D is 0."""
-    if b < 0.0:
-        return -math.inf
-    if beta == 0.0:
-        return min(a, 0.0)
-    lo = max(a, 0.0)
-    d_cap = math.exp((log_cap - log_k) / beta)  # where the two bounds of F cross
-    total = -math.inf
-    hi = min(b, d_cap)
-    if hi > lo:
-        total = log_k + a + _log_power_integral(beta, lo, hi)
-    c_lo = max(lo, d_cap)
-    if b > c_lo:
-        total = _log_add(total, log_cap + a + _log_sub(-c_lo, -b))
-    if b > 0.0:
-        total = _log_add(total, a - b + min(log_cap, log_k + beta * math.log(b)))
-    return total
-
-
-@njit(cache=True)
-def exact_log_tail(m, lam, q, t_r, log_t, y_max, sides_max, log_sides_k):
-    """log of a bound on P(X + S + Y >= ``log_t``) under a wrong hypothesis (docs/
-    verification.md): X the sum of the ``star_log_ratios`` of ``m`` points (lambda ``lam`` <
-    1, star fraction ``q``, radius at s / sigma^2 = ``t_r``); S the triangle-side ratio, at
-    most ``sides_max``, its deficit below that with F(x) <= K x^(3/2), log K =
-    ``log_sides_k`` (-inf: no sides); Y the other evidence, E[e^Y | X, S] <= 1, at most
-    ``y_max[j]`` when j of the points hit (the last value for more):
-    E[1{X + S >= T - y_max} min(1, e^(X + S - T))]. Each point's t = s / sigma^2 is
-    exponential of rate lambda; it hits (t < t_r) or misses, and scores l(0) less a deficit
-    that is concave in t, whose inverse t(x) is convex: up to x*, a hit's deficit has
-    P(hit, deficit <= x) <= kappa x, kappa = lambda t(x*) / x*, and at most 1 - e^(-lambda
-    t(x*)). Deficits of F <= C_i x^a_i add to one of F <= prod(C_i Gamma(a_i + 1)) /
-    Gamma(sum a_i + 1) x^(sum a_i). Summed over the hits j with binomial weights (the misses'
-    deficit exact, x* the deficit the j hits may have, at most a hit's at the radius), the
-    last terms bounded by their mass."""
-    c = (1.0 - q) + q / lam
-    l_0 = math.log(c)
-    decay = math.exp(-(1.0 - lam) * t_r)
-    d_r = l_0 - math.log((1.0 - q) + q / lam * decay)  # a hit's largest deficit
-    d_miss = l_0 - math.log((1.0 - q) + q * decay)  # a miss's (more)
-    log_miss = -lam * t_r
-    log_pi = math.log(-math.expm1(-lam * t_r))
-    sides = log_sides_k > -math.inf
-    a_all = m * l_0 + sides_max - log_t  # the deficit X + S may have in all, Y at 0
-    b_all = a_all + y_max[-1]
-    if b_all < 0.0:
-        return -math.inf
-    j_first = max(0, m - int(min(b_all / d_miss, m)))  # b_all >= 0: int() is the floor
-    total = -math.inf
-    for j in range(j_first, m + 1):
-        # C(m, j) (1 - pi)^(m - j): the hits' own chance is in their F
-        log_w = (math.lgamma(m + 1.0) - math.lgamma(j + 1.0) - math.lgamma(m - j + 1.0)
-                 + (m - j) * log_miss)  # fmt: skip
-        log_binom = log_w + j * log_pi
-        a = a_all - (m - j) * d_miss
-        b = a + y_max[min(j, len(y_max) - 1)]
-        x_top = min(b, d_r)
-        log_k, log_cap, beta = 0.0, 0.0, 0.0
-        if j > 0 and x_top > 0.0:
-            t_top = t_r
-            rest = c * math.exp(-x_top) - (1.0 - q)  # (q / lambda) e^(-(1 - lambda) t)
-            if x_top < d_r and rest > 0.0:
-                t_top = min(-math.log(rest * lam / q) / (1.0 - lam), t_r)
-            log_k = j * math.log(lam * t_top / x_top)  # kappa^j, Gamma(2)^j = 1
-            log_cap = j * math.log(-math.expm1(-lam * t_top))
-            beta = float(j)
-        if sides:
-            log_k += log_sides_k + math.lgamma(2.5)
-            beta += 1.5
-        if beta > 0.0 or j == 0:
-            log_k -= math.lgamma(beta + 1.0)
-            total = _log_add(total, log_w + _log_deficit_tail(beta, log_k, log_cap, a, b))
-        # the binomial terms beyond fall by at least this ratio each: bound them by their mass
-        ratio = (m - j) / (j + 1.0) * math.exp(log_pi - log_miss)
-        if 0.0 < ratio < 0.5 and log_binom + math.log(2.0 * ratio) < total - 7.0:
-            total = _log_add(total, log_binom + math.log(2.0 * ratio))
-            break
-    return total
+                       log_other)  # fmt: skip
 
 
 @njit(cache=True)
 def false_match(dist, n_cone, field_area, n_stars, n_used, hypotheses, sigmas, radius,
-                log_other, max_other, log_sides, sides_tol):  # fmt: skip
+                log_other):  # fmt: skip
     """The false-match probability of a hypothesis whose pairs are at chords ``dist`` (rad),
-    ``n_stars`` points in all: ``len(sigmas) hypotheses`` times the chance, under a wrong
-    hypothesis, of evidence as strong as the log likelihood ratio T = X + S + Y seen, at the
-    centroid sigma of ``sigmas`` (rad) that gives the smallest; X the sum of the points'
-    ratios (``star_log_ratios``, star fraction ``Q_STAR``), S = ``log_sides`` the ratio of
-    the sides of the triangle that built it when it was looked up within ``sides_tol`` (rad;
-    0: none; ``side_log_ratio`` at the largest sigma, at most ``SIDE_FLOOR`` below its bound),
-    Y = ``log_other`` (the brightness ratio, at most ``max_other[k]`` with k points paired,
-    the last value for more; ``other_log_max``). The ``n_used`` points that built a
-    hypothesis agree by construction: the best-scoring ``n_used`` pairs are left out
+    ``n_stars`` points in all: ``len(sigmas) hypotheses / Lambda``, Lambda the product of the
+    points' likelihood ratios (``star_log_ratios``, star fraction ``Q_STAR``) at the centroid
+    sigma of ``sigmas`` (rad) that gives the largest, times
+    e^``log_other`` (the brightness and triangle-side ratios). The ``n_used`` points that
+    built a hypothesis agree by construction: the best-scoring ``n_used`` pairs are left out
     (unmatched points when fewer paired). Each ratio has expectation 1 (at most) under a
-    wrong hypothesis, so the chance is at most e^-T (Markov), and at most the exact tail of X
-    and S with Y bounded by Markov (``exact_log_tail``): the smaller is taken. Over the
-    hypotheses tried and the sigmas taken the best of, P(p <= alpha) <= alpha (alpha (1 + ln
-    H) over a search that stops at its first acceptance, H counted as it goes): a
-    probability of being wrong that can only err high."""
+    wrong hypothesis, so P(Lambda >= t) <= 1/t (Markov); over the hypotheses tried and the
+    sigmas taken the best of, P(p <= alpha) <= alpha (alpha (1 + ln H) over a
+    search that stops at its first acceptance, H counted as it goes): a probability of being
+    wrong that can only err high."""
     n_pairs = len(dist)
     dropped = min(n_used, n_pairs)
     n_unmatched = max(n_stars - n_pairs - (n_used - dropped), 0)
-    m = n_pairs - dropped + n_unmatched
-    # with j of the m points a hit, at most n_used + j paired
-    y_max = np.empty(m + 1)
-    for j in range(m + 1):
-        y_max[j] = max_other[min(n_used + j, len(max_other) - 1)]
-    sides_max, log_sides_k = 0.0, -math.inf
-    if sides_tol > 0.0:
-        sides_max = side_log_bound(sigmas.max(), sides_tol)
-        log_sides = min(log_sides, sides_max - SIDE_FLOOR)
-        # three sides off by uniform d within +-tol; deficit sum d^2 / (4 sigma^2)
-        log_sides_k = math.log(4.0 * math.pi / 3.0) + 3.0 * math.log(sigmas.max() / sides_tol)
-    s_r = 2.0 * math.sin(0.5 * radius) ** 2
-    best = math.inf
+    best = -math.inf
     logs = np.empty(n_pairs)
     for sigma in sigmas:
         miss = star_log_ratios(dist, n_cone, field_area, sigma, Q_STAR, radius, logs)
         logs.sort()
-        total = n_unmatched * miss + log_sides + log_other
+        total = n_unmatched * miss
         for k in range(n_pairs - dropped):
             total += logs[k]
-        log_tail = -total
-        lam = n_cone / field_area * sigma * sigma
-        if lam < 1.0 and (m > 0 or sides_tol > 0.0):
-            exact = exact_log_tail(m, lam, Q_STAR, s_r / (sigma * sigma), total, y_max,
-                                   sides_max, log_sides_k)  # fmt: skip
-            log_tail = min(log_tail, exact)
-        best = min(best, log_tail)
-    log_p = math.log(len(sigmas) * max(hypotheses, 1)) + best
+        best = max(best, total)
+    log_p = math.log(len(sigmas) * max(hypotheses, 1)) - best - log_other
     return math.exp(min(log_p, 0.0))
 
 
 @njit(cache=True)
 def best_case_false_match(n_stars, n_agree, n_used, n_cone, field_area, hypotheses, sigmas,
-                          radius, max_other, sides_tol):  # fmt: skip
+                          radius, max_other):  # fmt: skip
     """The smallest ``false_match`` a hypothesis can reach with ``n_agree`` of ``n_stars``
     points within ``radius`` of a catalog star, ``n_cone`` (at least 1) catalog stars on the
-    field: every agreeing point exactly on its star, its triangle's sides (looked up within
-    ``sides_tol``, 0: none) exact, or none agreeing (better when a field is so dense that a
-    match scores less than a miss, lambda > ~1); ``max_other``: the largest brightness ratio
-    it can have (whatever stars pair). For a screen: a hypothesis that cannot beat the
-    threshold even so is not verified."""
+    field: every agreeing point exactly on its star, or none agreeing (better when a field is
+    so dense that a match scores less than a miss, lambda > ~1); ``max_other``: the largest
+    brightness and side log ratios it can have. For a screen: a hypothesis that cannot beat
+    the threshold even so is not verified."""
     n_agree = min(n_agree, n_stars)
     n_cone = max(n_cone, 1)
-    most = np.array([max_other])
-    exact_sides = side_log_bound(sigmas.max(), sides_tol)
     on_stars = false_match(np.zeros(n_agree), n_cone, field_area, n_stars, n_used, hypotheses,
-                           sigmas, radius, max_other, most, exact_sides, sides_tol)  # fmt: skip
+                           sigmas, radius, max_other)  # fmt: skip
     none = false_match(np.zeros(0), n_cone, field_area, n_stars, n_used, hypotheses, sigmas,
-                       radius, max_other, most, exact_sides, sides_tol)  # fmt: skip
+                       radius, max_other)  # fmt: skip
     return min(on_stars, none)
 
 
@@ -747,28 +538,24 @@ def test_hypothesis(bearings, obs_rows, cat_rows, parity, sky, allowed, radius, 
     vectors = sky[0]
     no_cov = np.zeros((3, 3))
     n_used = len(obs_rows)
-    log_sides, sides_tol = 0.0, 0.0
+    log_sides = 0.0
     if n_used == 3:
         log_sides = side_log_ratio(bearings[obs_rows], vectors[cat_rows], sigmas.max(), tol)
-        sides_tol = tol
-    ranked = len(mags) > 0
     R = wahba(bearings[obs_rows], vectors[cat_rows], np.ones(n_used), parity)
     v = pair_catalog(bearings, R, sky, allowed, radius, no_cov, False, work)
-    log_bright = brightness_log_ratio(v.obs, v.cat, rank, mags, work, v.n_cone, bright_drop)
-    max_bright = brightness_log_max(rank, v.n_cone, bright_drop, ranked)
+    log_other = log_sides + brightness_log_ratio(v.obs, v.cat, rank, mags, work, v.n_cone,
+                                                 bright_drop)  # fmt: skip
     p = field_false_match(v.dist, v.obs, rank, v.n_cone, v.field_area, n_used, hypotheses,
-                          sigmas, radius, log_bright, max_bright, log_sides,
-                          sides_tol)  # fmt: skip
+                          sigmas, radius, log_other)  # fmt: skip
     if p > max_p:
         return Tested(REJECTED, v.obs, v.cat, R, p, log_sides)
     if parity_known == 0:
         R_m = wahba(bearings[v.obs], vectors[v.cat], np.ones(len(v.obs)), -parity)
         m = pair_catalog(bearings, R_m, sky, allowed, radius, no_cov, False, work)
-        log_m = brightness_log_ratio(m.obs, m.cat, rank, mags, work, m.n_cone, bright_drop)
-        max_m = brightness_log_max(rank, m.n_cone, bright_drop, ranked)
+        log_m = log_sides + brightness_log_ratio(m.obs, m.cat, rank, mags, work, m.n_cone,
+                                                 bright_drop)  # fmt: skip
         p_m = field_false_match(m.dist, m.obs, rank, m.n_cone, m.field_area, n_used,
-                                hypotheses, sigmas, radius, log_m, max_m, log_sides,
-                                sides_tol)  # fmt: skip
+                                hypotheses, sigmas, radius, log_m)  # fmt: skip
         if p_m <= max_p:
             return Tested(AMBIGUOUS, v.obs, v.cat, R, p, log_sides)
     return Tested(FOUND, v.obs, v.cat, R, p, log_sides)
@@ -949,6 +736,7 @@ def triangle_search(bearings, triangles, pair_a, pair_b, pair_angle, max_angle, 
     field_area = 1.0 - math.cos(field_rad)
     ranked = len(mags) > 0
     n_ranked = scored_count(rank, 1e18)
+    sides_bound = side_log_bound(sigmas.max(), tol)
     screen2 = chord(radius) ** 2
     work = np.empty(len(vectors), dtype=np.int64)
     head = np.full(len(vectors), -1, dtype=np.int64)
@@ -988,16 +776,16 @@ def triangle_search(bearings, triangles, pair_a, pair_b, pair_angle, max_angle, 
             # on a field of one catalog star, the brightness at its best, no point scored but
             # the agreeing ones (no field does better): neither this nor any later (lower)
             # count can be convincing; on its own field: not this one
-            best_bright = brightness_log_bound(agree[h], bright_drop, 1e9, ranked)
+            best_other = sides_bound + brightness_log_bound(agree[h], bright_drop, 1e9, ranked)
             n_best = min(agree[h], n_ranked)
             if best_case_false_match(n_best, n_best, 3, 1, field_area, hypotheses, sigmas,
-                                     radius, best_bright, tol) > max_p:  # fmt: skip
+                                     radius, best_other) > max_p:  # fmt: skip
                 break
-            own = brightness_log_bound(agree[h], bright_drop, n_cone[h], ranked)
+            own = sides_bound + brightness_log_bound(agree[h], bright_drop, n_cone[h], ranked)
             n_scored = scored_count(rank, n_cone[h])
             if n_cone[h] > 0 and best_case_false_match(n_scored, agree[h], 3, n_cone[h],
                                                        field_area, hypotheses, sigmas, radius,
-                                                       own, tol) > max_p:  # fmt: skip
+                                                       own) > max_p:  # fmt: skip
                 continue
             if timed and proposed % CLOCK_EVERY == CLOCK_EVERY - 1 and clock() > end_time:
                 status = OUT_OF_TIME

@@ -58,15 +58,10 @@ class Verification:
         hypotheses: int,
         settings: MatchSettings,
         log_other: float = 0.0,
-        max_other: np.ndarray | None = None,
-        log_sides: float = 0.0,
-        sides_tol_rad: float = 0.0,
     ) -> float:
         """False-match probability of these pairs among ``n_stars`` points, ``n_used`` of
-        which built the hypothesis, ``hypotheses`` tried, with brightness evidence of
-        natural-log likelihood ratio ``log_other``, at most ``max_other[k]`` had k stars
-        paired (None: ``log_other`` whatever paired), and the side ratio ``log_sides`` of a
-        triangle looked up within ``sides_tol_rad`` (0: none; ``identify.kernels.false_match``)."""
+        which built the hypothesis, ``hypotheses`` tried, with other evidence of natural-log
+        likelihood ratio ``log_other`` (``identify.kernels.false_match``)."""
         radius, sigmas = settings.kernel_args()
         return float(
             kernels().false_match(
@@ -79,9 +74,6 @@ class Verification:
                 sigmas,
                 radius,
                 log_other,
-                np.array([log_other] if max_other is None else max_other, dtype=np.float64),
-                float(log_sides),
-                float(sides_tol_rad),
             )
         )
 
@@ -158,7 +150,7 @@ def best_case_probability(
     area = 1.0 - np.cos(field_rad)
     bright = k.brightness_log_bound(n_agree, 3, 1e9, settings.ranked)
     n = min(n_agree, n_stars)
-    return float(k.best_case_false_match(n, n, 3, 1, area, hypotheses, sigmas, radius, bright, 0.0))
+    return float(k.best_case_false_match(n, n, 3, 1, area, hypotheses, sigmas, radius, bright))
 
 
 @dataclass

@@ -47,9 +47,6 @@ def conclude(
     k = kernels()
     xy = np.ascontiguousarray(stars.xy, dtype=np.float64)
     rank = point_ranks(brightness_order(stars), len(xy))
-    radius, sigmas = settings.kernel_args()
-    # the identification was a triangle looked up within the pair tolerance when it has sides
-    sides_tol = settings.pair_tol_rad if found.log_sides else 0.0
     done = k.conclude(
         np.ascontiguousarray(found.obs_index, dtype=np.int64),
         np.ascontiguousarray(found.cat_index, dtype=np.int64),
@@ -63,10 +60,8 @@ def conclude(
         float(camera.height),
         bool(fit_focal),
         bool(fit_distortion),
-        radius,
-        sigmas,
+        *settings.kernel_args(),
         float(found.log_sides),
-        sides_tol,
         rank,
         catalog_mags(database, stars.brightness is not None),
         int(found.bright_drop),

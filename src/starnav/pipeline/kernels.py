@@ -18,7 +18,6 @@ from numba import njit
 from starnav.attitude.kernels import fit, free_focal_step, studentized
 from starnav.camera.kernels import N_INTRINSIC, field_cos, pixels_to_bearings, sees
 from starnav.identify.kernels import (
-    brightness_log_max,
     brightness_log_ratio,
     chord,
     cone,
@@ -131,13 +130,12 @@ def expected_stars(R, sky, model, p, width, height, work):
 
 @njit(cache=True)
 def conclude(obs, cat, R, xy, sky, allowed, model, p0, width, height, fit_focal,
-             fit_distortion, radius, sigmas, log_sides, sides_tol, rank, mags, bright_drop,
-             sigma_px, hypotheses, max_p, min_matched_fraction):  # fmt: skip
+             fit_distortion, radius, sigmas, log_sides, rank, mags, bright_drop, sigma_px,
+             hypotheses, max_p, min_matched_fraction):  # fmt: skip
     """From an identification (pairs ``obs`` / ``cat``, attitude ``R``) to the fitted
     solution and its refusal code (``ACCEPTED`` or why not). ``radius`` (rad): the pairing
     radius; ``sigmas`` (rad): the centroid sigmas the false-match probability takes the best
-    of; ``log_sides``: the identification's triangle-side log ratio, looked up
-    within ``sides_tol`` (rad; 0: not a triangle); ``rank``: the points'
+    of; ``log_sides``: the identification's triangle-side log ratio; ``rank``: the points'
     places in the brightness order, ``mags`` the catalog's (empty: the brightness is not
     known; ``identify.kernels.field_false_match``), ``bright_drop`` of the pairs' brightness
     scores left out; ``sigma_px``: the sigma the outlier and rematch rules use."""
@@ -176,11 +174,10 @@ def conclude(obs, cat, R, xy, sky, allowed, model, p0, width, height, fit_focal,
     # the field cone's stars again, for their brightness ranks (pairing left them elsewhere)
     field_rad = math.acos(1.0 - a.field_area)
     n_cone = cone(f.R[2], chord(field_rad) ** 2, sky, allowed, work)
-    log_bright = brightness_log_ratio(a.obs, a.cat, rank, mags, work, n_cone, bright_drop)
-    max_bright = brightness_log_max(rank, n_cone, bright_drop, len(mags) > 0)
+    log_other = log_sides + brightness_log_ratio(a.obs, a.cat, rank, mags, work, n_cone,
+                                                 bright_drop)  # fmt: skip
     p_false = field_false_match(dist, a.obs, rank, a.n_cone, a.field_area, n_fitted, hypotheses,
-                                sigmas, radius, log_bright, max_bright, log_sides,
-                                sides_tol)  # fmt: skip
+                                sigmas, radius, log_other)  # fmt: skip
     refusal = ACCEPTED
     f_scale = 0.0
     if not fit_focal and len(a.obs) >= MIN_STARS_SCALE_CHECK:
