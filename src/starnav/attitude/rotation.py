@@ -31,19 +31,23 @@ def nearest_rotation(B):
     det = det3(B[0], B[1], B[2])
     if scale > 0.0 and det > 1e-12 * scale**3:
         X = B / scale
+        C = np.empty((3, 3))  # X^-T: the cofactor matrix over the determinant
+        Y = np.empty((3, 3))  # the next iterate (the two swap: no array made in the loop)
         for _ in range(30):
             d = det3(X[0], X[1], X[2])
-            C = np.empty((3, 3))  # X^-T: the cofactor matrix over the determinant
             for i in range(3):
                 i1, i2 = (i + 1) % 3, (i + 2) % 3
                 for j in range(3):
                     j1, j2 = (j + 1) % 3, (j + 2) % 3
                     C[i, j] = (X[i1, j1] * X[i2, j2] - X[i1, j2] * X[i2, j1]) / d
             g = (abs(d) ** (-1.0 / 3.0)) if abs(d) > 0 else 1.0  # determinant scaling
-            Y = 0.5 * (g * X + C / g)
-            change = np.max(np.abs(Y - X))
-            X = Y
-            if change < 1e-15:
+            change = 0.0
+            for i in range(3):
+                for j in range(3):
+                    Y[i, j] = 0.5 * (g * X[i, j] + C[i, j] / g)
+                    change = max(change, abs(Y[i, j] - X[i, j]))
+            X, Y = Y, X
+            if change < 1e-15 and d == d:  # (a NaN determinant: to the SVD)
                 return X
     U, _, Vt = np.linalg.svd(B)
     d = det3(U[:, 0], U[:, 1], U[:, 2]) * det3(Vt[0], Vt[1], Vt[2])

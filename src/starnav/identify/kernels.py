@@ -55,7 +55,7 @@ def angle(a, b):
 
 
 WIDE_CONE_RAD = math.radians(60.0)  # cones wider than this are searched row by row
-WIDE_SCREEN_RAD = math.radians(35.0)  # wider fields screen hypotheses star by star
+WIDE_SCREEN_RAD = math.radians(35.0)  # wider fields: the screen does not count the field cone
 CLOCK_EVERY = 32  # with a time budget, the clock is read every this many hypotheses
 
 
@@ -564,10 +564,10 @@ def test_hypothesis(bearings, obs_rows, cat_rows, parity, sky, allowed, radius, 
 @njit(cache=True)
 def _join(pair_a, pair_b, lo1, n1, lo2, n2, head, after, allowed, vectors, cos_hi, cos_lo, out):
     """The triangles of ``catalog_triangles``: side ij (both ways) joined to the lists of side
-    ik at its first star, side jk checked; written to ``out`` unless it has no rows (then
-    only counted). Returns how many."""
+    ik at its first star, side jk checked; written to ``out`` as far as it has rows, all
+    counted. Returns how many."""
     n = 0
-    fill = len(out) > 0
+    rows = len(out)
     for k in range(2 * n1):
         if k < n1:
             a, b = np.int64(pair_a[lo1 + k]), np.int64(pair_b[lo1 + k])
@@ -584,7 +584,7 @@ def _join(pair_a, pair_b, lo1, n1, lo2, n2, head, after, allowed, vectors, cos_h
             cos_bc = vectors[b, 0] * vectors[c, 0] + vectors[b, 1] * vectors[c, 1]
             cos_bc += vectors[b, 2] * vectors[c, 2]
             if cos_bc >= cos_hi and cos_bc <= cos_lo:
-                if fill:
+                if n < rows:
                     out[n, 0], out[n, 1], out[n, 2] = a, b, c
                 n += 1
     return n
@@ -623,10 +623,16 @@ def catalog_triangles(pair_a, pair_b, pair_angle, vectors, allowed, s_ij, s_ik, 
             head[first] = k
     cos_hi = math.cos(s_jk + tol)
     cos_lo = math.cos(max(s_jk - tol, 0.0))
+    # written as they are found into room for a side's worth (most triangles have far fewer
+    # matches than that), joined again into the exact room if they did not fit
+    out = np.empty((max(n1, n2), 3), dtype=np.int64)
     counted = _join(pair_a, pair_b, lo1, n1, lo2, n2, head, after, allowed, vectors,
-                    cos_hi, cos_lo, np.empty((0, 3), dtype=np.int64))  # fmt: skip
-    out = np.empty((counted, 3), dtype=np.int64)
-    _join(pair_a, pair_b, lo1, n1, lo2, n2, head, after, allowed, vectors, cos_hi, cos_lo, out)
+                    cos_hi, cos_lo, out)  # fmt: skip
+    if counted > len(out):
+        out = np.empty((counted, 3), dtype=np.int64)
+        _join(pair_a, pair_b, lo1, n1, lo2, n2, head, after, allowed, vectors, cos_hi, cos_lo,
+              out)  # fmt: skip
+    out = out[:counted]
     for k in range(n1):  # leave the work space as found
         for star in (pair_a[lo1 + k], pair_b[lo1 + k]):
             head[star] = -1
@@ -635,50 +641,31 @@ def catalog_triangles(pair_a, pair_b, pair_angle, vectors, allowed, s_ij, s_ik, 
 
 
 @njit(cache=True)
-def _screen(bearings, tri, triples, parities, sky, allowed, field_rad, screen2, work, cam,
-            end_time):  # fmt: skip
+def _screen(bearings, tri, triples, parities, sky, allowed, screen2, work, end_time):
     """Per hypothesis, how many bearings land near some catalog star under its attitude (a
-    quick count that may only err high), and how many catalog stars its field cone holds (as
-    ``pair_catalog`` counts them; 0 when not counted: wide fields); stops early (the rest
-    counted 0) after ``end_time`` (``clock`` seconds)."""
+    quick count that may only err high: each bearing's own cells of the sky grid looked up),
+    and its boresight (ICRS, for the field cone's star count, which the search makes only for
+    the hypotheses it may verify); stops early (the rest counted 0) after ``end_time``
+    (``clock`` seconds)."""
     vectors = sky[0]
     m = len(triples)
     agree = np.zeros(m, dtype=np.int64)
-    in_cone = np.zeros(m, dtype=np.int64)
+    axes = np.zeros((m, 3))
     ones = np.ones(3)
     sky_b = np.empty(3)
     for h in range(m):
         if h % CLOCK_EVERY == CLOCK_EVERY - 1 and end_time < math.inf and clock() > end_time:
             break
         R = wahba(tri, vectors[triples[h]], ones, parities[h])
-        if field_rad > WIDE_SCREEN_RAD:  # a wide field: look up each bearing's own cells
-            for b in range(len(bearings)):
-                for k in range(3):
-                    sky_b[k] = (
-                        R[0, k] * bearings[b, 0]
-                        + R[1, k] * bearings[b, 1]
-                        + R[2, k] * bearings[b, 2]
-                    )
-                agree[h] += cone(sky_b, screen2, sky, allowed, work) > 0
-            continue
-        n_cone = cone(R[2], chord(field_rad) ** 2, sky, allowed, work)
-        in_cone[h] = n_cone
-        for c in range(n_cone):
-            row = work[c]
-            v0, v1, v2 = vectors[row, 0], vectors[row, 1], vectors[row, 2]
-            for k in range(3):
-                cam[c, k] = R[k, 0] * v0 + R[k, 1] * v1 + R[k, 2] * v2
+        for k in range(3):
+            axes[h, k] = R[2, k]
         for b in range(len(bearings)):
-            for c in range(n_cone):
-                dx = bearings[b, 0] - cam[c, 0]
-                if dx * dx >= screen2:
-                    continue
-                dy = bearings[b, 1] - cam[c, 1]
-                dz = bearings[b, 2] - cam[c, 2]
-                if dx * dx + dy * dy + dz * dz < screen2:
-                    agree[h] += 1
-                    break
-    return agree, in_cone
+            for k in range(3):
+                sky_b[k] = (
+                    R[0, k] * bearings[b, 0] + R[1, k] * bearings[b, 1] + R[2, k] * bearings[b, 2]
+                )
+            agree[h] += cone(sky_b, screen2, sky, allowed, work) > 0
+    return agree, axes
 
 
 @njit(cache=True)
@@ -738,10 +725,11 @@ def triangle_search(bearings, triangles, pair_a, pair_b, pair_angle, max_angle, 
     n_ranked = scored_count(rank, 1e18)
     sides_bound = side_log_bound(sigmas.max(), tol)
     screen2 = chord(radius) ** 2
+    wide = field_rad > WIDE_SCREEN_RAD
+    cone2 = chord(field_rad) ** 2
     work = np.empty(len(vectors), dtype=np.int64)
     head = np.full(len(vectors), -1, dtype=np.int64)
     mark = np.zeros(len(vectors), dtype=np.bool_)
-    cam = np.empty((len(vectors), 3))
     hypotheses, proposed, best_p = 0, 0, 1.0
     empty = np.empty(0, dtype=np.int64)
     tri = np.empty((3, 3))
@@ -767,8 +755,8 @@ def triangle_search(bearings, triangles, pair_a, pair_b, pair_angle, max_angle, 
         if len(triples) == 0:
             continue
         hypotheses += len(triples)
-        agree, n_cone = _screen(bearings, tri, triples, parities, sky, allowed, field_rad,
-                                screen2, work, cam, end_time)  # fmt: skip
+        agree, axes = _screen(bearings, tri, triples, parities, sky, allowed, screen2, work,
+                              end_time)  # fmt: skip
         if timed and clock() > end_time:
             status = OUT_OF_TIME
             break
@@ -781,9 +769,12 @@ def triangle_search(bearings, triangles, pair_a, pair_b, pair_angle, max_angle, 
             if best_case_false_match(n_best, n_best, 3, 1, field_area, hypotheses, sigmas,
                                      radius, best_other) > max_p:  # fmt: skip
                 break
-            own = sides_bound + brightness_log_bound(agree[h], bright_drop, n_cone[h], ranked)
-            n_scored = scored_count(rank, n_cone[h])
-            if n_cone[h] > 0 and best_case_false_match(n_scored, agree[h], 3, n_cone[h],
+            # the catalog stars of its field cone (as ``pair_catalog`` counts them; not
+            # counted, 0, on a wide field)
+            n_cone = 0 if wide else cone(axes[h], cone2, sky, allowed, work)
+            own = sides_bound + brightness_log_bound(agree[h], bright_drop, n_cone, ranked)
+            n_scored = scored_count(rank, n_cone)
+            if n_cone > 0 and best_case_false_match(n_scored, agree[h], 3, n_cone,
                                                        field_area, hypotheses, sigmas, radius,
                                                        own) > max_p:  # fmt: skip
                 continue
