@@ -68,19 +68,10 @@ def _within(vectors, r, axis, chord2):
     return dx * dx + dy * dy + dz * dz <= chord2
 
 
-@njit(cache=True)
-def cone(axis, chord2, sky, allowed, out):
-    """Allowed rows of the sky's vectors within chord sqrt(chord2) of ``axis``, written to
-    ``out``; returns how many."""
-    vectors, start, rows, n_dec, n_ra, step = sky
-    n = 0
-    radius = 2.0 * math.asin(min(1.0, 0.5 * math.sqrt(chord2))) + 1e-9
-    if radius > WIDE_CONE_RAD:  # a wide field's cone: every row beats visiting the cells
-        for r in range(len(vectors)):
-            if allowed[r] and _within(vectors, r, axis, chord2):
-                out[n] = r
-                n += 1
-        return n
+@njit(cache=True, inline="always")
+def _cells(axis, radius, n_dec, n_ra, step):
+    """The Dec bands ``i_lo..i_hi`` and RA columns ``j_lo..j_hi`` (mod ``n_ra``) of the sky
+    grid that hold every point within ``radius`` (rad) of ``axis``."""
     dec0 = math.asin(max(-1.0, min(1.0, axis[2])))
     ra0 = math.atan2(axis[1], axis[0])
     lo, hi = dec0 - radius, dec0 + radius
@@ -94,6 +85,29 @@ def cone(axis, chord2, sky, allowed, out):
         j_hi = math.floor((ra0 + half) / step)
         if j_hi - j_lo + 1 >= n_ra:
             j_lo, j_hi = 0, n_ra - 1
+    return i_lo, i_hi, j_lo, j_hi
+
+
+@njit(cache=True)
+def cone_radius(chord2):
+    """The angle (rad) of chord sqrt(``chord2``), a hair wider (the cells searched for it)."""
+    return 2.0 * math.asin(min(1.0, 0.5 * math.sqrt(chord2))) + 1e-9
+
+
+@njit(cache=True)
+def cone(axis, chord2, sky, allowed, out):
+    """Allowed rows of the sky's vectors within chord sqrt(chord2) of ``axis``, written to
+    ``out``; returns how many."""
+    vectors, start, rows, n_dec, n_ra, step = sky
+    n = 0
+    radius = cone_radius(chord2)
+    if radius > WIDE_CONE_RAD:  # a wide field's cone: every row beats visiting the cells
+        for r in range(len(vectors)):
+            if allowed[r] and _within(vectors, r, axis, chord2):
+                out[n] = r
+                n += 1
+        return n
+    i_lo, i_hi, j_lo, j_hi = _cells(axis, radius, n_dec, n_ra, step)
     for i in range(i_lo, i_hi + 1):
         for jj in range(j_lo, j_hi + 1):
             cell = i * n_ra + jj % n_ra
@@ -103,6 +117,27 @@ def cone(axis, chord2, sky, allowed, out):
                     out[n] = r
                     n += 1
     return n
+
+
+@njit(cache=True)
+def near_star(axis, chord2, radius, sky, allowed):
+    """Whether an allowed row of the sky's vectors is within chord sqrt(chord2) of ``axis``
+    (``radius``: ``cone_radius(chord2)``): ``cone`` > 0, stopped at the first."""
+    vectors, start, rows, n_dec, n_ra, step = sky
+    if radius > WIDE_CONE_RAD:
+        for r in range(len(vectors)):
+            if allowed[r] and _within(vectors, r, axis, chord2):
+                return True
+        return False
+    i_lo, i_hi, j_lo, j_hi = _cells(axis, radius, n_dec, n_ra, step)
+    for i in range(i_lo, i_hi + 1):
+        for jj in range(j_lo, j_hi + 1):
+            cell = i * n_ra + jj % n_ra
+            for m in range(start[cell], start[cell + 1]):
+                r = rows[m]
+                if allowed[r] and _within(vectors, r, axis, chord2):
+                    return True
+    return False
 
 
 # the chance that a measured point is a star of the catalog under a right hypothesis (the
@@ -641,7 +676,7 @@ def catalog_triangles(pair_a, pair_b, pair_angle, vectors, allowed, s_ij, s_ik, 
 
 
 @njit(cache=True)
-def _screen(bearings, tri, triples, parities, sky, allowed, screen2, work, end_time):
+def _screen(bearings, tri, triples, parities, sky, allowed, screen2, end_time):
     """Per hypothesis, how many bearings land near some catalog star under its attitude (a
     quick count that may only err high: each bearing's own cells of the sky grid looked up),
     and its boresight (ICRS, for the field cone's star count, which the search makes only for
@@ -653,6 +688,7 @@ def _screen(bearings, tri, triples, parities, sky, allowed, screen2, work, end_t
     axes = np.zeros((m, 3))
     ones = np.ones(3)
     sky_b = np.empty(3)
+    screen_rad = cone_radius(screen2)
     for h in range(m):
         if h % CLOCK_EVERY == CLOCK_EVERY - 1 and end_time < math.inf and clock() > end_time:
             break
@@ -664,7 +700,7 @@ def _screen(bearings, tri, triples, parities, sky, allowed, screen2, work, end_t
                 sky_b[k] = (
                     R[0, k] * bearings[b, 0] + R[1, k] * bearings[b, 1] + R[2, k] * bearings[b, 2]
                 )
-            agree[h] += cone(sky_b, screen2, sky, allowed, work) > 0
+            agree[h] += near_star(sky_b, screen2, screen_rad, sky, allowed)
     return agree, axes
 
 
@@ -755,8 +791,7 @@ def triangle_search(bearings, triangles, pair_a, pair_b, pair_angle, max_angle, 
         if len(triples) == 0:
             continue
         hypotheses += len(triples)
-        agree, axes = _screen(bearings, tri, triples, parities, sky, allowed, screen2, work,
-                              end_time)  # fmt: skip
+        agree, axes = _screen(bearings, tri, triples, parities, sky, allowed, screen2, end_time)
         if timed and clock() > end_time:
             status = OUT_OF_TIME
             break
