@@ -221,6 +221,27 @@ def _spread(R, p, free, res, J):
 
 
 @njit(cache=True)
+def variance_scale(variance_px2, sigma_px):
+    """The factor that puts a fit's covariance (at its a-posteriori ``variance_px2``) at the
+    larger of that and ``sigma_px``² (1 when the residuals are exactly 0)."""
+    return max(1.0, sigma_px**2 / variance_px2) if variance_px2 > 0 else 1.0
+
+
+@njit(cache=True)
+def at_least_sigma(f, sigma_px):
+    """``f`` with its covariance and 1-sigmas at the larger of its a-posteriori variance and
+    the known centroid ``sigma_px``² (``variance_scale``; the residuals and the variance
+    itself kept): a fit of few stars estimates its variance from few residuals (2n - 3
+    degrees of freedom: of 5 stars' fits one in twenty puts the sigma 44 % or more low), and
+    a low estimate claims a precision the centroids do not have."""
+    scale = variance_scale(f.variance_px2, sigma_px)
+    root = math.sqrt(scale)
+    return Fit(f.R, f.params, f.residuals, f.rotation_cov * scale, f.variance_px2, f.leverage,
+               f.rms_px, f.sigma_boresight_arcsec * root, f.sigma_roll_arcsec * root,
+               f.sigma_focal_px * root)  # fmt: skip
+
+
+@njit(cache=True)
 def studentized(residuals, leverage, sigma_px):
     """Each star's residual over its own expected spread when the centroid error is
     ``sigma_px``: r^T (I - H_ii)^-1 r / sigma^2, chi-square with 2 degrees of freedom for a

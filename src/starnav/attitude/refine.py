@@ -33,7 +33,9 @@ class Refinement:
     ``sigma_focal_px``: 1-sigma of the focal length (0 when it was held fixed);
     ``rotation_cov_rad2`` (3, 3): covariance of the small rotation about the camera axes
     (radians squared) that took the a-posteriori variance ``variance_px2`` (px squared) per
-    coordinate; ``leverage`` (n, 2, 2): each star's block of the hat matrix.
+    coordinate (a solve told the centroid sigma takes at least its square:
+    ``attitude.kernels.at_least_sigma``); ``leverage`` (n, 2, 2): each star's block of the
+    hat matrix.
     """
 
     R_cam_from_icrs: np.ndarray

@@ -29,6 +29,12 @@ def kernels():
     return kernels
 
 
+CONTESTED = (
+    "two sets of matches explain the stars as well (as many stars, one point a different "
+    "star's): not sure which is right"
+)
+
+
 def conclude(
     found: Identification,
     stars: StarList,
@@ -37,13 +43,16 @@ def conclude(
     settings: MatchSettings,
     *,
     sigma_px: float,
+    known_sigma_px: float | None = None,
     fit_focal: bool,
     min_matched_fraction: float,
     fit_distortion: bool = False,
 ) -> tuple[Solution | None, str]:
     """The fitted solution of an identification, or None and the reason it is refused.
     ``database``: what it was identified on (its catalog's rows); ``camera``: the model the
-    identification used; ``settings``: its tolerances."""
+    identification used; ``settings``: its tolerances; ``sigma_px``: the centroid sigma the
+    outlier and rematch rules use; ``known_sigma_px``: the one told (None: not known), the
+    least the reported 1-sigmas are at (``attitude.kernels.at_least_sigma``)."""
     k = kernels()
     xy = np.ascontiguousarray(stars.xy, dtype=np.float64)
     rank = point_ranks(brightness_order(stars), len(xy))
@@ -66,6 +75,7 @@ def conclude(
         catalog_mags(database, stars.brightness is not None),
         int(found.bright_drop),
         float(sigma_px),
+        0.0 if known_sigma_px is None else float(known_sigma_px),
         int(found.hypotheses),
         settings.max_false_match_probability,
         float(min_matched_fraction),
@@ -74,6 +84,8 @@ def conclude(
         return None, wrong_scale(done.scale_focal_px, camera)
     if done.refusal == k.UNCONVINCING:
         return None, unconvincing(done.false_match_probability)
+    if done.refusal == k.CONTESTED:
+        return None, CONTESTED
     if done.refusal == k.TOO_FEW:
         return None, too_few(len(done.obs), done.expected, min_matched_fraction)
     fit = refinement(done.fit, camera)

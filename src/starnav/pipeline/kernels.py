@@ -15,7 +15,13 @@ from collections import namedtuple
 import numpy as np
 from numba import njit
 
-from starnav.attitude.kernels import fit, free_focal_step, studentized
+from starnav.attitude.kernels import (
+    at_least_sigma,
+    fit,
+    free_focal_step,
+    studentized,
+    variance_scale,
+)
 from starnav.camera.kernels import N_INTRINSIC, field_cos, pixels_to_bearings, sees
 from starnav.identify.kernels import (
     brightness_log_ratio,
@@ -40,7 +46,7 @@ SCALE_TOLERANCE = 0.005  # ... and more than this (relative) is refused without 
 N_USED = 3  # stars a hypothesis is built from (they agree by construction)
 N_DISTORTION = 2  # the distortion coefficients a fit may free (k1, k2)
 # refusals
-ACCEPTED, WRONG_SCALE, UNCONVINCING, TOO_FEW = 0, 1, 2, 3
+ACCEPTED, WRONG_SCALE, UNCONVINCING, TOO_FEW, CONTESTED = 0, 1, 2, 3, 4
 
 Converged = namedtuple("Converged", "obs cat fit n_cone field_area")
 Concluded = namedtuple(
@@ -79,7 +85,7 @@ def converge(obs, cat, R, xy, sky, allowed, model, p0, width, height, fit_focal,
                                  sigma_px)  # fmt: skip
     n_cone, area = 0, 0.0
     for _ in range(MAX_REMATCH):
-        scale = max(1.0, sigma_px**2 / f.variance_px2) if f.variance_px2 > 0 else 1.0
+        scale = variance_scale(f.variance_px2, sigma_px)
         bearings = pixels_to_bearings(model, f.params, xy)
         v = pair_catalog(bearings, f.R, sky, allowed, radius, f.rotation_cov * scale, True, work)
         n_cone, area = v.n_cone, v.field_area
@@ -90,6 +96,20 @@ def converge(obs, cat, R, xy, sky, allowed, model, p0, width, height, fit_focal,
         obs, cat, f = _drop_outliers(v.obs, v.cat, f, xy, vectors, model, p0, fit_focal,
                                      fit_distortion, sigma_px)  # fmt: skip
     return Converged(obs, cat, f, n_cone, area)
+
+
+@njit(cache=True)
+def same_pairs(obs_a, cat_a, obs_b, cat_b):
+    """Whether two sets of pairs (points ``obs``, catalog rows ``cat``) are the same."""
+    if len(obs_a) != len(obs_b):
+        return False
+    for i in range(len(obs_a)):
+        found = False
+        for j in range(len(obs_b)):
+            found = found or (obs_a[i] == obs_b[j] and cat_a[i] == cat_b[j])
+        if not found:
+            return False
+    return True
 
 
 @njit(cache=True)
@@ -131,14 +151,16 @@ def expected_stars(R, sky, model, p, width, height, work):
 @njit(cache=True)
 def conclude(obs, cat, R, xy, sky, allowed, model, p0, width, height, fit_focal,
              fit_distortion, radius, sigmas, log_sides, rank, mags, bright_drop, sigma_px,
-             hypotheses, max_p, min_matched_fraction):  # fmt: skip
+             known_sigma_px, hypotheses, max_p, min_matched_fraction):  # fmt: skip
     """From an identification (pairs ``obs`` / ``cat``, attitude ``R``) to the fitted
     solution and its refusal code (``ACCEPTED`` or why not). ``radius`` (rad): the pairing
     radius; ``sigmas`` (rad): the centroid sigmas the false-match probability takes the best
     of; ``log_sides``: the identification's triangle-side log ratio; ``rank``: the points'
     places in the brightness order, ``mags`` the catalog's (empty: the brightness is not
     known; ``identify.kernels.field_false_match``), ``bright_drop`` of the pairs' brightness
-    scores left out; ``sigma_px``: the sigma the outlier and rematch rules use."""
+    scores left out; ``sigma_px``: the sigma the outlier and rematch rules use;
+    ``known_sigma_px``: the centroid sigma when it is known (0: not), the least the reported
+    covariance is at (``at_least_sigma``)."""
     vectors = sky[0]
     work = np.empty(len(vectors), dtype=np.int64)
     a = converge(obs, cat, R, xy, sky, allowed, model, p0, width, height, fit_focal,
@@ -148,13 +170,20 @@ def conclude(obs, cat, R, xy, sky, allowed, model, p0, width, height, fit_focal,
     bearings = pixels_to_bearings(model, a.fit.params, xy)
     wide = pair_catalog(bearings, a.fit.R, sky, allowed, WIDE_FACTOR * radius, a.fit.rotation_cov,
                         False, work)  # fmt: skip
+    contested = False
     if len(wide.obs) > len(a.obs):
         b = converge(wide.obs, wide.cat, a.fit.R, xy, sky, allowed, model, p0, width, height,
                      fit_focal, fit_distortion, radius, sigma_px, work)  # fmt: skip
         rms_a, rms_b = shared_rms(a.obs, a.cat, a.fit.residuals, b.obs, b.cat, b.fit.residuals)
-        if len(b.obs) > len(a.obs) and rms_b <= WIDE_RMS_FACTOR * rms_a + WIDE_RMS_SIGMA * sigma_px:
+        fits = rms_b <= WIDE_RMS_FACTOR * rms_a + WIDE_RMS_SIGMA * sigma_px
+        if len(b.obs) > len(a.obs) and fits:
             a = b
             bearings = pixels_to_bearings(model, a.fit.params, xy)
+        elif len(b.obs) == len(a.obs) and fits and not same_pairs(a.obs, a.cat, b.obs, b.cat):
+            # as many stars, as well fitted, but not the same ones: a point of one answer
+            # (a false star far out, say, that bent the roll) is another star's in the
+            # other; which is right the stars do not say
+            contested = True
     f = a.fit
     # score the final pairs (the last verification may hold a slightly different set)
     dist = np.empty(len(a.obs))
@@ -186,9 +215,13 @@ def conclude(obs, cat, R, xy, sky, allowed, model, p0, width, height, fit_focal,
         df = f_scale - p0[0]
         if abs(df) > SCALE_SIGMAS * sigma and abs(df) > SCALE_TOLERANCE * p0[0]:
             refusal = WRONG_SCALE
+    if refusal == ACCEPTED and contested:
+        refusal = CONTESTED
     if refusal == ACCEPTED and p_false > max_p:
         refusal = UNCONVINCING
     expected = min(len(xy), expected_stars(f.R, sky, model, f.params, width, height, work))
     if refusal == ACCEPTED and len(a.obs) < min_matched_fraction * expected:
         refusal = TOO_FEW
+    if known_sigma_px > 0:
+        f = at_least_sigma(f, known_sigma_px)
     return Concluded(refusal, a.obs, a.cat, f, p_false, f_scale, expected)

@@ -318,6 +318,7 @@ def fit_identification(
         database,
         match_settings,
         sigma_px=settings.search_sigma_px,
+        known_sigma_px=settings.sigma_px,
         fit_focal=settings.fit_focal,
         fit_distortion=settings.fit_distortion,
         min_matched_fraction=settings.min_matched_fraction,
