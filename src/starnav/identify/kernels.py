@@ -95,49 +95,44 @@ def cone_radius(chord2):
 
 
 @njit(cache=True)
-def cone(axis, chord2, sky, allowed, out):
-    """Allowed rows of the sky's vectors within chord sqrt(chord2) of ``axis``, written to
-    ``out``; returns how many."""
+def _cone_rows(axis, chord2, radius, sky, allowed, out, first):
+    """Allowed rows of the sky's vectors within chord sqrt(chord2) of ``axis`` (``radius``:
+    ``cone_radius(chord2)``), written to ``out``; returns how many, or with ``first`` 1 at
+    the first found (nothing written)."""
     vectors, start, rows, n_dec, n_ra, step = sky
+    # a wide field's cone: every row in one run beats visiting the cells
+    wide = radius > WIDE_CONE_RAD
+    i_lo, i_hi, j_lo, j_hi = (0, 0, 0, 0) if wide else _cells(axis, radius, n_dec, n_ra, step)
+    n_j = j_hi - j_lo + 1
     n = 0
-    radius = cone_radius(chord2)
-    if radius > WIDE_CONE_RAD:  # a wide field's cone: every row beats visiting the cells
-        for r in range(len(vectors)):
+    for g in range(1 if wide else (i_hi - i_lo + 1) * n_j):
+        lo, hi = 0, len(vectors)
+        if not wide:
+            cell = (i_lo + g // n_j) * n_ra + (j_lo + g % n_j) % n_ra
+            lo, hi = start[cell], start[cell + 1]
+        for m in range(lo, hi):
+            r = m if wide else rows[m]
             if allowed[r] and _within(vectors, r, axis, chord2):
+                if first:
+                    return 1
                 out[n] = r
                 n += 1
-        return n
-    i_lo, i_hi, j_lo, j_hi = _cells(axis, radius, n_dec, n_ra, step)
-    for i in range(i_lo, i_hi + 1):
-        for jj in range(j_lo, j_hi + 1):
-            cell = i * n_ra + jj % n_ra
-            for m in range(start[cell], start[cell + 1]):
-                r = rows[m]
-                if allowed[r] and _within(vectors, r, axis, chord2):
-                    out[n] = r
-                    n += 1
     return n
 
 
 @njit(cache=True)
-def near_star(axis, chord2, radius, sky, allowed):
+def cone(axis, chord2, sky, allowed, out):
+    """Allowed rows of the sky's vectors within chord sqrt(chord2) of ``axis``, written to
+    ``out``; returns how many."""
+    return _cone_rows(axis, chord2, cone_radius(chord2), sky, allowed, out, False)
+
+
+@njit(cache=True)
+def near_star(axis, chord2, radius, sky, allowed, none):
     """Whether an allowed row of the sky's vectors is within chord sqrt(chord2) of ``axis``
-    (``radius``: ``cone_radius(chord2)``): ``cone`` > 0, stopped at the first."""
-    vectors, start, rows, n_dec, n_ra, step = sky
-    if radius > WIDE_CONE_RAD:
-        for r in range(len(vectors)):
-            if allowed[r] and _within(vectors, r, axis, chord2):
-                return True
-        return False
-    i_lo, i_hi, j_lo, j_hi = _cells(axis, radius, n_dec, n_ra, step)
-    for i in range(i_lo, i_hi + 1):
-        for jj in range(j_lo, j_hi + 1):
-            cell = i * n_ra + jj % n_ra
-            for m in range(start[cell], start[cell + 1]):
-                r = rows[m]
-                if allowed[r] and _within(vectors, r, axis, chord2):
-                    return True
-    return False
+    (``radius``: ``cone_radius(chord2)``, computed once by the caller): ``cone`` > 0,
+    stopped at the first. ``none``: an int64 array, nothing is written to it."""
+    return _cone_rows(axis, chord2, radius, sky, allowed, none, True) > 0
 
 
 # the chance that a measured point is a star of the catalog under a right hypothesis (the
@@ -689,6 +684,7 @@ def _screen(bearings, tri, triples, parities, sky, allowed, screen2, end_time):
     ones = np.ones(3)
     sky_b = np.empty(3)
     screen_rad = cone_radius(screen2)
+    none = np.empty(0, dtype=np.int64)
     for h in range(m):
         if h % CLOCK_EVERY == CLOCK_EVERY - 1 and end_time < math.inf and clock() > end_time:
             break
@@ -700,7 +696,7 @@ def _screen(bearings, tri, triples, parities, sky, allowed, screen2, end_time):
                 sky_b[k] = (
                     R[0, k] * bearings[b, 0] + R[1, k] * bearings[b, 1] + R[2, k] * bearings[b, 2]
                 )
-            agree[h] += near_star(sky_b, screen2, screen_rad, sky, allowed)
+            agree[h] += near_star(sky_b, screen2, screen_rad, sky, allowed, none)
     return agree, axes
 
 
