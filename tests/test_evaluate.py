@@ -399,3 +399,29 @@ def test_two_equally_good_sets_of_matches_are_refused_not_guessed():
     config = EvalConfig(seed=6016, kinds=ADVERSARIAL)
     r = solve_frame(config, uniform_boresights(50_000, seed=6016), 20435)
     assert r.outcome == "none" and "two sets of matches" in r.reason
+
+
+@pytest.mark.parametrize("seed, index", [(7000, 23823), (7019, 10407), (7019, 15135)])
+def test_one_far_star_does_not_hold_a_wrong_focal_length(seed, index):
+    """Three wrong answers of the third million adversarial frames (fov-off: the focal length
+    told 2-5 % off): a cluster (the Hyades, the Pleiades) fits the wrong scale by itself and
+    one star across the field, matched to a wrong neighbour where that scale puts one, held
+    the joint fit at the focal length told (seed 7000 #23823: 0.5 %, 2.3 sigma). Without that
+    one star the others say the focal length is off: refused, naming the one they fit."""
+    config = EvalConfig(seed=seed, kinds=ADVERSARIAL)
+    r = solve_frame(config, uniform_boresights(50_000, seed=seed), index)
+    assert r.kind == "fov-off" and r.outcome == "none"
+    assert "the stars fit a focal length of" in r.reason
+
+
+def test_a_far_star_between_the_stars_of_a_double_is_contested():
+    """The third million's few-star wrong answer (seed 7016 #9209): four stars in one corner
+    and one far point between HIP 100027 and HIP 100064 (4.4 px apart, the brighter one
+    missing from the frame). The point fixes the roll by itself, so the fit bends to
+    whichever it is given: it took the wrong one and the roll was 0.5° off. Judged from the
+    other four, the other star fits as well and would move the attitude beyond its error
+    bars: refused as not sure."""
+    config = EvalConfig(seed=7016, kinds=ADVERSARIAL)
+    r = solve_frame(config, uniform_boresights(50_000, seed=7016), 9209)
+    assert r.kind == "few" and r.outcome == "none"
+    assert "two sets of matches" in r.reason

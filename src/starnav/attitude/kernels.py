@@ -262,9 +262,10 @@ def studentized(residuals, leverage, sigma_px):
 
 
 @njit(cache=True)
-def free_focal_step(R, icrs, xy, model, p):
+def free_focal_step(R, icrs, xy, model, p, sigma_px=0.0):
     """(focal length px, its 1-sigma) the stars fit, by one Gauss-Newton step with the focal
-    length freed from a fit that held it (``R`` that fit's attitude)."""
+    length freed from a fit that held it (``R`` that fit's attitude). The 1-sigma is at the
+    a-posteriori variance, at least ``sigma_px``² (``variance_scale``; 0: no floor)."""
     free = np.zeros(N_INTRINSIC, dtype=np.bool_)
     free[0] = True
     res, J = residuals_jacobian(R, icrs, xy, model, p, free)
@@ -274,6 +275,8 @@ def free_focal_step(R, icrs, xy, model, p):
     step = cholesky_solve(L, -(J.T @ res))
     left = res + J @ step
     s2 = (left @ left) / max(len(res) - 4, 1)
+    if sigma_px > 0:
+        s2 *= variance_scale(s2, sigma_px)
     var = s2 / L[3, 3] ** 2  # (J^T J)^-1 [3, 3]
     f = p[0] * math.exp(step[3])
     return f, f * math.sqrt(max(var, 0.0))

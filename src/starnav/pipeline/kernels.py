@@ -22,7 +22,7 @@ from starnav.attitude.kernels import (
     studentized,
     variance_scale,
 )
-from starnav.camera.kernels import N_INTRINSIC, field_cos, pixels_to_bearings, sees
+from starnav.camera.kernels import N_INTRINSIC, field_cos, pixels_to_bearings, project, sees
 from starnav.identify.kernels import (
     brightness_log_ratio,
     chord,
@@ -43,6 +43,11 @@ WIDE_RMS_SIGMA = 0.1
 MIN_STARS_SCALE_CHECK = 6  # the focal length given is tested from this many matched stars on
 SCALE_SIGMAS = 5.0  # a focal length this many sigma off ...
 SCALE_TOLERANCE = 0.005  # ... and more than this (relative) is refused without --fit-focal
+# a pair is contested when another star for its point (or point for its star) fits nearly as
+# well, the likelihood ratio under SWAP_RATIO, and taking it would move the attitude beyond
+# SWAP_SIGMAS of its error
+SWAP_RATIO = 20.0
+SWAP_SIGMAS = 3.0
 N_USED = 3  # stars a hypothesis is built from (they agree by construction)
 N_DISTORTION = 2  # the distortion coefficients a fit may free (k1, k2)
 # refusals
@@ -99,22 +104,110 @@ def converge(obs, cat, R, xy, sky, allowed, model, p0, width, height, fit_focal,
 
 
 @njit(cache=True)
-def same_pairs(obs_a, cat_a, obs_b, cat_b):
-    """Whether two sets of pairs (points ``obs``, catalog rows ``cat``) are the same."""
-    if len(obs_a) != len(obs_b):
+def scale_off(R, icrs, xy, model, p0, sigma_px):
+    """(whether the stars put the focal length off the one given, the focal length px they
+    fit): off when it is more than ``SCALE_SIGMAS`` sigma (at least ``sigma_px``'s) and
+    ``SCALE_TOLERANCE`` away, by all the stars or by all but any one of them. One far star
+    can pin the scale: a close group (a cluster such as the Pleiades) fits a focal length a
+    few per cent off by itself, and one star across the field matched to a wrong neighbour
+    where that scale puts one then holds the joint fit at the focal length given."""
+    n = len(xy)
+    f_all, sigma = free_focal_step(R, icrs, xy, model, p0, sigma_px)
+    keep = np.ones(n, dtype=np.bool_)
+    for left_out in range(-1, n if n > MIN_STARS_SCALE_CHECK else 0):
+        if left_out < 0:
+            f_scale = f_all
+        else:
+            keep[:] = True
+            keep[left_out] = False
+            f_scale, sigma = free_focal_step(R, icrs[keep], xy[keep], model, p0, sigma_px)
+        df = f_scale - p0[0]
+        if abs(df) > SCALE_SIGMAS * sigma and abs(df) > SCALE_TOLERANCE * p0[0]:
+            return True, f_scale
+    return False, f_all
+
+
+@njit(cache=True)
+def _swap_matters(e, delta, leverage, sigma2, t, gate):
+    """Whether the alternative whose residual is the pair's plus ``delta`` (px) fits nearly as
+    well from the other stars (deleted residual ``e``, studentized ``t``) and moves the fit by
+    more than ``SWAP_SIGMAS`` (a residual change delta moves the parameters by
+    (J^T J)^-1 J_i^T delta: delta^T H_ii delta / sigma^2 in their covariance's units)."""
+    a0, a1 = e[0] + delta[0], e[1] + delta[1]
+    m00, m01 = 1.0 - leverage[0, 0], -leverage[0, 1]
+    m10, m11 = -leverage[1, 0], 1.0 - leverage[1, 1]
+    t_other = (a0 * (m00 * a0 + m01 * a1) + a1 * (m10 * a0 + m11 * a1)) / sigma2
+    if t_other > gate or t_other - t > 2.0 * math.log(SWAP_RATIO):
         return False
-    for i in range(len(obs_a)):
-        found = False
-        for j in range(len(obs_b)):
-            found = found or (obs_a[i] == obs_b[j] and cat_a[i] == cat_b[j])
-        if not found:
-            return False
-    return True
+    shift2 = (
+        delta[0] * (leverage[0, 0] * delta[0] + leverage[0, 1] * delta[1])
+        + delta[1] * (leverage[1, 0] * delta[0] + leverage[1, 1] * delta[1])
+    ) / sigma2
+    return shift2 > SWAP_SIGMAS**2
+
+
+@njit(cache=True)
+def contested_pair(obs, cat, f, xy, sky, allowed, model, sigma_px, work):
+    """Whether a pair of the fit ``f`` could as well be another: its point another catalog
+    star (unmatched, of ``allowed``) or its star another unmatched point, nearly as likely
+    judged from the other stars (each pair's deleted residual: the fit without it), and the
+    attitude would differ beyond its error bars. A far star that alone fixes the roll and sits
+    between the two stars of a close double is such a pair: whichever it is given, the fit
+    bends to it. ``sigma_px``: the centroid sigma (at least the fit's a-posteriori one)."""
+    vectors = sky[0]
+    n = len(obs)
+    sigma2 = sigma_px**2 * variance_scale(f.variance_px2, sigma_px)
+    gate = 2.0 * math.log(n / OUTLIER_ALPHA)  # the outlier rule's
+    t = studentized(f.residuals, f.leverage, math.sqrt(sigma2))
+    matched = np.zeros(len(xy), dtype=np.bool_)
+    matched[obs] = True
+    J_c = np.empty((2, 3))
+    J_p = np.empty((2, N_INTRINSIC))
+    e = np.empty(2)
+    delta = np.empty(2)
+    for i in range(n):
+        H = f.leverage[i]
+        a, b, c, d = 1.0 - H[0, 0], -H[0, 1], -H[1, 0], 1.0 - H[1, 1]
+        det = a * d - b * c
+        if not det > 1e-4:  # the fit rests on this pair alone: the others do not judge it
+            continue
+        r0, r1 = f.residuals[i, 0], f.residuals[i, 1]
+        e[0], e[1] = (d * r0 - b * r1) / det, (-c * r0 + a * r1) / det
+        # alternatives as far as the gate reaches from the deleted residual
+        reach_px = math.sqrt(e[0] ** 2 + e[1] ** 2) + math.sqrt(gate * sigma2 / det)
+        for q in range(len(xy)):
+            if not matched[q]:
+                delta[0] = xy[obs[i], 0] - xy[q, 0]
+                delta[1] = xy[obs[i], 1] - xy[q, 1]
+                if delta[0] ** 2 + delta[1] ** 2 <= reach_px**2 and _swap_matters(
+                    e, delta, H, sigma2, t[i], gate
+                ):
+                    return True
+        row = cat[i]
+        here = f.R @ vectors[row]
+        x0, y0 = project(model, f.params, here[0], here[1], here[2], J_c, J_p)
+        reach_rad = 2.0 * reach_px / f.params[0]
+        for m in range(cone(vectors[row], chord(reach_rad) ** 2, sky, allowed, work)):
+            other = work[m]
+            taken = False
+            for k in range(n):
+                taken = taken or cat[k] == other
+            if taken:
+                continue
+            c_o = f.R @ vectors[other]
+            if c_o[2] <= 0:
+                continue
+            x1, y1 = project(model, f.params, c_o[0], c_o[1], c_o[2], J_c, J_p)
+            delta[0], delta[1] = x1 - x0, y1 - y0
+            if _swap_matters(e, delta, H, sigma2, t[i], gate):
+                return True
+    return False
 
 
 @njit(cache=True)
 def shared_rms(obs_a, cat_a, res_a, obs_b, cat_b, res_b):
-    """Residual rms (px) of the pairs two fits share, under each (inf when none)."""
+    """Residual rms (px) of the pairs two fits share, under each (inf when none), and how
+    many they share (pairs are one to one: as many as both have means the same pairs)."""
     sa, sb, n = 0.0, 0.0, 0
     for i in range(len(obs_a)):
         for j in range(len(obs_b)):
@@ -123,8 +216,8 @@ def shared_rms(obs_a, cat_a, res_a, obs_b, cat_b, res_b):
                 sb += res_b[j, 0] ** 2 + res_b[j, 1] ** 2
                 n += 1
     if n == 0:
-        return np.inf, np.inf
-    return math.sqrt(sa / n), math.sqrt(sb / n)
+        return np.inf, np.inf, 0
+    return math.sqrt(sa / n), math.sqrt(sb / n), n
 
 
 @njit(cache=True)
@@ -174,12 +267,13 @@ def conclude(obs, cat, R, xy, sky, allowed, model, p0, width, height, fit_focal,
     if len(wide.obs) > len(a.obs):
         b = converge(wide.obs, wide.cat, a.fit.R, xy, sky, allowed, model, p0, width, height,
                      fit_focal, fit_distortion, radius, sigma_px, work)  # fmt: skip
-        rms_a, rms_b = shared_rms(a.obs, a.cat, a.fit.residuals, b.obs, b.cat, b.fit.residuals)
+        rms_a, rms_b, n_shared = shared_rms(a.obs, a.cat, a.fit.residuals, b.obs, b.cat,
+                                            b.fit.residuals)  # fmt: skip
         fits = rms_b <= WIDE_RMS_FACTOR * rms_a + WIDE_RMS_SIGMA * sigma_px
         if len(b.obs) > len(a.obs) and fits:
             a = b
             bearings = pixels_to_bearings(model, a.fit.params, xy)
-        elif len(b.obs) == len(a.obs) and fits and not same_pairs(a.obs, a.cat, b.obs, b.cat):
+        elif len(b.obs) == len(a.obs) and fits and n_shared < len(a.obs):
             # as many stars, as well fitted, but not the same ones: a point of one answer
             # (a false star far out, say, that bent the roll) is another star's in the
             # other; which is right the stars do not say
@@ -211,11 +305,12 @@ def conclude(obs, cat, R, xy, sky, allowed, model, p0, width, height, fit_focal,
     f_scale = 0.0
     if not fit_focal and len(a.obs) >= MIN_STARS_SCALE_CHECK:
         # a wrong focal length biases the attitude beyond its error bars: test the scale
-        f_scale, sigma = free_focal_step(f.R, vectors[a.cat], xy[a.obs], model, p0)
-        df = f_scale - p0[0]
-        if abs(df) > SCALE_SIGMAS * sigma and abs(df) > SCALE_TOLERANCE * p0[0]:
+        wrong, f_scale = scale_off(f.R, vectors[a.cat], xy[a.obs], model, p0, sigma_px)
+        if wrong:
             refusal = WRONG_SCALE
-    if refusal == ACCEPTED and contested:
+    if refusal == ACCEPTED and (
+        contested or contested_pair(a.obs, a.cat, f, xy, sky, allowed, model, sigma_px, work)
+    ):
         refusal = CONTESTED
     if refusal == ACCEPTED and p_false > max_p:
         refusal = UNCONVINCING
