@@ -414,6 +414,19 @@ def test_one_far_star_does_not_hold_a_wrong_focal_length(seed, index):
     assert "the stars fit a focal length of" in r.reason
 
 
+def test_a_larger_set_that_gives_a_point_another_star_contests_the_answer():
+    """A wrong answer of the fourth million (seed 8005 #30896, mirrored): a false star 2 px
+    from a true one took its star and bent a five-star fit (0.65° in roll) so that four true
+    stars fell outside the radius. The wide search found all nine, the true star on its own
+    point, but the five stars it shares fit the bent answer better (1.03 against 0.45 px rms,
+    a five-star fit follows its noise), so the larger set was not taken; it gives one of the
+    answer's stars another point, so the answer is refused as not sure."""
+    config = EvalConfig(seed=8005, kinds=ADVERSARIAL)
+    r = solve_frame(config, uniform_boresights(50_000, seed=8005), 30896)
+    assert r.kind == "mirrored" and r.outcome == "none"
+    assert "two sets of matches" in r.reason
+
+
 def test_a_far_star_between_the_stars_of_a_double_is_contested():
     """The third million's few-star wrong answer (seed 7016 #9209): four stars in one corner
     and one far point between HIP 100027 and HIP 100064 (4.4 px apart, the brighter one

@@ -30,8 +30,8 @@ def kernels():
 
 
 CONTESTED = (
-    "two sets of matches explain the stars as well (as many stars, one point a different "
-    "star's): not sure which is right"
+    "two sets of matches explain the stars about as well (a point or a star has another "
+    "partner in each): not sure which is right"
 )
 
 

@@ -205,19 +205,23 @@ def contested_pair(obs, cat, f, xy, sky, allowed, model, sigma_px, work):
 
 
 @njit(cache=True)
-def shared_rms(obs_a, cat_a, res_a, obs_b, cat_b, res_b):
-    """Residual rms (px) of the pairs two fits share, under each (inf when none), and how
-    many they share (pairs are one to one: as many as both have means the same pairs)."""
-    sa, sb, n = 0.0, 0.0, 0
+def compare_pairs(obs_a, cat_a, res_a, obs_b, cat_b, res_b):
+    """Two fits' pairs (points ``obs``, catalog rows ``cat``, residuals px): the residual rms
+    of the pairs they share under each (inf when none), how many they share (pairs are one to
+    one: as many as both have means the same pairs), and how many pairs of one give a point
+    or a star of the other a different partner."""
+    sa, sb, n, conflicts = 0.0, 0.0, 0, 0
     for i in range(len(obs_a)):
         for j in range(len(obs_b)):
-            if obs_a[i] == obs_b[j] and cat_a[i] == cat_b[j]:
+            same_point, same_star = obs_a[i] == obs_b[j], cat_a[i] == cat_b[j]
+            if same_point and same_star:
                 sa += res_a[i, 0] ** 2 + res_a[i, 1] ** 2
                 sb += res_b[j, 0] ** 2 + res_b[j, 1] ** 2
                 n += 1
+            conflicts += same_point != same_star
     if n == 0:
-        return np.inf, np.inf, 0
-    return math.sqrt(sa / n), math.sqrt(sb / n), n
+        return np.inf, np.inf, 0, conflicts
+    return math.sqrt(sa / n), math.sqrt(sb / n), n, conflicts
 
 
 @njit(cache=True)
@@ -267,8 +271,8 @@ def conclude(obs, cat, R, xy, sky, allowed, model, p0, width, height, fit_focal,
     if len(wide.obs) > len(a.obs):
         b = converge(wide.obs, wide.cat, a.fit.R, xy, sky, allowed, model, p0, width, height,
                      fit_focal, fit_distortion, radius, sigma_px, work)  # fmt: skip
-        rms_a, rms_b, n_shared = shared_rms(a.obs, a.cat, a.fit.residuals, b.obs, b.cat,
-                                            b.fit.residuals)  # fmt: skip
+        rms_a, rms_b, n_shared, conflicts = compare_pairs(a.obs, a.cat, a.fit.residuals, b.obs,
+                                                          b.cat, b.fit.residuals)  # fmt: skip
         fits = rms_b <= WIDE_RMS_FACTOR * rms_a + WIDE_RMS_SIGMA * sigma_px
         if len(b.obs) > len(a.obs) and fits:
             a = b
@@ -277,6 +281,12 @@ def conclude(obs, cat, R, xy, sky, allowed, model, p0, width, height, fit_focal,
             # as many stars, as well fitted, but not the same ones: a point of one answer
             # (a false star far out, say, that bent the roll) is another star's in the
             # other; which is right the stars do not say
+            contested = True
+        elif len(b.obs) > len(a.obs) and conflicts > 0:
+            # more stars, fitting the shared ones worse, and one of this answer's points or
+            # stars has another partner there: a false star beside a true one that bent a
+            # few-star fit (the shared stars then fit it better than the whole sky does)
+            # looks just like a far point pulled in that bends the larger fit
             contested = True
     f = a.fit
     # score the final pairs (the last verification may hold a slightly different set)
