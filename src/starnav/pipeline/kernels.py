@@ -22,7 +22,14 @@ from starnav.attitude.kernels import (
     studentized,
     variance_scale,
 )
-from starnav.camera.kernels import N_INTRINSIC, field_cos, pixels_to_bearings, project, sees
+from starnav.camera.kernels import (
+    N_INTRINSIC,
+    PINHOLE,
+    field_cos,
+    pixels_to_bearings,
+    project,
+    sees,
+)
 from starnav.identify.kernels import (
     brightness_log_ratio,
     chord,
@@ -195,7 +202,7 @@ def contested_pair(obs, cat, f, xy, sky, allowed, model, sigma_px, work):
             if taken:
                 continue
             c_o = f.R @ vectors[other]
-            if c_o[2] <= 0:
+            if model == PINHOLE and c_o[2] <= 0:  # a fisheye sees past 90°, a pinhole not
                 continue
             x1, y1 = project(model, f.params, c_o[0], c_o[1], c_o[2], J_c, J_p)
             delta[0], delta[1] = x1 - x0, y1 - y0
