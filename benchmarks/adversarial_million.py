@@ -157,7 +157,7 @@ def main() -> int:
     print(
         f"{state['wall_s'] / 60:.0f} min of evaluation in all; {machine(load)}; "
         f"`python benchmarks/adversarial_million.py --frames {args.frames} "
-        f"--chunk {args.chunk}`."
+        f"--chunk {args.chunk} --seed {args.seed}`."
     )
     return 0
 
