@@ -418,7 +418,7 @@ def test_a_larger_set_that_gives_a_point_another_star_contests_the_answer():
     """A wrong answer of the fourth million (seed 8005 #30896, mirrored): a false star 2 px
     from a true one took its star and bent a five-star fit (0.65° in roll) so that four true
     stars fell outside the radius. The wide search found all nine, the true star on its own
-    point, but the five stars it shares fit the bent answer better (1.03 against 0.45 px rms,
+    point, but the four stars they share fit the bent answer better (1.03 against 0.45 px rms,
     a five-star fit follows its noise), so the larger set was not taken; it gives one of the
     answer's stars another point, so the answer is refused as not sure."""
     config = EvalConfig(seed=8005, kinds=ADVERSARIAL)

@@ -111,6 +111,12 @@ def converge(obs, cat, R, xy, sky, allowed, model, p0, width, height, fit_focal,
 
 
 @njit(cache=True)
+def _focal_off(f, sigma, f0):
+    """Whether the focal length ``f`` (1-sigma ``sigma``) is off the one given, ``f0`` (px)."""
+    return abs(f - f0) > SCALE_SIGMAS * sigma and abs(f - f0) > SCALE_TOLERANCE * f0
+
+
+@njit(cache=True)
 def scale_off(R, icrs, xy, model, p0, sigma_px):
     """(whether the stars put the focal length off the one given, the focal length px they
     fit): off when it is more than ``SCALE_SIGMAS`` sigma (at least ``sigma_px``'s) and
@@ -120,37 +126,36 @@ def scale_off(R, icrs, xy, model, p0, sigma_px):
     where that scale puts one then holds the joint fit at the focal length given."""
     n = len(xy)
     f_all, sigma = free_focal_step(R, icrs, xy, model, p0, sigma_px)
+    if _focal_off(f_all, sigma, p0[0]):
+        return True, f_all
     keep = np.ones(n, dtype=np.bool_)
-    for left_out in range(-1, n if n > MIN_STARS_SCALE_CHECK else 0):
-        if left_out < 0:
-            f_scale = f_all
-        else:
-            keep[:] = True
-            keep[left_out] = False
-            f_scale, sigma = free_focal_step(R, icrs[keep], xy[keep], model, p0, sigma_px)
-        df = f_scale - p0[0]
-        if abs(df) > SCALE_SIGMAS * sigma and abs(df) > SCALE_TOLERANCE * p0[0]:
+    for left_out in range(n if n > MIN_STARS_SCALE_CHECK else 0):
+        keep[:] = True
+        keep[left_out] = False
+        f_scale, sigma = free_focal_step(R, icrs[keep], xy[keep], model, p0, sigma_px)
+        if _focal_off(f_scale, sigma, p0[0]):
             return True, f_scale
     return False, f_all
 
 
 @njit(cache=True)
-def _swap_matters(e, delta, leverage, sigma2, t, gate):
+def _form(u0, u1, M):
+    """u^T M u of the 2-vector (u0, u1) and the 2x2 ``M``."""
+    return u0 * (M[0, 0] * u0 + M[0, 1] * u1) + u1 * (M[1, 0] * u0 + M[1, 1] * u1)
+
+
+@njit(cache=True)
+def _swap_matters(e, delta, rest, leverage, sigma2, gate):
     """Whether the alternative whose residual is the pair's plus ``delta`` (px) fits nearly as
-    well from the other stars (deleted residual ``e``, studentized ``t``) and moves the fit by
-    more than ``SWAP_SIGMAS`` (a residual change delta moves the parameters by
-    (J^T J)^-1 J_i^T delta: delta^T H_ii delta / sigma^2 in their covariance's units)."""
-    a0, a1 = e[0] + delta[0], e[1] + delta[1]
-    m00, m01 = 1.0 - leverage[0, 0], -leverage[0, 1]
-    m10, m11 = -leverage[1, 0], 1.0 - leverage[1, 1]
-    t_other = (a0 * (m00 * a0 + m01 * a1) + a1 * (m10 * a0 + m11 * a1)) / sigma2
+    well from the other stars (the pair's deleted residual ``e``, studentized
+    e^T (I - H_ii) e / sigma^2; ``rest`` = I - H_ii) and moves the fit by more than
+    ``SWAP_SIGMAS`` (a residual change delta moves the parameters by (J^T J)^-1 J_i^T delta:
+    delta^T H_ii delta / sigma^2 in their covariance's units)."""
+    t = _form(e[0], e[1], rest) / sigma2
+    t_other = _form(e[0] + delta[0], e[1] + delta[1], rest) / sigma2
     if t_other > gate or t_other - t > 2.0 * math.log(SWAP_RATIO):
         return False
-    shift2 = (
-        delta[0] * (leverage[0, 0] * delta[0] + leverage[0, 1] * delta[1])
-        + delta[1] * (leverage[1, 0] * delta[0] + leverage[1, 1] * delta[1])
-    ) / sigma2
-    return shift2 > SWAP_SIGMAS**2
+    return _form(delta[0], delta[1], leverage) / sigma2 > SWAP_SIGMAS**2
 
 
 @njit(cache=True)
@@ -165,7 +170,6 @@ def contested_pair(obs, cat, f, xy, sky, allowed, model, sigma_px, work):
     n = len(obs)
     sigma2 = sigma_px**2 * variance_scale(f.variance_px2, sigma_px)
     gate = 2.0 * math.log(n / OUTLIER_ALPHA)  # the outlier rule's
-    t = studentized(f.residuals, f.leverage, math.sqrt(sigma2))
     matched = np.zeros(len(xy), dtype=np.bool_)
     matched[obs] = True
     J_c = np.empty((2, 3))
@@ -174,12 +178,13 @@ def contested_pair(obs, cat, f, xy, sky, allowed, model, sigma_px, work):
     delta = np.empty(2)
     for i in range(n):
         H = f.leverage[i]
-        a, b, c, d = 1.0 - H[0, 0], -H[0, 1], -H[1, 0], 1.0 - H[1, 1]
+        rest = np.eye(2) - H
+        a, b, c, d = rest[0, 0], rest[0, 1], rest[1, 0], rest[1, 1]
         det = a * d - b * c
         if not det > 1e-4:  # the fit rests on this pair alone: the others do not judge it
             continue
         r0, r1 = f.residuals[i, 0], f.residuals[i, 1]
-        e[0], e[1] = (d * r0 - b * r1) / det, (-c * r0 + a * r1) / det
+        e[0], e[1] = (d * r0 - b * r1) / det, (-c * r0 + a * r1) / det  # (I - H_ii)^-1 r
         # alternatives as far as the gate reaches from the deleted residual
         reach_px = math.sqrt(e[0] ** 2 + e[1] ** 2) + math.sqrt(gate * sigma2 / det)
         for q in range(len(xy)):
@@ -187,7 +192,7 @@ def contested_pair(obs, cat, f, xy, sky, allowed, model, sigma_px, work):
                 delta[0] = xy[obs[i], 0] - xy[q, 0]
                 delta[1] = xy[obs[i], 1] - xy[q, 1]
                 if delta[0] ** 2 + delta[1] ** 2 <= reach_px**2 and _swap_matters(
-                    e, delta, H, sigma2, t[i], gate
+                    e, delta, rest, H, sigma2, gate
                 ):
                     return True
         row = cat[i]
@@ -206,7 +211,7 @@ def contested_pair(obs, cat, f, xy, sky, allowed, model, sigma_px, work):
                 continue
             x1, y1 = project(model, f.params, c_o[0], c_o[1], c_o[2], J_c, J_p)
             delta[0], delta[1] = x1 - x0, y1 - y0
-            if _swap_matters(e, delta, H, sigma2, t[i], gate):
+            if _swap_matters(e, delta, rest, H, sigma2, gate):
                 return True
     return False
 
