@@ -45,3 +45,43 @@ def test_damaged_cache_is_rebuilt():
     first.path.write_bytes(b"not a numpy file")
     again = build_database(cat, 10.0)
     assert not again.from_cache and np.array_equal(again.pair_b, first.pair_b)
+
+
+def _near_directions(v, radius, rng):
+    """Directions just inside and just outside ``radius`` (rad) of each of ``v``, and on the
+    cube's edges and corners, where the near-star grid's faces meet."""
+    k = rng.normal(size=v.shape)
+    k -= np.sum(k * v, axis=1)[:, None] * v  # a tangent direction per star
+    k /= np.linalg.norm(k, axis=1)[:, None]
+    out = []
+    for f in (0.5, 0.999, 1.001, 1.5):
+        a = f * radius
+        out.append(np.cos(a) * v + np.sin(a) * k)
+    edges = rng.choice([-1.0, 1.0], size=(2000, 3))
+    edges[:1000, 0] = rng.uniform(-1, 1, 1000)  # along an edge; the rest: corners
+    out.append(edges)
+    out = np.vstack(out)
+    return out / np.linalg.norm(out, axis=1)[:, None]
+
+
+def test_the_near_star_grid_answers_as_a_search_of_every_star():
+    from starnav.identify import kernels
+    from starnav.identify.database import near_grid
+
+    rng = np.random.default_rng(5)
+    cat = _small_catalog(n=600)
+    # stars on the cube's edges and corners too, where one disk spans two or three faces
+    corner = rng.choice([-1.0, 1.0], size=(40, 3)) + rng.normal(0, 1e-3, (40, 3))
+    v = np.vstack([cat.vectors, corner / np.linalg.norm(corner, axis=1)[:, None]])
+    allowed = np.ones(len(v), dtype=np.bool_)
+    allowed[::7] = False  # a star that is not allowed is not near
+    for radius_deg in (0.04, 1.0, 8.0):
+        radius = np.radians(radius_deg)
+        chord2 = kernels.chord(radius) ** 2
+        near = near_grid(v, kernels.cone_radius(chord2))
+        queries = _near_directions(v, radius, rng)
+        got = np.array([kernels.near_cell(q, chord2, near, v, allowed) for q in queries])
+        d2 = np.sum((queries[:, None, :] - v[None, allowed, :]) ** 2, axis=2)
+        expected = np.any(d2 <= chord2, axis=1)
+        assert got.sum() > len(v)  # many queries are near a star, many are not
+        assert np.array_equal(got, expected), radius_deg

@@ -25,6 +25,7 @@ from starnav.geometry import angle_between, chord_from_angle
 
 _FORMAT_VERSION = 2
 GRID_STEP_DEG = 1.0  # cells of the RA / Dec grid the cone searches of the kernels use
+NEAR_CELLS_PER_STAR = 2.0  # the near-star grid has about this many cells per catalog star
 _ANGLE_STEP_DEG = 0.5  # databases are built for max angles rounded up to this step
 
 
@@ -68,22 +69,36 @@ class PairDatabase:
     @property
     def verification_nbytes(self) -> int:
         """Bytes of what every verification searches: catalog vectors, their KD-tree (its
-        copy of the vectors counted only when it is one) and the RA / Dec grid's arrays."""
+        copy of the vectors counted only when it is one) and the grids' arrays."""
         shared = np.shares_memory(self.tree.data, self.catalog.vectors)
         data = 0 if shared else self.tree.data.nbytes
         return int(self.catalog.vectors.nbytes + data + self.tree.indices.nbytes + self.grid_nbytes)
 
     @property
     def grid_nbytes(self) -> int:
-        """Bytes of the RA / Dec grid's own arrays (its vectors are the catalog's)."""
+        """Bytes of the RA / Dec grid's own arrays (its vectors are the catalog's) and of the
+        near-star grids built so far (``near``)."""
         _, start, rows, *_ = self.sky
-        return int(start.nbytes + rows.nbytes)
+        near = sum(a.nbytes + b.nbytes for a, b, _ in self._near_grids.values())
+        return int(start.nbytes + rows.nbytes + near)
 
     @functools.cached_property
     def sky(self) -> tuple:
         """The RA / Dec grid of the catalog the kernels search (``sky_grid``; ~2 ms for
         5000 stars, built on first use)."""
         return sky_grid(self.catalog.vectors)
+
+    def near(self, radius_rad: float) -> tuple:
+        """The near-star grid of the catalog for ``radius_rad`` (``near_grid``; built on first
+        use per radius, ~1 ms for 5000 stars)."""
+        grids = self._near_grids
+        if radius_rad not in grids:
+            grids[radius_rad] = near_grid(self.catalog.vectors, radius_rad)
+        return grids[radius_rad]
+
+    @functools.cached_property
+    def _near_grids(self) -> dict[float, tuple]:
+        return {}
 
     @functools.cached_property
     def everything(self) -> np.ndarray:
@@ -125,6 +140,51 @@ def sky_grid(vectors: np.ndarray, step_deg: float = GRID_STEP_DEG) -> tuple:
     rows = np.argsort(cell, kind="stable").astype(np.int32)
     start = np.searchsorted(cell[rows], np.arange(n_dec * n_ra + 1)).astype(np.int32)
     return (vectors, start, rows, n_dec, n_ra, step)
+
+
+def near_grid(vectors: np.ndarray, radius_rad: float) -> tuple:
+    """A grid that answers "is a star within ``radius_rad`` of this direction?" from one
+    cell, without trigonometry: ``(start, rows, n)``. The sphere is split into the six faces
+    of a cube (a direction's face: its largest component and that component's sign), each face
+    into n x n cells of its gnomonic plane (u, w = the next two components over the largest's
+    magnitude, in [-1, 1]); cell ``(face * n + i) * n + j`` holds rows
+    ``rows[start[c]:start[c + 1]]``: every star whose disk of ``radius_rad`` reaches into it.
+    The gnomonic map stretches an angle by at most 1 / d^2 where the direction's component
+    along the face's axis is d, and within ``radius_rad`` of a face d is at least
+    cos(atan(sqrt 2) + radius): a star within the radius of a direction is within
+    e = radius / d_min^2 of it in (u, w) on the direction's face, so a star is listed in every
+    cell its box u +- e, w +- e meets, on every face whose square grown by e holds it. The
+    cells are at least 2 e wide (a star is in at most 4 per face)."""
+    vectors = np.ascontiguousarray(vectors, dtype=np.float64)
+    d_min = math.cos(math.atan(math.sqrt(2.0)) + radius_rad)
+    if radius_rad <= 0.0 or d_min <= 0.0:
+        raise ValueError(f"the near-star grid needs a radius under 35°, got {radius_rad!r} rad")
+    e = radius_rad / d_min**2 * (1.0 + 1e-6) + 1e-12
+    per_face = round(math.sqrt(NEAR_CELLS_PER_STAR * len(vectors) / 6.0))
+    n = int(max(1, min(math.floor(1.0 / e), per_face)))
+    cells, rows = [], []
+    index = np.arange(len(vectors))
+    for face in range(6):
+        axis, sign = face // 2, (1.0 if face % 2 == 0 else -1.0)
+        d = sign * vectors[:, axis]
+        ok = d > 0.0
+        u = vectors[ok, (axis + 1) % 3] / d[ok]
+        w = vectors[ok, (axis + 2) % 3] / d[ok]
+        inside = (np.abs(u) <= 1.0 + e) & (np.abs(w) <= 1.0 + e)
+        u, w, star = u[inside], w[inside], index[ok][inside]
+        i_lo, i_hi, j_lo, j_hi = (
+            np.clip(np.floor((c + 1.0) * 0.5 * n), 0, n - 1).astype(np.int64)
+            for c in (u - e, u + e, w - e, w + e)
+        )
+        for di in (0, 1):
+            for dj in (0, 1):
+                keep = (i_lo + di <= i_hi) & (j_lo + dj <= j_hi)
+                cells.append((face * n + i_lo[keep] + di) * n + j_lo[keep] + dj)
+                rows.append(star[keep])
+    cell, row = np.concatenate(cells), np.concatenate(rows)
+    order = np.argsort(cell, kind="stable")
+    start = np.searchsorted(cell[order], np.arange(6 * n * n + 1)).astype(np.int32)
+    return (start, row[order].astype(np.int32), n)
 
 
 def catalog_only(catalog: Catalog, max_angle_rad: float) -> PairDatabase:

@@ -9,8 +9,9 @@ tracking. Every decision of the verification is written here once; the Python mo
 
 The sky grid ``sky = (vectors, start, rows, n_dec, n_ra, step_rad)``: cell ``i * n_ra + j``
 (Dec band i from the south pole, RA column j) holds catalog rows ``rows[start[c]:start[c+1]]``
-(``identify.database.sky_grid``). Searches see only the rows where ``allowed`` is True
-(tracking: the stars near the prior).
+(``identify.database.sky_grid``); the screen asks instead one cell of a cube's faces whether a
+star is near (``near = (start, rows, n)``, ``identify.database.near_grid``). Searches see only
+the rows where ``allowed`` is True (tracking: the stars near the prior).
 """
 
 from __future__ import annotations
@@ -95,11 +96,11 @@ def cone_radius(chord2):
 
 
 @njit(cache=True)
-def _cone_rows(axis, chord2, radius, sky, allowed, out, first):
-    """Allowed rows of the sky's vectors within chord sqrt(chord2) of ``axis`` (``radius``:
-    ``cone_radius(chord2)``), written to ``out``; returns how many, or with ``first`` 1 at
-    the first found (nothing written)."""
+def cone(axis, chord2, sky, allowed, out):
+    """Allowed rows of the sky's vectors within chord sqrt(chord2) of ``axis``, written to
+    ``out``; returns how many."""
     vectors, start, rows, n_dec, n_ra, step = sky
+    radius = cone_radius(chord2)
     # a wide field's cone: every row in one run beats visiting the cells
     wide = radius > WIDE_CONE_RAD
     i_lo, i_hi, j_lo, j_hi = (0, 0, 0, 0) if wide else _cells(axis, radius, n_dec, n_ra, step)
@@ -113,26 +114,31 @@ def _cone_rows(axis, chord2, radius, sky, allowed, out, first):
         for m in range(lo, hi):
             r = m if wide else rows[m]
             if allowed[r] and _within(vectors, r, axis, chord2):
-                if first:
-                    return 1
                 out[n] = r
                 n += 1
     return n
 
 
 @njit(cache=True)
-def cone(axis, chord2, sky, allowed, out):
-    """Allowed rows of the sky's vectors within chord sqrt(chord2) of ``axis``, written to
-    ``out``; returns how many."""
-    return _cone_rows(axis, chord2, cone_radius(chord2), sky, allowed, out, False)
-
-
-@njit(cache=True)
-def near_star(axis, chord2, radius, sky, allowed, none):
-    """Whether an allowed row of the sky's vectors is within chord sqrt(chord2) of ``axis``
-    (``radius``: ``cone_radius(chord2)``, computed once by the caller): ``cone`` > 0,
-    stopped at the first. ``none``: an int64 array, nothing is written to it."""
-    return _cone_rows(axis, chord2, radius, sky, allowed, none, True) > 0
+def near_cell(axis, chord2, near, vectors, allowed):
+    """Whether an allowed row of ``vectors`` is within chord sqrt(chord2) of ``axis`` (a
+    unit vector), for a chord within the radius ``near`` was built for
+    (``identify.database.near_grid``): the stars listed in the one cell of ``axis``."""
+    start, rows, n = near
+    ax, big = 0, abs(axis[0])
+    if abs(axis[1]) > big:
+        ax, big = 1, abs(axis[1])
+    if abs(axis[2]) > big:
+        ax, big = 2, abs(axis[2])
+    face = 2 * ax + (1 if axis[ax] < 0.0 else 0)
+    i = min(max(math.floor((axis[(ax + 1) % 3] / big + 1.0) * 0.5 * n), 0), n - 1)
+    j = min(max(math.floor((axis[(ax + 2) % 3] / big + 1.0) * 0.5 * n), 0), n - 1)
+    cell = (face * n + i) * n + j
+    for m in range(start[cell], start[cell + 1]):
+        r = rows[m]
+        if allowed[r] and _within(vectors, r, axis, chord2):
+            return True
+    return False
 
 
 # the chance that a measured point is a star of the catalog under a right hypothesis (the
@@ -671,9 +677,9 @@ def catalog_triangles(pair_a, pair_b, pair_angle, vectors, allowed, s_ij, s_ik, 
 
 
 @njit(cache=True)
-def _screen(bearings, tri, triples, parities, sky, allowed, screen2, end_time):
+def _screen(bearings, tri, triples, parities, sky, near, allowed, screen2, end_time):
     """Per hypothesis, how many bearings land near some catalog star under its attitude (a
-    quick count that may only err high: each bearing's own cells of the sky grid looked up),
+    quick count: each bearing's one cell of the near-star grid ``near`` looked up),
     and its boresight (ICRS, for the field cone's star count, which the search makes only for
     the hypotheses it may verify); stops early (the rest counted 0) after ``end_time``
     (``clock`` seconds)."""
@@ -683,8 +689,6 @@ def _screen(bearings, tri, triples, parities, sky, allowed, screen2, end_time):
     axes = np.zeros((m, 3))
     ones = np.ones(3)
     sky_b = np.empty(3)
-    screen_rad = cone_radius(screen2)
-    none = np.empty(0, dtype=np.int64)
     for h in range(m):
         if h % CLOCK_EVERY == CLOCK_EVERY - 1 and end_time < math.inf and clock() > end_time:
             break
@@ -696,7 +700,7 @@ def _screen(bearings, tri, triples, parities, sky, allowed, screen2, end_time):
                 sky_b[k] = (
                     R[0, k] * bearings[b, 0] + R[1, k] * bearings[b, 1] + R[2, k] * bearings[b, 2]
                 )
-            agree[h] += near_star(sky_b, screen2, screen_rad, sky, allowed, none)
+            agree[h] += near_cell(sky_b, screen2, near, vectors, allowed)
     return agree, axes
 
 
@@ -742,8 +746,8 @@ def _shortest_sides_first(bearings, idx):
 
 
 @njit(cache=True)
-def triangle_search(bearings, triangles, pair_a, pair_b, pair_angle, max_angle, sky, allowed,
-                    tol, radius, sigmas, rank, mags, bright_drop, max_p, parity_known,
+def triangle_search(bearings, triangles, pair_a, pair_b, pair_angle, max_angle, sky, near,
+                    allowed, tol, radius, sigmas, rank, mags, bright_drop, max_p, parity_known,
                     max_hypotheses, end_time):  # fmt: skip
     """Try the measured ``triangles`` (rows of ``bearings``, (t, 3)) in order: look up the
     catalog triangles of each, screen all their hypotheses, verify the best (by the screen)
@@ -787,7 +791,8 @@ def triangle_search(bearings, triangles, pair_a, pair_b, pair_angle, max_angle, 
         if len(triples) == 0:
             continue
         hypotheses += len(triples)
-        agree, axes = _screen(bearings, tri, triples, parities, sky, allowed, screen2, end_time)
+        agree, axes = _screen(bearings, tri, triples, parities, sky, near, allowed, screen2,
+                              end_time)  # fmt: skip
         if timed and clock() > end_time:
             status = OUT_OF_TIME
             break

@@ -96,6 +96,9 @@ def match_triangles(
     # brightness is evidence; of the brightest stars only (wide fields), it is not
     bright_drop = 0 if database.pair_stars in (0, len(database.catalog)) else 3
     search = kernels().triangle_search
+    radius_rad = settings.kernel_args()[0]
+    # the screen's chord, as an angle (a hair wider: ``cone_radius``)
+    screen_rad = kernels().cone_radius(kernels().chord(radius_rad) ** 2)
     args = (
         bearings,
         triangles,
@@ -104,6 +107,7 @@ def match_triangles(
         database.pair_angle_rad,
         database.max_angle_rad,
         database.sky,
+        database.near(screen_rad),
         tester.allowed,
         settings.pair_tol_rad,
         *settings.kernel_args(),
