@@ -75,7 +75,7 @@ def test_the_near_star_grid_answers_as_a_search_of_every_star():
     v = np.vstack([cat.vectors, corner / np.linalg.norm(corner, axis=1)[:, None]])
     allowed = np.ones(len(v), dtype=np.bool_)
     allowed[::7] = False  # a star that is not allowed is not near
-    for radius_deg in (0.04, 1.0, 8.0):
+    for radius_deg in (0.04, 1.0, 8.0, 40.0):  # 40°: one cell per face
         radius = np.radians(radius_deg)
         chord2 = kernels.chord(radius) ** 2
         near = near_grid(v, kernels.cone_radius(chord2))

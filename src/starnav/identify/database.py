@@ -153,16 +153,19 @@ def near_grid(vectors: np.ndarray, radius_rad: float) -> tuple:
     cos(atan(sqrt 2) + radius): a star within the radius of a direction is within
     e = radius / d_min^2 of it in (u, w) on the direction's face, so a star is listed in every
     cell its box u +- e, w +- e meets, on every face whose square grown by e holds it. The
-    cells are at least 2 e wide (a star is in at most 4 per face)."""
+    cells are at least 2 e wide (a star is in at most 4 per face). A radius over ~30°: every
+    star in the one cell of every face."""
     vectors = np.ascontiguousarray(vectors, dtype=np.float64)
+    index = np.arange(len(vectors))
     d_min = math.cos(math.atan(math.sqrt(2.0)) + radius_rad)
-    if radius_rad <= 0.0 or d_min <= 0.0:
-        raise ValueError(f"the near-star grid needs a radius under 35°, got {radius_rad!r} rad")
+    if d_min < 0.1:  # a radius over ~30°: one cell per face, holding every star
+        n_stars = len(vectors)
+        start = np.arange(7, dtype=np.int32) * n_stars
+        return (start, np.tile(index, 6).astype(np.int32), 1)
     e = radius_rad / d_min**2 * (1.0 + 1e-6) + 1e-12
     per_face = round(math.sqrt(NEAR_CELLS_PER_STAR * len(vectors) / 6.0))
     n = int(max(1, min(math.floor(1.0 / e), per_face)))
     cells, rows = [], []
-    index = np.arange(len(vectors))
     for face in range(6):
         axis, sign = face // 2, (1.0 if face % 2 == 0 else -1.0)
         d = sign * vectors[:, axis]

@@ -96,7 +96,7 @@ def match_triangles(
     # brightness is evidence; of the brightest stars only (wide fields), it is not
     bright_drop = 0 if database.pair_stars in (0, len(database.catalog)) else 3
     search = kernels().triangle_search
-    radius_rad = settings.kernel_args()[0]
+    radius_rad, sigmas_rad = settings.kernel_args()
     # the screen's chord, as an angle (a hair wider: ``cone_radius``)
     screen_rad = kernels().cone_radius(kernels().chord(radius_rad) ** 2)
     args = (
@@ -110,7 +110,8 @@ def match_triangles(
         database.near(screen_rad),
         tester.allowed,
         settings.pair_tol_rad,
-        *settings.kernel_args(),
+        radius_rad,
+        sigmas_rad,
         tester.rank,
         tester.mags,
         bright_drop,
