@@ -78,7 +78,7 @@ def test_the_near_star_grid_answers_as_a_search_of_every_star():
     for radius_deg in (0.04, 1.0, 8.0, 40.0):  # 40°: one cell per face
         radius = np.radians(radius_deg)
         chord2 = kernels.chord(radius) ** 2
-        near = near_grid(v, kernels.cone_radius(chord2))
+        near = near_grid(v, radius)  # as the search builds it: for the match radius
         queries = _near_directions(v, radius, rng)
         got = np.array([kernels.near_cell(q, chord2, near, v, allowed) for q in queries])
         d2 = np.sum((queries[:, None, :] - v[None, allowed, :]) ** 2, axis=2)

@@ -153,8 +153,9 @@ def near_grid(vectors: np.ndarray, radius_rad: float) -> tuple:
     cos(atan(sqrt 2) + radius): a star within the radius of a direction is within
     e = radius / d_min^2 of it in (u, w) on the direction's face, so a star is listed in every
     cell its box u +- e, w +- e meets, on every face whose square grown by e holds it. The
-    cells are at least 2 e wide (a star is in at most 4 per face). A radius over ~30°: every
-    star in the one cell of every face."""
+    cells are at least 2 e wide (a star is in at most 4 per face); e is taken a millionth wider,
+    so a chord of ``radius_rad`` (its angle exact but for rounding) is covered. A radius over
+    ~30°: every star in the one cell of every face."""
     vectors = np.ascontiguousarray(vectors, dtype=np.float64)
     index = np.arange(len(vectors))
     d_min = math.cos(math.atan(math.sqrt(2.0)) + radius_rad)

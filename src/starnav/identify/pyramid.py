@@ -97,8 +97,6 @@ def match_triangles(
     bright_drop = 0 if database.pair_stars in (0, len(database.catalog)) else 3
     search = kernels().triangle_search
     radius_rad, sigmas_rad = settings.kernel_args()
-    # the screen's chord, as an angle (a hair wider: ``cone_radius``)
-    screen_rad = kernels().cone_radius(kernels().chord(radius_rad) ** 2)
     args = (
         bearings,
         triangles,
@@ -107,7 +105,7 @@ def match_triangles(
         database.pair_angle_rad,
         database.max_angle_rad,
         database.sky,
-        database.near(screen_rad),
+        database.near(radius_rad),
         tester.allowed,
         settings.pair_tol_rad,
         radius_rad,
