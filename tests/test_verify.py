@@ -3,6 +3,7 @@
 weighs the evidence the way it should (tight beats loose, more beats fewer, a dense field
 counts less, an unmatched point lowers the odds)."""
 
+import itertools
 import math
 
 import numpy as np
@@ -12,6 +13,7 @@ from scipy.integrate import quad
 from starnav.identify import kernels as K
 from starnav.identify.base import MatchSettings
 from starnav.identify.verify import Verification
+from starnav.starlist import StarList, point_magnitudes
 
 PX = 1.0 / 2435.68  # rad per px of a 12° / 512 px camera
 SIGMA = 0.5 * PX
@@ -87,34 +89,46 @@ def test_an_unknown_sigma_takes_the_best_of_the_grid_and_pays_for_it():
     assert best == pytest.approx(4 * _p([0.2] * 8, 10, settings=at_quarter), rel=1e-9)
 
 
-def test_brightness_and_side_ratios_have_expectation_at_most_one():
-    n_cone = 30
-    mags = np.arange(n_cone, dtype=float)  # row k is the k-th brightest
-    cone_rows = np.arange(n_cone)
-    for r in range(0, 14):
-        # a wrong hypothesis pairs point r with any star of the field, uniformly
-        mean = np.mean(
-            [
-                math.exp(
-                    K.brightness_log_ratio(
-                        np.array([0]), np.array([k]), np.array([r]), mags, cone_rows, n_cone, 0
-                    )
-                )
-                for k in range(n_cone)
-            ]
-        )
-        assert mean == pytest.approx(1.0, abs=1e-12) or mean < 1.0
-    # a right one's bright point on a bright star: evidence; unknown brightness: none
-    one = (np.array([0]), np.array([0]), np.array([0]), mags, cone_rows, 30)
-    assert K.brightness_log_ratio(*one, 0) == pytest.approx(math.log(0.5 + 0.5 * 30 / 4))
-    # the stars that built a hypothesis may come from tables of bright stars: left out
-    assert K.brightness_log_ratio(*one, 1) == 0.0
-    unknown = (np.array([0]), np.array([0]), np.array([-1]), mags, cone_rows, 30)
-    assert K.brightness_log_ratio(*unknown, 0) == 0.0
-    # tied magnitudes are ranked by row: a star tied with all the others is not "brightest"
-    tied = np.zeros(n_cone)
-    assert K.brightness_log_ratio(np.array([0]), np.array([29]), np.array([0]), tied,
-                                  cone_rows, 30, 0) == pytest.approx(math.log(0.5))  # fmt: skip
+def _bright(cat, point_mag, mags, n_used=0, rank=None):
+    """``brightness_log_ratio`` of points 0..n-1 paired with rows ``cat``, the whole
+    ``mags`` the field cone."""
+    n = len(cat)
+    rank = np.arange(len(point_mag)) if rank is None else rank
+    point_mag = np.asarray(point_mag, dtype=float)
+    cone = np.arange(len(mags))
+    return K.brightness_log_ratio(np.arange(n), np.asarray(cat), rank, point_mag, mags, cone,
+                                  len(mags), n_used)  # fmt: skip
+
+
+def test_brightness_ratio_has_expectation_at_most_one_and_weighs_magnitudes():
+    rng = np.random.default_rng(3)
+    mags = np.sort(rng.uniform(1.0, 6.0, 12))  # the field cone's stars
+    points = np.array([2.1, 3.4, 3.9])  # instrumental magnitudes, any zero point
+    # a wrong hypothesis pairs each point with any star of the field (independently): the
+    # mean over every pairing, exactly, is at most 1 (1 but for the zero points left out)
+    for n in (1, 2):
+        pairings = itertools.product(range(12), repeat=n)
+        means = [math.exp(_bright(c, points[:n], mags)) for c in pairings]
+        assert 0.3 < np.mean(means) <= 1.0 + 1e-12
+    # a right one: the stars' magnitudes are the points' plus one zero point (which costs:
+    # it is known to the width of the field's magnitudes, 5 mag, and found to ~0.1 mag)
+    right = np.concatenate([points + 1.7, mags])
+    assert _bright([0, 1, 2], points, right) > math.log(10.0)
+    assert _bright([0, 1, 2], points, right) <= K.brightness_log_bound(3, 0, 15, True)
+    # the stars that built a hypothesis from tables of bright stars are left out
+    assert _bright([0, 1, 2], points, right, n_used=1) < _bright([0, 1, 2], points, right)
+    assert _bright([0, 1, 2], points, right, n_used=3) == 0.0
+    # no magnitudes, or not measured: no evidence; a point out of the order is not scored
+    assert _bright([0, 1, 2], [], right) == 0.0
+    assert _bright([0, 1, 2], [np.nan] * 3, right) == 0.0
+    assert _bright([0], points, right, rank=np.array([-1, 0, 1])) == 0.0
+    # magnitudes that disagree cost at most the no-evidence weight's factor
+    wrong_order = np.concatenate([points[::-1] + 1.7, mags])
+    assert _bright([0, 1, 2], [2.1, 3.4, 3.9], wrong_order) >= math.log(K.NO_BRIGHTNESS_WEIGHT)
+    assert _bright([0, 1, 2], [2.1, 3.4, 3.9], wrong_order) < _bright([0, 1, 2], points, right)
+
+
+def test_side_ratio_has_expectation_at_most_one():
     # the sides: a catalog triangle's side uniform within the tolerance window (one side moved,
     # the two exact ones taken out at their bound, a third of the triangle's each)
     tol = 3.0 * math.sqrt(2.0) * SIGMA
@@ -128,3 +142,12 @@ def test_brightness_and_side_ratios_have_expectation_at_most_one():
     assert 0.99 < np.mean(ratios) <= 1.0  # the Gaussian's mass within +-3 sigma
     assert K.side_log_ratio(tri, tri, SIGMA, tol) == pytest.approx(3.0 * exact_side)
     assert K.side_log_ratio(tri, tri, SIGMA, 0.0) == 0.0
+
+
+def test_point_magnitudes_come_from_the_brightness():
+    xy = np.zeros((4, 2))
+    stars = StarList(xy, ("a", "b", "c", "d"), np.array([1.0, 100.0, 0.0, -3.0]))
+    mags = point_magnitudes(stars)
+    assert mags[:2] == pytest.approx([0.0, -5.0])
+    assert np.isnan(mags[2:]).all()  # no flux: no magnitude
+    assert point_magnitudes(StarList(xy, stars.labels, None)) is None

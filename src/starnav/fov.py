@@ -37,7 +37,7 @@ from starnav.pipeline.solver import (
     fit_identification,
 )
 from starnav.results import SolveResult
-from starnav.starlist import StarList, brightness_order, check_star_list
+from starnav.starlist import StarList, brightness_order, check_star_list, point_magnitudes
 
 DEFAULT_FOV_RANGE_DEG = (5.0, 40.0)
 # the narrowest horizontal field searched: a 3° field holds about 12 Hipparcos stars to the
@@ -469,6 +469,9 @@ def _search_and_fit(
     t0 = time.perf_counter()
     order = brightness_order(stars)
     xy_sorted = stars.xy[order]
+    point_mag = point_magnitudes(stars)
+    if point_mag is not None:
+        point_mag = point_mag[order][: MatchSettings.max_screen_stars]
     if base.distorted:  # take the known distortion out: the search assumes a pinhole
         pinhole = Camera(base.width, base.height, base.focal_px, base.cx, base.cy)
         xy_sorted = pinhole.bearings_to_pixels(base.pixels_to_bearings(xy_sorted))
@@ -497,7 +500,7 @@ def _search_and_fit(
                 max_false_match_probability=settings.max_false_match_probability,
                 pattern_stars=pattern_stars,
                 deadline=share,
-                ranked=stars.brightness is not None,
+                point_mag=point_mag,
                 near=where,
             ),
             stars,

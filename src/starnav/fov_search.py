@@ -169,7 +169,7 @@ def search_fov(
     max_hypotheses: int = 20000,
     deadline: Deadline | None = None,
     near: tuple[np.ndarray, float] | None = None,
-    ranked: bool = False,
+    point_mag: np.ndarray | None = None,
 ) -> Iterator[FovMatch]:
     """Identify the stars at ``xy`` (n, 2, px, distortion removed, brightest first) with the
     focal length unknown within ``focal_range_px`` (px), searching ``bands``. Yields every
@@ -178,8 +178,8 @@ def search_fov(
     ended. ``deadline``: the search ends when it passes (looked at before each band's
     look-up and after each hypothesis). ``near``: (unit vector, radius in rad): only catalog
     patterns whose first star lies within the radius plus the band's half diagonal of the
-    vector (a position hint) are hypotheses. ``sigma_px``: px, None if unknown; ``ranked``:
-    the rows are in brightness order."""
+    vector (a position hint) are hypotheses. ``sigma_px``: px, None if unknown; ``point_mag``:
+    the rows' magnitudes (they are in brightness order), None: not known."""
     n = len(xy)
     if n < 4:
         yield FovMatch(None, "fewer than 4 stars", 0, float("nan"), None)
@@ -196,7 +196,7 @@ def search_fov(
     tally = Tally()
     tester: HypothesisTester | None = None
     at_focal = functools.partial(_settings, sigma_px, max_false_match_probability, parity,
-                                 max_hypotheses, deadline, ranked)  # fmt: skip
+                                 max_hypotheses, deadline, point_mag)  # fmt: skip
     work = {id(band): np.empty(len(band.catalog), dtype=np.int64) for band, _ in plans}
     start = 0
     for end in ends:
@@ -264,13 +264,13 @@ def _informative(rows: np.ndarray, xy: np.ndarray, sigma_px: float | None) -> np
     return rows[d.reshape(len(rows), -1).max(axis=1) >= MIN_PATTERN_TOLS * tol_px]
 
 
-def _settings(sigma_px, max_false_match_probability, parity, max_hypotheses, deadline, ranked,
+def _settings(sigma_px, max_false_match_probability, parity, max_hypotheses, deadline, point_mag,
               focal_px):  # fmt: skip
     """The verification settings of one hypothesis's focal length."""
     settings = MatchSettings.for_focal(
         sigma_px, focal_px, max_false_match_probability=max_false_match_probability, parity=parity
     )
-    return replace(settings, max_hypotheses=max_hypotheses, deadline=deadline, ranked=ranked)
+    return replace(settings, max_hypotheses=max_hypotheses, deadline=deadline, point_mag=point_mag)
 
 
 def _near(band: Band, cat_rows: np.ndarray, near: tuple[np.ndarray, float]) -> np.ndarray:

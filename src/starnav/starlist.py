@@ -176,6 +176,16 @@ def read_known_stars_csv(path: str | Path) -> KnownStars:
     )
 
 
+def point_magnitudes(stars: StarList) -> np.ndarray | None:
+    """The magnitudes of ``stars`` from their brightness (-2.5 log10; NaN where it is not
+    positive), None when there is no brightness."""
+    if stars.brightness is None:
+        return None
+    b = np.asarray(stars.brightness, dtype=np.float64)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(b > 0.0, -2.5 * np.log10(np.where(b > 0.0, b, 1.0)), np.nan)
+
+
 def brightness_order(stars: StarList) -> np.ndarray:
     """Rows of ``stars`` brightest first (as given when there is no brightness)."""
     if stars.brightness is None:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import functools
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from typing import Protocol
 
 import numpy as np
@@ -39,9 +39,11 @@ class MatchSettings:
     +1 or -1 when known, None to find it; ``max_stars``: triangles are made of the first
     (brightest) this many stars; ``max_screen_stars``: identification uses the first this
     many (the attitude fit then takes in the rest); ``max_hypotheses``: give up after testing
-    this many; ``deadline``: give up when it passes (``starnav.budget``); ``ranked``: the
-    ``order`` an identifier is given is the brightness order (the false-match probability
-    then weighs the brightness).
+    this many; ``deadline``: give up when it passes (``starnav.budget``); ``point_mag``: the
+    points' magnitudes (rows as the bearings an identifier is given, NaN: not measured;
+    ``starlist.point_magnitudes``), None when their brightness is not known: then the
+    ``order`` an identifier is given is not the brightness order (``ranked``), and the
+    false-match probability weighs no brightness.
     """
 
     pair_tol_rad: float
@@ -54,7 +56,12 @@ class MatchSettings:
     max_hypotheses: int = 20000
     pixel_rad: float | None = None
     deadline: Deadline | None = None
-    ranked: bool = False
+    point_mag: np.ndarray | None = field(default=None, compare=False)
+
+    @property
+    def ranked(self) -> bool:
+        """Whether the points' brightness is known and their ``order`` is by it."""
+        return self.point_mag is not None
 
     @classmethod
     def for_focal(
@@ -148,6 +155,8 @@ def screen_stars_only(identify: Callable[..., IdentifyOutcome]) -> Callable[...,
         used = np.asarray(order)[: settings.max_screen_stars]
         if len(used) >= len(bearings):
             return identify(self, bearings, np.asarray(order), database, settings)
+        if settings.point_mag is not None:
+            settings = replace(settings, point_mag=settings.point_mag[used])
         outcome = identify(self, bearings[used], np.arange(len(used)), database, settings)
         found = outcome.identification
         if found is not None:

@@ -145,12 +145,22 @@ def near_cell(axis, chord2, near, vectors, allowed):
 # rest: false stars, stars fainter than the catalog). Any value keeps each likelihood ratio's
 # expectation 1 under a wrong hypothesis; at 1/2 a false point halves the odds
 Q_STAR = 0.5
-# brightness: a point of brightness rank r (0: the brightest) is, under a right hypothesis, with
-# chance BRIGHT_WEIGHT a star among the BRIGHT_WINDOW[0] r + BRIGHT_WINDOW[1] brightest
-# catalog stars of the field cone (the cone holds ~1.6x the image's stars), otherwise any
-BRIGHT_WEIGHT = 0.5
-BRIGHT_WINDOW = (2, 4)
-BRIGHT_MAX_RATIO = 50.0  # a star's brightness ratio is capped at (1 - w) + w x this
+# brightness (when the points' magnitudes are known): under a right hypothesis a point of
+# magnitude m is, with chance BRIGHT_WEIGHT, a star of catalog magnitude m + z + N(0, sigma)
+# (z the zero point, the same for every point), otherwise any star of the field cone; sigma one
+# of MAG_SIGMAS_MAG, or the brightness tells nothing (weight NO_BRIGHTNESS_WEIGHT, the rest
+# split evenly); z uniform over what the field's and the points' magnitudes allow, widened by
+# ZERO_POINT_MARGIN_MAG, on a grid of MAG_STEPS steps a sigma (brightness_log_ratio). The
+# BRIGHT_PAIRS brightest points paired are scored, each ratio capped at BRIGHT_MAX_RATIO
+BRIGHT_WEIGHT = 0.9
+MAG_SIGMAS_MAG = (0.1, 0.2, 0.4, 0.8)
+NO_BRIGHTNESS_WEIGHT = 0.2
+ZERO_POINT_MARGIN_MAG = 0.5
+BRIGHT_PAIRS = 8
+BRIGHT_MAX_RATIO = 16.0
+MAG_STEPS = 8
+MAG_CUT = 5  # sigma
+MAG_WINDOW = 3.0  # sigma
 # the points scored: the first SCORED_PER_STAR x the catalog stars of the field cone in the
 # order (at least MIN_SCORED); the fainter ones are expected to be fainter than the catalog
 SCORED_PER_STAR = 2.0
@@ -188,47 +198,121 @@ def star_log_ratios(dist, n_cone, field_area, sigma, q, radius, out):
 
 
 @njit(cache=True)
-def brightness_log_ratio(obs, cat, rank, mags, cone_rows, n_cone, n_used):
-    """Natural-log likelihood ratio, right hypothesis against wrong, of the brightness of the
-    pairs (points ``obs`` of brightness ranks ``rank``, -1: none; catalog rows ``cat`` of
-    magnitudes ``mags``, empty: the brightness is not known) among the ``n_cone`` catalog
-    stars ``cone_rows`` of the field. A wrong hypothesis pairs a point with any star of the
-    field (its rank among them uniform, ties broken by row); a right one, with chance
-    ``BRIGHT_WEIGHT``, with one among the window of its rank (``BRIGHT_WINDOW``). In the
-    window a pair scores (1 - w) + w n_cone / window (at most ``BRIGHT_MAX_RATIO``), outside
-    it 1 - w: expectation 1 under a wrong hypothesis, if the hypothesis's own stars were
-    drawn from the whole catalog; when they come from tables of the brightest stars (the FOV
-    search's, wide fields'), the ``n_used`` largest scores are left out."""
-    w = BRIGHT_WEIGHT
-    if len(mags) == 0:
+def _mag_kernel(steps):
+    """phi of the magnitude kernel at offsets -steps..steps of a step (a ``MAG_STEPS``-th of
+    its sigma); 0 beyond."""
+    table = np.empty(2 * steps + 1)
+    for d in range(-steps, steps + 1):
+        table[d + steps] = math.exp(-0.5 * (d / MAG_STEPS) ** 2)
+    return table
+
+
+@njit(cache=True)
+def brightness_log_ratio(obs, cat, rank, point_mag, mags, cone_rows, n_cone, n_used):
+    """Natural-log likelihood ratio, right hypothesis against wrong, of the magnitudes of
+    the pairs (points ``obs`` of places ``rank`` in the order, -1: not in it, and
+    magnitudes ``point_mag``, NaN: not measured, empty: the brightness is not known;
+    catalog rows ``cat`` of magnitudes ``mags``) among the ``n_cone`` catalog stars
+    ``cone_rows`` of the field.
+
+    A wrong hypothesis pairs a point with any star of the field, whatever its magnitude; a
+    right one pairs a point of magnitude m with a star of magnitude about t = m + z. A pair
+    scores (1 - w) + w n_cone g(M) / sum over the field's stars of g(M'), g a Gaussian of
+    the magnitude sigma about t: its expectation under a wrong hypothesis is 1 for any t
+    fixed by the point alone, so is the product's over pairs at one zero point z, and the
+    mixture's over z, the sigmas and no evidence (see the constants). To make it cheap and
+    exact, magnitudes and zero points are counted in steps of a ``MAG_STEPS``-th of the
+    sigma: z on the grid of steps (uniform over the prior's grid points), m rounded to a
+    step, M to the middle of its 4 steps' bin, g cut at ``MAG_CUT`` sigma; the zero points
+    further than ``MAG_WINDOW`` sigma from the pairs' median offset are left out (they can
+    only add). The ``BRIGHT_PAIRS`` pairs of the brightest points are scored; when the
+    hypothesis's own stars came from tables of the brightest stars (the FOV search's, wide
+    fields'), the ``n_used`` largest scores are left out."""
+    if len(mags) == 0 or len(point_mag) == 0 or n_cone < 2:
         return 0.0
-    scores = np.zeros(len(obs))
-    for k in range(len(obs)):
-        r = rank[obs[k]]
-        window = BRIGHT_WINDOW[0] * r + BRIGHT_WINDOW[1]
-        if r < 0 or window >= n_cone:
+    # the pairs of the brightest points with a magnitude
+    order = np.argsort(rank[obs])
+    m = np.empty(BRIGHT_PAIRS)
+    M = np.empty(BRIGHT_PAIRS)
+    n = 0
+    for k in order:
+        if n < BRIGHT_PAIRS and rank[obs[k]] >= 0 and math.isfinite(point_mag[obs[k]]):
+            m[n], M[n] = point_mag[obs[k]], mags[cat[k]]
+            n += 1
+    if n <= n_used:
+        return 0.0
+    m, M = m[:n], M[:n]
+    cone = mags[cone_rows[:n_cone]]
+    cone_lo, cone_hi = cone.min(), cone.max()
+    # the zero point's prior: the brightest point is at most the field's faintest star and
+    # at least its brightest (both within the margin)
+    m_min = math.inf
+    for i in range(len(point_mag)):
+        if rank[i] >= 0 and math.isfinite(point_mag[i]):
+            m_min = min(m_min, point_mag[i])
+    z_lo = cone_lo - m_min - ZERO_POINT_MARGIN_MAG
+    z_hi = cone_hi - m_min + ZERO_POINT_MARGIN_MAG
+    z_mid = np.median(M - m)
+    w = BRIGHT_WEIGHT
+    cut = MAG_CUT * MAG_STEPS
+    table = _mag_kernel(cut)
+    factors = np.empty(n)
+    total = math.log(NO_BRIGHTNESS_WEIGHT)
+    log_each = math.log((1.0 - NO_BRIGHTNESS_WEIGHT) / len(MAG_SIGMAS_MAG))
+    for sigma in MAG_SIGMAS_MAG:
+        h = sigma / MAG_STEPS
+        i_lo, i_hi = math.ceil(z_lo / h), math.floor(z_hi / h)  # the prior's grid points
+        w_lo = max(i_lo, math.ceil((z_mid - MAG_WINDOW * sigma) / h))
+        w_hi = min(i_hi, math.floor((z_mid + MAG_WINDOW * sigma) / h))
+        if w_hi < w_lo:
             continue
-        m, row = mags[cat[k]], cat[k]
-        brighter = 0
+        # the field's stars counted in bins of 4 steps, b0 the first
+        b0 = math.floor(cone_lo / (4.0 * h))
+        counts = np.zeros(math.floor(cone_hi / (4.0 * h)) - b0 + 1)
         for c in range(n_cone):
-            other = cone_rows[c]
-            brighter += mags[other] < m or (mags[other] == m and other < row)
-        if brighter < window:
-            scores[k] = math.log((1.0 - w) + w * min(n_cone / window, BRIGHT_MAX_RATIO))
-        else:
-            scores[k] = math.log(1.0 - w)
-    scores.sort()
-    return scores[: max(len(obs) - n_used, 0)].sum()
+            counts[math.floor(cone[c] / (4.0 * h)) - b0] += 1.0
+        r = np.empty(n, dtype=np.int64)  # the points' magnitudes in steps
+        bins = np.empty(n, dtype=np.int64)  # their stars' bins
+        for k in range(n):
+            r[k] = round(m[k] / h)
+            bins[k] = math.floor(M[k] / (4.0 * h)) - b0
+        # the sum over the field of g at every t (in steps) the pairs take
+        j_lo, j_hi = r.min() + w_lo, r.max() + w_hi
+        field_sum = np.zeros(j_hi - j_lo + 1)
+        for j in range(j_lo, j_hi + 1):
+            b_first = max(math.ceil((j - cut - 2) / 4.0) - b0, 0)
+            b_last = min(math.floor((j + cut - 2) / 4.0) - b0, len(counts) - 1)
+            acc = 0.0
+            for b in range(b_first, b_last + 1):
+                acc += counts[b] * table[4 * (b + b0) + 2 - j + cut]
+            field_sum[j - j_lo] = acc
+        acc = 0.0
+        for i in range(w_lo, w_hi + 1):
+            for k in range(n):
+                j = r[k] + i
+                d = 4 * (bins[k] + b0) + 2 - j
+                own = table[d + cut] if abs(d) <= cut else 0.0
+                ratio = n_cone * own / max(field_sum[j - j_lo], own) if own > 0.0 else 0.0
+                factors[k] = (1.0 - w) + w * min(ratio, BRIGHT_MAX_RATIO)
+            if n_used > 0:
+                factors.sort()
+            product = 1.0  # at most BRIGHT_MAX_RATIO ** BRIGHT_PAIRS: no overflow
+            for k in range(n - n_used):
+                product *= factors[k]
+            acc += product
+        total = _log_add(total, log_each + math.log(acc / (i_hi - i_lo + 1)))
+    return total
 
 
 @njit(cache=True)
 def brightness_log_bound(n_agree, n_used, n_cone, ranked):
     """The largest ``brightness_log_ratio`` ``n_agree`` pairs, ``n_used`` of them left out,
     can have among ``n_cone`` catalog stars (0 when the brightness is not known)."""
-    if not ranked or n_cone <= BRIGHT_WINDOW[1]:
+    n = min(n_agree, BRIGHT_PAIRS) - n_used
+    if not ranked or n <= 0 or n_cone < 2:
         return 0.0
-    ratio = min(n_cone / BRIGHT_WINDOW[1], BRIGHT_MAX_RATIO)
-    return max(n_agree - n_used, 0) * math.log((1.0 - BRIGHT_WEIGHT) + BRIGHT_WEIGHT * ratio)
+    ratio = (1.0 - BRIGHT_WEIGHT) + BRIGHT_WEIGHT * min(n_cone, BRIGHT_MAX_RATIO)
+    return math.log(NO_BRIGHTNESS_WEIGHT + (1.0 - NO_BRIGHTNESS_WEIGHT) * ratio**n)
 
 
 @njit(cache=True)
@@ -559,15 +643,16 @@ def pair_catalog(bearings, R, sky, allowed, radius, cov, gate, work):
 
 @njit(cache=True)
 def test_hypothesis(bearings, obs_rows, cat_rows, parity, sky, allowed, radius, sigmas, tol,
-                    rank, mags, bright_drop, hypotheses, max_p, parity_known,
+                    rank, point_mag, mags, bright_drop, hypotheses, max_p, parity_known,
                     work):  # fmt: skip
     """Verify one hypothesis (bearing rows paired with catalog rows, with a parity): its
     attitude (Wahba), the agreeing stars of the whole field, the false-match probability
     over ``hypotheses`` (``false_match``: pairs within ``radius``, the centroid sigma the best
     of ``sigmas``, rad; ``rank``: the points' places in the order, -1: not in it, the first
-    ``scored_count`` scored; ``mags``: the catalog's, empty when the points' brightness is not
-    known, ``bright_drop`` of the pairs' brightness scores left out: the built stars', when
-    they come from tables of bright stars; with the triangle's sides when it is a triangle
+    ``scored_count`` scored; ``point_mag``: their magnitudes (``brightness_log_ratio``);
+    ``mags``: the catalog's, empty when the points' brightness is not known, ``bright_drop``
+    of the pairs' brightness scores left out: the built stars', when they come from tables
+    of bright stars; with the triangle's sides when it is a triangle
     looked up within ``tol``, rad, 0: not); accepted (``FOUND``) below ``max_p`` unless the
     parity is unknown (``parity_known`` 0) and the mirror image verifies too (``AMBIGUOUS``:
     collinear stars)."""
@@ -579,8 +664,8 @@ def test_hypothesis(bearings, obs_rows, cat_rows, parity, sky, allowed, radius, 
         log_sides = side_log_ratio(bearings[obs_rows], vectors[cat_rows], sigmas.max(), tol)
     R = wahba(bearings[obs_rows], vectors[cat_rows], np.ones(n_used), parity)
     v = pair_catalog(bearings, R, sky, allowed, radius, no_cov, False, work)
-    log_other = log_sides + brightness_log_ratio(v.obs, v.cat, rank, mags, work, v.n_cone,
-                                                 bright_drop)  # fmt: skip
+    log_other = log_sides + brightness_log_ratio(v.obs, v.cat, rank, point_mag, mags, work,
+                                                 v.n_cone, bright_drop)  # fmt: skip
     p = field_false_match(v.dist, v.obs, rank, v.n_cone, v.field_area, n_used, hypotheses,
                           sigmas, radius, log_other)  # fmt: skip
     if p > max_p:
@@ -588,8 +673,8 @@ def test_hypothesis(bearings, obs_rows, cat_rows, parity, sky, allowed, radius, 
     if parity_known == 0:
         R_m = wahba(bearings[v.obs], vectors[v.cat], np.ones(len(v.obs)), -parity)
         m = pair_catalog(bearings, R_m, sky, allowed, radius, no_cov, False, work)
-        log_m = log_sides + brightness_log_ratio(m.obs, m.cat, rank, mags, work, m.n_cone,
-                                                 bright_drop)  # fmt: skip
+        log_m = log_sides + brightness_log_ratio(m.obs, m.cat, rank, point_mag, mags, work,
+                                                 m.n_cone, bright_drop)  # fmt: skip
         p_m = field_false_match(m.dist, m.obs, rank, m.n_cone, m.field_area, n_used,
                                 hypotheses, sigmas, radius, log_m)  # fmt: skip
         if p_m <= max_p:
@@ -747,8 +832,8 @@ def _shortest_sides_first(bearings, idx):
 
 @njit(cache=True)
 def triangle_search(bearings, triangles, pair_a, pair_b, pair_angle, max_angle, sky, near,
-                    allowed, tol, radius, sigmas, rank, mags, bright_drop, max_p, parity_known,
-                    max_hypotheses, end_time):  # fmt: skip
+                    allowed, tol, radius, sigmas, rank, point_mag, mags, bright_drop, max_p,
+                    parity_known, max_hypotheses, end_time):  # fmt: skip
     """Try the measured ``triangles`` (rows of ``bearings``, (t, 3)) in order: look up the
     catalog triangles of each, screen all their hypotheses, verify the best (by the screen)
     until one is accepted, nothing left can be, ``max_hypotheses`` are spent or the
@@ -819,7 +904,7 @@ def triangle_search(bearings, triangles, pair_a, pair_b, pair_angle, max_angle, 
                 break
             proposed += 1
             r = test_hypothesis(bearings, idx, triples[h], parities[h], sky, allowed, radius,
-                                sigmas, tol, rank, mags, bright_drop, hypotheses, max_p,
+                                sigmas, tol, rank, point_mag, mags, bright_drop, hypotheses, max_p,
                                 parity_known, work)  # fmt: skip
             best_p = min(best_p, r.p)
             if r.status != REJECTED:

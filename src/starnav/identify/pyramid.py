@@ -111,6 +111,7 @@ def match_triangles(
         radius_rad,
         sigmas_rad,
         tester.rank,
+        tester.point_mag,
         tester.mags,
         bright_drop,
         settings.max_false_match_probability,

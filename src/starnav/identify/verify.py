@@ -129,6 +129,16 @@ def point_ranks(order: np.ndarray | None, n: int) -> np.ndarray:
     return rank
 
 
+def kernel_point_mags(settings: MatchSettings, n: int) -> np.ndarray:
+    """The ``n`` points' magnitudes as the kernels take them (empty: not known)."""
+    if settings.point_mag is None:
+        return np.empty(0)
+    mags = np.ascontiguousarray(settings.point_mag, dtype=np.float64)
+    if len(mags) != n:
+        raise ValueError(f"{len(mags)} point magnitudes for {n} points")
+    return mags
+
+
 def catalog_mags(database: PairDatabase, ranked: bool) -> np.ndarray:
     """The magnitudes of the database's catalog rows as the kernels take them when the
     points' order is their brightness's (``ranked``), else none (no brightness evidence)."""
@@ -195,6 +205,7 @@ class HypothesisTester:
         self.allowed = database.everything if allowed is None else allowed
         self.rank = point_ranks(order, len(self.bearings))
         self.mags = catalog_mags(database, settings.ranked)
+        self.point_mag = kernel_point_mags(settings, len(self.bearings))
         # one int64 per catalog row: the kernels' work space (a search may share one; made
         # on the first test, as the triangle search only uses the tally and outcome)
         self._work = work
@@ -234,6 +245,7 @@ class HypothesisTester:
             *s.kernel_args(),
             0.0,  # hypotheses not from a triangle look-up: no side evidence
             self.rank,
+            self.point_mag,
             self.mags,
             len(obs_rows),  # their own stars may be from tables of bright stars
             self.tally.hypotheses,

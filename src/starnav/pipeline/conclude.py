@@ -19,7 +19,7 @@ from starnav.identify.base import Identification, MatchSettings
 from starnav.identify.database import PairDatabase
 from starnav.identify.verify import catalog_mags, point_ranks
 from starnav.results import Solution, StarTable
-from starnav.starlist import StarList, brightness_order
+from starnav.starlist import StarList, brightness_order, point_magnitudes
 
 
 def kernels():
@@ -56,6 +56,7 @@ def conclude(
     k = kernels()
     xy = np.ascontiguousarray(stars.xy, dtype=np.float64)
     rank = point_ranks(brightness_order(stars), len(xy))
+    mags = point_magnitudes(stars)
     done = k.conclude(
         np.ascontiguousarray(found.obs_index, dtype=np.int64),
         np.ascontiguousarray(found.cat_index, dtype=np.int64),
@@ -72,6 +73,7 @@ def conclude(
         *settings.kernel_args(),
         float(found.log_sides),
         rank,
+        np.empty(0) if mags is None else np.ascontiguousarray(mags, dtype=np.float64),
         catalog_mags(database, stars.brightness is not None),
         int(found.bright_drop),
         float(sigma_px),

@@ -259,14 +259,15 @@ def expected_stars(R, sky, model, p, width, height, work):
 
 @njit(cache=True)
 def conclude(obs, cat, R, xy, sky, allowed, model, p0, width, height, fit_focal,
-             fit_distortion, radius, sigmas, log_sides, rank, mags, bright_drop, sigma_px,
-             known_sigma_px, hypotheses, max_p, min_matched_fraction):  # fmt: skip
+             fit_distortion, radius, sigmas, log_sides, rank, point_mag, mags, bright_drop,
+             sigma_px, known_sigma_px, hypotheses, max_p, min_matched_fraction):  # fmt: skip
     """From an identification (pairs ``obs`` / ``cat``, attitude ``R``) to the fitted
     solution and its refusal code (``ACCEPTED`` or why not). ``radius`` (rad): the pairing
     radius; ``sigmas`` (rad): the centroid sigmas the false-match probability takes the best
     of; ``log_sides``: the identification's triangle-side log ratio; ``rank``: the points'
-    places in the brightness order, ``mags`` the catalog's (empty: the brightness is not
-    known; ``identify.kernels.field_false_match``), ``bright_drop`` of the pairs' brightness
+    places in the brightness order, ``point_mag`` their magnitudes, ``mags`` the catalog's
+    (empty: the brightness is not known; ``identify.kernels.field_false_match`` and
+    ``brightness_log_ratio``), ``bright_drop`` of the pairs' brightness
     scores left out; ``sigma_px``: the sigma the outlier and rematch rules use;
     ``known_sigma_px``: the centroid sigma when it is known (0: not), the least the reported
     covariance is at (``at_least_sigma``)."""
@@ -316,10 +317,10 @@ def conclude(obs, cat, R, xy, sky, allowed, model, p0, width, height, fit_focal,
         dist[s] = math.sqrt(d2)
     # the fitted attitude has the hypothesis's freedom, and the focal length's when fitted
     n_fitted = N_USED + (1 if fit_focal else 0) + (N_DISTORTION if fit_distortion else 0)
-    # the field cone's stars again, for their brightness ranks (pairing left them elsewhere)
+    # the field cone's stars again, for their magnitudes (pairing left them elsewhere)
     field_rad = math.acos(1.0 - a.field_area)
     n_cone = cone(f.R[2], chord(field_rad) ** 2, sky, allowed, work)
-    log_other = log_sides + brightness_log_ratio(a.obs, a.cat, rank, mags, work, n_cone,
+    log_other = log_sides + brightness_log_ratio(a.obs, a.cat, rank, point_mag, mags, work, n_cone,
                                                  bright_drop)  # fmt: skip
     p_false = field_false_match(dist, a.obs, rank, a.n_cone, a.field_area, n_fitted, hypotheses,
                                 sigmas, radius, log_other)  # fmt: skip

@@ -30,7 +30,7 @@ from starnav.identify.tracking import Tracking
 from starnav.pipeline.conclude import conclude, elapsed_ms
 from starnav.pipeline.deep import deep_match
 from starnav.results import Solution, SolveResult
-from starnav.starlist import StarList, brightness_order
+from starnav.starlist import StarList, brightness_order, point_magnitudes
 
 DEFAULT_SIGMA_PX = SEARCH_SIGMA_PX  # the tolerances' sigma when none is told
 DEFAULT_MAX_FALSE_MATCH_PROBABILITY = 1e-4
@@ -240,7 +240,7 @@ class Solver:
             bearings = self.camera.pixels_to_bearings(stars.xy)
             order = brightness_order(stars)
             t1 = time.perf_counter()
-            settings = replace(self.match_settings, ranked=stars.brightness is not None)
+            settings = replace(self.match_settings, point_mag=point_magnitudes(stars))
             if deadline is not None:
                 settings = replace(settings, deadline=deadline)
             outcome, algorithm = self._identify(bearings, order, prior, prior_sigma_deg, settings)
