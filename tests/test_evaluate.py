@@ -438,3 +438,15 @@ def test_a_far_star_between_the_stars_of_a_double_is_contested():
     r = solve_frame(config, uniform_boresights(50_000, seed=7016), 9209)
     assert r.kind == "few" and r.outcome == "none"
     assert "two sets of matches" in r.reason
+
+
+def test_an_answer_whose_image_holds_more_unseen_bright_stars_than_matches_is_refused():
+    """The sixth million's one wrong answer (seed 10009, frame 37207, scrambled: no star
+    where it belongs): 5 of its 9 points, all of Hp 4.8-5.8, matched stars of Hp 5.0-6.0 with
+    magnitudes that agree (claim 8.6e-5), in a field whose brighter stars (Hp 2.1-4.9) none of
+    the points are. Now refused for them."""
+    config = EvalConfig(seed=10009, kinds=("random", "scrambled", "mirrored", "fov-off",
+                                           "crowded", "few"))  # fmt: skip
+    r = solve_frame(config, uniform_boresights(50000, seed=10009), 37207)
+    assert r.kind == "scrambled" and r.n_true == 0
+    assert r.outcome == "none" and "brighter than any it matched" in r.reason

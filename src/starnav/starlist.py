@@ -182,8 +182,8 @@ def point_magnitudes(stars: StarList) -> np.ndarray | None:
     if stars.brightness is None:
         return None
     b = np.asarray(stars.brightness, dtype=np.float64)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        return np.where(b > 0.0, -2.5 * np.log10(np.where(b > 0.0, b, 1.0)), np.nan)
+    positive = b > 0.0
+    return np.where(positive, -2.5 * np.log10(np.where(positive, b, 1.0)), np.nan)
 
 
 def brightness_order(stars: StarList) -> np.ndarray:

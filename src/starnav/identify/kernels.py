@@ -224,10 +224,10 @@ def brightness_log_ratio(obs, cat, rank, point_mag, mags, cone_rows, n_cone, n_u
     exact, magnitudes and zero points are counted in steps of a ``MAG_STEPS``-th of the
     sigma: z on the grid of steps (uniform over the prior's grid points), m rounded to a
     step, M to the middle of its 4 steps' bin, g cut at ``MAG_CUT`` sigma; the zero points
-    further than ``MAG_WINDOW`` sigma from the pairs' median offset are left out (they can
-    only add). The ``BRIGHT_PAIRS`` pairs of the brightest points are scored; when the
-    hypothesis's own stars came from tables of the brightest stars (the FOV search's, wide
-    fields'), the ``n_used`` largest scores are left out."""
+    further than ``MAG_WINDOW`` sigma from the pairs' median offset are left out (which can
+    only make the ratio smaller). The ``BRIGHT_PAIRS`` pairs of the brightest points are
+    scored; when the hypothesis's own stars came from tables of the brightest stars (the FOV
+    search's, wide fields'), the ``n_used`` largest scores are left out."""
     if len(mags) == 0 or len(point_mag) == 0 or n_cone < 2:
         return 0.0
     # the pairs of the brightest points with a magnitude

@@ -29,6 +29,10 @@ def kernels():
     return kernels
 
 
+BRIGHT_UNSEEN = (
+    "the best attitude puts in the image as many catalog stars brighter than any it matched "
+    "as it matched, none of them among the points: not sure it is right"
+)
 CONTESTED = (
     "two sets of matches explain the stars about as well (a point or a star has another "
     "partner in each): not sure which is right"
@@ -88,6 +92,8 @@ def conclude(
         return None, unconvincing(done.false_match_probability)
     if done.refusal == k.CONTESTED:
         return None, CONTESTED
+    if done.refusal == k.BRIGHT_UNSEEN:
+        return None, BRIGHT_UNSEEN
     if done.refusal == k.TOO_FEW:
         return None, too_few(len(done.obs), done.expected, min_matched_fraction)
     fit = refinement(done.fit, camera)

@@ -58,7 +58,13 @@ SWAP_SIGMAS = 3.0
 N_USED = 3  # stars a hypothesis is built from (they agree by construction)
 N_DISTORTION = 2  # the distortion coefficients a fit may free (k1, k2)
 # refusals
-ACCEPTED, WRONG_SCALE, UNCONVINCING, TOO_FEW, CONTESTED = 0, 1, 2, 3, 4
+ACCEPTED, WRONG_SCALE, UNCONVINCING, TOO_FEW, CONTESTED, BRIGHT_UNSEEN = 0, 1, 2, 3, 4, 5
+# an answer is refused when the image it predicts holds at least as many catalog stars brighter
+# than its brightest matched star by UNSEEN_MARGIN_MAG as it matched, and at least MIN_UNSEEN
+# (with the points' brightness known): a right answer's brightest points are its brightest
+# stars, so such stars should be among the points
+UNSEEN_MARGIN_MAG = 0.5
+MIN_UNSEEN = 3
 
 Converged = namedtuple("Converged", "obs cat fit n_cone field_area")
 Concluded = namedtuple(
@@ -237,24 +243,27 @@ def compare_pairs(obs_a, cat_a, res_a, obs_b, cat_b, res_b):
 
 
 @njit(cache=True)
-def expected_stars(R, sky, model, p, width, height, work):
-    """Catalog stars inside the image at attitude ``R`` through the camera ``p``: the stars
-    the solution says should be measurable."""
+def expected_stars(R, sky, model, p, width, height, mags, brighter_than, work):
+    """Catalog stars inside the image at attitude ``R`` through the camera ``p`` (the stars
+    the solution says should be measurable), and how many of them have ``mags`` below
+    ``brighter_than`` (0 when ``mags`` is empty)."""
     vectors = sky[0]
     everything = np.ones(len(vectors), dtype=np.bool_)
     limit = field_cos(model, p, width, height)
     n_front = cone(R[2], chord(math.acos(limit)) ** 2, sky, everything, work)
     J_c = np.empty((2, 3))
     J_p = np.empty((2, N_INTRINSIC))
-    inside = 0
+    inside, bright = 0, 0
     for m in range(n_front):
         row = work[m]
         v0, v1, v2 = vectors[row, 0], vectors[row, 1], vectors[row, 2]
         c0 = R[0, 0] * v0 + R[0, 1] * v1 + R[0, 2] * v2
         c1 = R[1, 0] * v0 + R[1, 1] * v1 + R[1, 2] * v2
         c2 = R[2, 0] * v0 + R[2, 1] * v1 + R[2, 2] * v2
-        inside += sees(model, p, width, height, limit, c0, c1, c2, J_c, J_p)
-    return inside
+        seen = sees(model, p, width, height, limit, c0, c1, c2, J_c, J_p)
+        inside += seen
+        bright += seen and len(mags) > 0 and mags[row] < brighter_than
+    return inside, bright
 
 
 @njit(cache=True)
@@ -337,9 +346,14 @@ def conclude(obs, cat, R, xy, sky, allowed, model, p0, width, height, fit_focal,
         refusal = CONTESTED
     if refusal == ACCEPTED and p_false > max_p:
         refusal = UNCONVINCING
-    expected = min(len(xy), expected_stars(f.R, sky, model, f.params, width, height, work))
+    brightest = mags[a.cat].min() if len(mags) > 0 and len(a.cat) > 0 else math.inf
+    in_image, unseen = expected_stars(f.R, sky, model, f.params, width, height, mags,
+                                      brightest - UNSEEN_MARGIN_MAG, work)  # fmt: skip
+    expected = min(len(xy), in_image)
     if refusal == ACCEPTED and len(a.obs) < min_matched_fraction * expected:
         refusal = TOO_FEW
+    if refusal == ACCEPTED and unseen >= max(MIN_UNSEEN, len(a.obs)):
+        refusal = BRIGHT_UNSEEN
     if known_sigma_px > 0:
         f = at_least_sigma(f, known_sigma_px)
     return Concluded(refusal, a.obs, a.cat, f, p_false, f_scale, expected)
