@@ -161,6 +161,13 @@ BRIGHT_MAX_RATIO = 16.0
 MAG_STEPS = 8
 MAG_CUT = 5  # sigma
 MAG_WINDOW = 3.0  # sigma
+# the magnitude kernel g at offsets -MAG_CUT..MAG_CUT sigma, in steps of 1 / MAG_STEPS sigma
+MAG_TABLE = np.array(
+    [
+        math.exp(-0.5 * (d / MAG_STEPS) ** 2)
+        for d in range(-MAG_CUT * MAG_STEPS, MAG_CUT * MAG_STEPS + 1)
+    ]
+)
 # the points scored: the first SCORED_PER_STAR x the catalog stars of the field cone in the
 # order (at least MIN_SCORED); the fainter ones are expected to be fainter than the catalog
 SCORED_PER_STAR = 2.0
@@ -195,16 +202,6 @@ def star_log_ratios(dist, n_cone, field_area, sigma, q, radius, out):
         out[k] = _log_add(log_rest, log_q - log_lam + rho * s - s / (sigma * sigma))
     s_r = 2.0 * math.sin(0.5 * radius) ** 2  # 1 - cos(radius)
     return _log_add(log_rest, log_q + rho * s_r - s_r / (sigma * sigma))
-
-
-@njit(cache=True)
-def _mag_kernel(steps):
-    """phi of the magnitude kernel at offsets -steps..steps of a step (a ``MAG_STEPS``-th of
-    its sigma); 0 beyond."""
-    table = np.empty(2 * steps + 1)
-    for d in range(-steps, steps + 1):
-        table[d + steps] = math.exp(-0.5 * (d / MAG_STEPS) ** 2)
-    return table
 
 
 @njit(cache=True)
@@ -255,7 +252,7 @@ def brightness_log_ratio(obs, cat, rank, point_mag, mags, cone_rows, n_cone, n_u
     z_mid = np.median(M - m)
     w = BRIGHT_WEIGHT
     cut = MAG_CUT * MAG_STEPS
-    table = _mag_kernel(cut)
+    table = MAG_TABLE
     factors = np.empty(n)
     total = math.log(NO_BRIGHTNESS_WEIGHT)
     log_each = math.log((1.0 - NO_BRIGHTNESS_WEIGHT) / len(MAG_SIGMAS_MAG))

@@ -129,11 +129,12 @@ def point_ranks(order: np.ndarray | None, n: int) -> np.ndarray:
     return rank
 
 
-def kernel_point_mags(settings: MatchSettings, n: int) -> np.ndarray:
-    """The ``n`` points' magnitudes as the kernels take them (empty: not known)."""
-    if settings.point_mag is None:
+def kernel_point_mags(point_mag: np.ndarray | None, n: int) -> np.ndarray:
+    """The ``n`` points' magnitudes ``point_mag`` as the kernels take them (empty: not
+    known)."""
+    if point_mag is None:
         return np.empty(0)
-    mags = np.ascontiguousarray(settings.point_mag, dtype=np.float64)
+    mags = np.ascontiguousarray(point_mag, dtype=np.float64)
     if len(mags) != n:
         raise ValueError(f"{len(mags)} point magnitudes for {n} points")
     return mags
@@ -205,7 +206,7 @@ class HypothesisTester:
         self.allowed = database.everything if allowed is None else allowed
         self.rank = point_ranks(order, len(self.bearings))
         self.mags = catalog_mags(database, settings.ranked)
-        self.point_mag = kernel_point_mags(settings, len(self.bearings))
+        self.point_mag = kernel_point_mags(settings.point_mag, len(self.bearings))
         # one int64 per catalog row: the kernels' work space (a search may share one; made
         # on the first test, as the triangle search only uses the tally and outcome)
         self._work = work

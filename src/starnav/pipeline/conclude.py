@@ -17,7 +17,7 @@ from starnav.catalog import Catalog
 from starnav.geometry import radec_roll_from_attitude
 from starnav.identify.base import Identification, MatchSettings
 from starnav.identify.database import PairDatabase
-from starnav.identify.verify import catalog_mags, point_ranks
+from starnav.identify.verify import catalog_mags, kernel_point_mags, point_ranks
 from starnav.results import Solution, StarTable
 from starnav.starlist import StarList, brightness_order, point_magnitudes
 
@@ -60,7 +60,6 @@ def conclude(
     k = kernels()
     xy = np.ascontiguousarray(stars.xy, dtype=np.float64)
     rank = point_ranks(brightness_order(stars), len(xy))
-    mags = point_magnitudes(stars)
     done = k.conclude(
         np.ascontiguousarray(found.obs_index, dtype=np.int64),
         np.ascontiguousarray(found.cat_index, dtype=np.int64),
@@ -77,7 +76,7 @@ def conclude(
         *settings.kernel_args(),
         float(found.log_sides),
         rank,
-        np.empty(0) if mags is None else np.ascontiguousarray(mags, dtype=np.float64),
+        kernel_point_mags(point_magnitudes(stars), len(xy)),
         catalog_mags(database, stars.brightness is not None),
         int(found.bright_drop),
         float(sigma_px),
