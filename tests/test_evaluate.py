@@ -456,3 +456,33 @@ def test_an_answer_whose_image_holds_more_unseen_bright_stars_than_matches_is_re
     r = solve_frame(config, uniform_boresights(50000, seed=10009), 37207)
     assert r.kind == "scrambled" and r.n_true == 0
     assert r.outcome == "none" and "brighter than any it matched" in r.reason
+
+
+def test_an_answer_whose_residuals_the_centroid_sigma_cannot_explain_is_refused():
+    """The seventh million's one wrong answer (seed 20005, frame 33603, fov-off: the FOV 3.7 %
+    narrower than told): the Pleiades at the image's edge fit the told scale by themselves, a
+    false star across the field sat where that scale puts another star, and the 11 pairs
+    held the attitude 0.27° off (15-21 of its own sigmas, claim 1.5e-18). Their residuals,
+    rms 1.23 px against the told 0.5 px (chi-square 66 on 19 degrees of freedom), now refuse
+    it."""
+    config = EvalConfig(seed=20005, kinds=("random", "scrambled", "mirrored", "fov-off",
+                                           "crowded", "few"))  # fmt: skip
+    r = solve_frame(config, uniform_boresights(50000, seed=20005), 33603)
+    assert r.kind == "fov-off" and r.n_true == 20
+    assert r.outcome == "none" and "worse than their centroid sigma allows" in r.reason
+
+
+def test_the_misfit_limit_is_the_chi_square_quantile():
+    """The misfit rule's chi-square limit (Wilson-Hilferty) against scipy's exact quantile at
+    MISFIT_ALPHA: within 4 % from 3 degrees of freedom on, and never below it (the rule errs
+    towards answering)."""
+    from scipy.stats import chi2
+
+    from starnav.pipeline import kernels
+
+    for dof in (1, 2, 3, 5, 10, 19, 40, 100, 400):
+        exact = chi2.isf(1e-4, dof)
+        limit = kernels.misfit_limit(dof)
+        assert limit >= exact
+        if dof >= 3:
+            assert limit <= 1.04 * exact

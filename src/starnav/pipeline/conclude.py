@@ -93,6 +93,8 @@ def conclude(
         return None, CONTESTED
     if done.refusal == k.BRIGHT_UNSEEN:
         return None, BRIGHT_UNSEEN
+    if done.refusal == k.MISFIT:
+        return None, misfit(done.fit.rms_px, float(known_sigma_px))
     if done.refusal == k.TOO_FEW:
         return None, too_few(len(done.obs), done.expected, min_matched_fraction)
     fit = refinement(done.fit, camera)
@@ -152,6 +154,14 @@ def wrong_scale(focal: float, camera: CameraModel) -> str:
 def unconvincing(p_false: float) -> str:
     """The refusal of a fit whose false-match probability is too high."""
     return f"false-match probability {p_false:.2g} after the fit"
+
+
+def misfit(rms_px: float, sigma_px: float) -> str:
+    """The refusal of a fit whose residuals are beyond what the centroid sigma allows."""
+    return (
+        f"the matched stars fit the camera worse than their centroid sigma allows (rms "
+        f"{rms_px:.2f} px, sigma {sigma_px:.2f} px): is the field of view right?"
+    )
 
 
 def too_few(n_matched: int, expected: int, min_matched_fraction: float) -> str:

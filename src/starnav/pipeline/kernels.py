@@ -58,7 +58,12 @@ SWAP_SIGMAS = 3.0
 N_USED = 3  # stars a hypothesis is built from (they agree by construction)
 N_DISTORTION = 2  # the distortion coefficients a fit may free (k1, k2)
 # refusals
-ACCEPTED, WRONG_SCALE, UNCONVINCING, TOO_FEW, CONTESTED, BRIGHT_UNSEEN = 0, 1, 2, 3, 4, 5
+ACCEPTED, WRONG_SCALE, UNCONVINCING, TOO_FEW, CONTESTED, BRIGHT_UNSEEN, MISFIT = 0, 1, 2, 3, 4, 5, 6
+# with the centroid sigma known, an answer is refused when its residuals' chi-square (sum of
+# r^2 / sigma^2 over 2n - fitted degrees of freedom) is beyond what the sigma allows but with
+# chance MISFIT_ALPHA: the stars do not fit the camera given (a field of view a few per cent
+# off that a close cluster and a false star across the field hold at the given scale)
+MISFIT_ALPHA_Z = 3.719  # the normal quantile of MISFIT_ALPHA = 1e-4 (one-sided)
 # an answer is refused when the image it predicts holds at least as many catalog stars brighter
 # than its brightest matched star by UNSEEN_MARGIN_MAG as it matched, and at least MIN_UNSEEN
 # (with the points' brightness known): a right answer's brightest points are its brightest
@@ -243,6 +248,28 @@ def compare_pairs(obs_a, cat_a, res_a, obs_b, cat_b, res_b):
 
 
 @njit(cache=True)
+def misfit_limit(dof):
+    """The chi-square of ``dof`` degrees of freedom exceeded with chance ``MISFIT_ALPHA``
+    (Wilson-Hilferty's cube-root normal approximation: within a few per cent of the exact
+    quantile from 3 degrees of freedom on, above it at few)."""
+    a = 2.0 / (9.0 * dof)
+    return dof * (1.0 - a + MISFIT_ALPHA_Z * math.sqrt(a)) ** 3
+
+
+@njit(cache=True)
+def misfits(residuals, n_fitted, sigma_px):
+    """Whether the residuals (n, 2, px) of a fit of ``n_fitted`` parameters are beyond what
+    a centroid sigma of ``sigma_px`` allows (``misfit_limit``)."""
+    dof = 2 * len(residuals) - n_fitted
+    if dof < 1 or sigma_px <= 0.0:
+        return False
+    chi2 = 0.0
+    for i in range(len(residuals)):
+        chi2 += (residuals[i, 0] ** 2 + residuals[i, 1] ** 2) / sigma_px**2
+    return chi2 > misfit_limit(dof)
+
+
+@njit(cache=True)
 def expected_stars(R, sky, model, p, width, height, mags, brighter_than, work):
     """Catalog stars inside the image at attitude ``R`` through the camera ``p`` (the stars
     the solution says should be measurable), and how many of them have ``mags`` below
@@ -340,6 +367,8 @@ def conclude(obs, cat, R, xy, sky, allowed, model, p0, width, height, fit_focal,
         wrong, f_scale = scale_off(f.R, vectors[a.cat], xy[a.obs], model, p0, sigma_px)
         if wrong:
             refusal = WRONG_SCALE
+    if refusal == ACCEPTED and misfits(f.residuals, n_fitted, known_sigma_px):
+        refusal = MISFIT
     if refusal == ACCEPTED and (
         contested or contested_pair(a.obs, a.cat, f, xy, sky, allowed, model, sigma_px, work)
     ):
