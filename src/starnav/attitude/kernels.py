@@ -15,9 +15,9 @@ import math
 from collections import namedtuple
 
 import numpy as np
-from numba import njit
 
 from starnav.attitude.rotation import rotate_by
+from starnav.caching import njit
 from starnav.camera.kernels import N_INTRINSIC, n_coefficients, project, update
 from starnav.geometry import ARCSEC_PER_RAD
 

@@ -24,7 +24,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+
+from starnav.caching import njit
 
 PINHOLE = 0
 EQUIDISTANT = 1

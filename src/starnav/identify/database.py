@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial import cKDTree
 
+from starnav.caching import cache_dir
 from starnav.catalog import Catalog
 from starnav.geometry import angle_between, chord_from_angle
 
@@ -27,12 +28,6 @@ _FORMAT_VERSION = 2
 GRID_STEP_DEG = 1.0  # cells of the RA / Dec grid the cone searches of the kernels use
 NEAR_CELLS_PER_STAR = 2.0  # the near-star grid has about this many cells per catalog star
 _ANGLE_STEP_DEG = 0.5  # databases are built for max angles rounded up to this step
-
-
-def cache_dir() -> Path:
-    """Directory of cached databases (``$STARNAV_CACHE_DIR`` or ``~/.cache/starnav``)."""
-    env = os.environ.get("STARNAV_CACHE_DIR")
-    return Path(env) if env else Path.home() / ".cache" / "starnav"
 
 
 @dataclass(frozen=True, eq=False)

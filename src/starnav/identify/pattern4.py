@@ -32,10 +32,11 @@ from pathlib import Path
 
 import numpy as np
 
+from starnav.caching import cache_dir
 from starnav.errors import CatalogError, StarnavError
 from starnav.geometry import angle_between, chord_from_angle, triple_product
 from starnav.identify.base import IdentifyOutcome, MatchSettings, screen_stars_only
-from starnav.identify.database import PairDatabase, cache_dir, load_cached, save_cached
+from starnav.identify.database import PairDatabase, load_cached, save_cached
 from starnav.identify.verify import HypothesisTester
 
 _FORMAT_VERSION = 2  # 2: stars as (field, subset, order) codes, largest edge in uint16 steps

@@ -13,7 +13,6 @@ import math
 from collections import namedtuple
 
 import numpy as np
-from numba import njit
 
 from starnav.attitude.kernels import (
     at_least_sigma,
@@ -22,6 +21,7 @@ from starnav.attitude.kernels import (
     studentized,
     variance_scale,
 )
+from starnav.caching import njit
 from starnav.camera.kernels import (
     N_INTRINSIC,
     PINHOLE,

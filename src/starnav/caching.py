@@ -1,0 +1,69 @@
+"""Where starnav keeps what it computes once: the pair and pattern tables, and the machine code
+of its numba kernels.
+
+Both live under ``$STARNAV_CACHE_DIR`` (default ``~/.cache/starnav``). The machine code goes to
+``numba/kernels-<hash>`` there (or under ``$NUMBA_CACHE_DIR`` when that is set), the hash taken
+over the sources of every kernel module together: numba invalidates a cached function when its
+own file changes, not when a function it calls in another file does (``pipeline.kernels``
+calls ``identify.kernels``), so a release that changed only a callee would otherwise run the
+old callee's code. numba checks its own version and Python's itself.
+"""
+
+from __future__ import annotations
+
+import functools
+import hashlib
+import os
+from collections.abc import Callable
+from pathlib import Path
+
+PACKAGE = Path(__file__).resolve().parent
+# every module with numba kernels (tests/test_caching.py checks the list against the sources)
+KERNEL_SOURCES = (
+    "attitude/kernels.py",
+    "attitude/rotation.py",
+    "camera/kernels.py",
+    "identify/kernels.py",
+    "pipeline/kernels.py",
+)
+
+
+def cache_dir() -> Path:
+    """Directory of starnav's caches (``$STARNAV_CACHE_DIR`` or ``~/.cache/starnav``)."""
+    env = os.environ.get("STARNAV_CACHE_DIR")
+    return Path(env) if env else Path.home() / ".cache" / "starnav"
+
+
+@functools.cache
+def kernel_sources_hash() -> str:
+    """SHA-256 (hex, 16 digits) of the kernel modules' sources, in ``KERNEL_SOURCES`` order."""
+    digest = hashlib.sha256()
+    for name in KERNEL_SOURCES:
+        digest.update(name.encode())
+        digest.update((PACKAGE / name).read_bytes())
+    return digest.hexdigest()[:16]
+
+
+def kernel_cache_dir(numba_cache_dir: str = "") -> Path:
+    """Where the kernels' machine code is cached: ``kernels-<hash>`` under
+    ``numba_cache_dir`` (numba's ``NUMBA_CACHE_DIR``) when given, else under
+    ``cache_dir() / "numba"``."""
+    base = Path(numba_cache_dir) if numba_cache_dir else cache_dir() / "numba"
+    return base / f"kernels-{kernel_sources_hash()}"
+
+
+def njit(**options) -> Callable:
+    """``numba.njit(**options)`` whose cache (``cache=True``) is ``kernel_cache_dir()``: numba
+    picks a function's cache folder when it is decorated, so ``numba.config.CACHE_DIR`` is set
+    for the decoration only (numba code of other packages keeps its own)."""
+    import numba
+
+    def decorate(func: Callable) -> Callable:
+        saved = numba.config.CACHE_DIR
+        numba.config.CACHE_DIR = str(kernel_cache_dir(saved))
+        try:
+            return numba.njit(**options)(func)
+        finally:
+            numba.config.CACHE_DIR = saved
+
+    return decorate

@@ -1,0 +1,56 @@
+"""The kernels' machine-code cache: keyed by all kernel sources together."""
+
+from __future__ import annotations
+
+import re
+
+from starnav import caching
+
+
+def test_the_kernel_source_list_is_every_module_with_numba_kernels():
+    """A module that compiles kernels but is not in KERNEL_SOURCES would leave its callers'
+    cached code stale when it changes."""
+    found = {
+        str(path.relative_to(caching.PACKAGE))
+        for path in caching.PACKAGE.rglob("*.py")
+        if re.search(r"^@njit\(", path.read_text(), flags=re.MULTILINE)
+    }
+    assert found == set(caching.KERNEL_SOURCES)
+
+
+def test_kernel_cache_folders_follow_the_sources(monkeypatch, tmp_path):
+    """The cache folder's name changes with any kernel module's source (a callee's too), sits
+    under NUMBA_CACHE_DIR when that is given, else under STARNAV_CACHE_DIR."""
+    monkeypatch.setenv("STARNAV_CACHE_DIR", str(tmp_path))
+    here = caching.kernel_cache_dir()
+    assert here.parent == tmp_path / "numba" and here.name.startswith("kernels-")
+    assert caching.kernel_cache_dir("/somewhere").parent.as_posix() == "/somewhere"
+    copy = tmp_path / "pkg"
+    for name in caching.KERNEL_SOURCES:
+        (copy / name).parent.mkdir(parents=True, exist_ok=True)
+        (copy / name).write_bytes((caching.PACKAGE / name).read_bytes())
+    monkeypatch.setattr(caching, "PACKAGE", copy)
+    caching.kernel_sources_hash.cache_clear()
+    try:
+        assert caching.kernel_cache_dir() == here  # the same sources: the same folder
+        with (copy / "identify/kernels.py").open("a") as fh:
+            fh.write("\n# a callee changed\n")
+        caching.kernel_sources_hash.cache_clear()
+        assert caching.kernel_cache_dir() != here
+    finally:
+        caching.kernel_sources_hash.cache_clear()
+
+
+def test_kernels_are_cached_in_their_folder_and_numba_config_is_restored():
+    """A kernel decorated through ``caching.njit`` has its cache there; numba's CACHE_DIR is
+    what it was before (other packages' numba code keeps its own cache)."""
+    import numba
+
+    from starnav.identify import kernels
+
+    before = numba.config.CACHE_DIR
+    cache = getattr(kernels.chord, "_cache", None)
+    if cache is None:  # NUMBA_DISABLE_JIT: plain Python, nothing cached
+        return
+    assert cache.cache_path.startswith(str(caching.kernel_cache_dir(before)))
+    assert numba.config.CACHE_DIR == before
