@@ -160,7 +160,8 @@ def misfit(rms_px: float, sigma_px: float) -> str:
     """The refusal of a fit whose residuals are beyond what the centroid sigma allows."""
     return (
         f"the matched stars fit the camera worse than their centroid sigma allows (rms "
-        f"{rms_px:.2f} px, sigma {sigma_px:.2f} px): is the field of view right?"
+        f"{rms_px:.2f} px, sigma {sigma_px:.2f} px): are the field of view, the lens model "
+        f"and the sigma right?"
     )
 
 

@@ -306,7 +306,8 @@ def conclude(obs, cat, R, xy, sky, allowed, model, p0, width, height, fit_focal,
     ``brightness_log_ratio``), ``bright_drop`` of the pairs' brightness
     scores left out; ``sigma_px``: the sigma the outlier and rematch rules use;
     ``known_sigma_px``: the centroid sigma when it is known (0: not), the least the reported
-    covariance is at (``at_least_sigma``)."""
+    covariance is at (``at_least_sigma``) and what the residuals are tested against
+    (``misfits``)."""
     vectors = sky[0]
     work = np.empty(len(vectors), dtype=np.int64)
     a = converge(obs, cat, R, xy, sky, allowed, model, p0, width, height, fit_focal,
