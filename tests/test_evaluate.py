@@ -451,9 +451,8 @@ def test_an_answer_whose_image_holds_more_unseen_bright_stars_than_matches_is_re
     where it belongs): 5 of its 9 points, all of Hp 4.8-5.8, matched stars of Hp 5.0-6.0 with
     magnitudes that agree (claim 8.6e-5), in a field whose brighter stars (Hp 2.1-4.9) none of
     the points are. Now refused for them."""
-    config = EvalConfig(seed=10009, kinds=("random", "scrambled", "mirrored", "fov-off",
-                                           "crowded", "few"))  # fmt: skip
-    r = solve_frame(config, uniform_boresights(50000, seed=10009), 37207)
+    config = EvalConfig(seed=10009, kinds=ADVERSARIAL)
+    r = solve_frame(config, uniform_boresights(50_000, seed=10009), 37207)
     assert r.kind == "scrambled" and r.n_true == 0
     assert r.outcome == "none" and "brighter than any it matched" in r.reason
 
@@ -465,9 +464,8 @@ def test_an_answer_whose_residuals_the_centroid_sigma_cannot_explain_is_refused(
     held the attitude 0.27° off (15-21 of its own sigmas, claim 1.5e-18). Their residuals,
     rms 1.23 px against the told 0.5 px (chi-square 66 on 19 degrees of freedom), now refuse
     it."""
-    config = EvalConfig(seed=20005, kinds=("random", "scrambled", "mirrored", "fov-off",
-                                           "crowded", "few"))  # fmt: skip
-    r = solve_frame(config, uniform_boresights(50000, seed=20005), 33603)
+    config = EvalConfig(seed=20005, kinds=ADVERSARIAL)
+    r = solve_frame(config, uniform_boresights(50_000, seed=20005), 33603)
     assert r.kind == "fov-off" and r.n_true == 20
     assert r.outcome == "none" and "worse than their centroid sigma allows" in r.reason
 
