@@ -194,3 +194,21 @@ def test_a_field_of_view_one_percent_off_is_refused_not_answered(hip_1991):
         else:  # at 0.3 px told, the far stars miss by up to 2.5 px: most are unconvincing
             assert res.solution is None or len(res.solution.stars) < 6
     assert refused >= 4
+
+
+def test_the_ranked_budget_grows_with_the_cube_of_the_pair_tolerance():
+    """Pyramid's budget with the points in brightness order: 1000 hypotheses at 0.5 px
+    centroids (the tolerance it was measured at), 8x that at 1 px (twice the tolerance: a
+    measured triangle finds ~8x as many catalog triangles), the full budget at 2 px; never
+    less than 1000 (0.3 px)."""
+    from starnav.identify.base import MatchSettings
+    from starnav.identify.pyramid import RANKED_MAX_HYPOTHESES, ranked_budget
+
+    def budget(sigma_px):
+        return ranked_budget(MatchSettings.for_focal(sigma_px, 2435.7))
+
+    assert budget(0.5) == RANKED_MAX_HYPOTHESES
+    assert budget(0.3) == RANKED_MAX_HYPOTHESES
+    assert budget(1.0) == 8 * RANKED_MAX_HYPOTHESES
+    assert budget(2.0) == MatchSettings.for_focal(2.0, 2435.7).max_hypotheses
+    assert budget(None) == budget(1.0)  # untold: the tolerances of 1 px
