@@ -20,7 +20,12 @@ from dataclasses import replace
 
 import numpy as np
 
-from starnav.identify.base import IdentifyOutcome, MatchSettings, screen_stars_only
+from starnav.identify.base import (
+    PAIR_TOL_SIGMAS,
+    IdentifyOutcome,
+    MatchSettings,
+    screen_stars_only,
+)
 from starnav.identify.database import PairDatabase
 from starnav.identify.verify import HypothesisTester, Tally, kernels
 
@@ -33,7 +38,7 @@ RANKED_MAX_HYPOTHESES = 1000
 # ... at a pair tolerance of RANKED_TOL_PX (0.5 px centroids); a measured triangle finds about
 # (tolerance / RANKED_TOL_PX)^3 as many catalog triangles at a wider one, and the budget grows
 # with it (a fixed 1000 left pyramid 39 % of the frames at 2 px noise, against 92 % before it)
-RANKED_TOL_PX = 3.0 * math.sqrt(2.0) * 0.5
+RANKED_TOL_PX = PAIR_TOL_SIGMAS * math.sqrt(2.0) * 0.5
 NARROW_DEG = 59.0
 NO_TRIANGLE = "no star triangle matches the catalog"  # the reason when nothing matched
 FEWER_THAN_3 = "fewer than 3 stars"
