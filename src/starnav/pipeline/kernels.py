@@ -179,7 +179,7 @@ def contested_pair(obs, cat, f, xy, sky, allowed, model, sigma_px, work):
     bends to it. ``sigma_px``: the centroid sigma (at least the fit's a-posteriori one)."""
     vectors = sky[0]
     n = len(obs)
-    sigma2 = sigma_px**2 * variance_scale(f.variance_px2, sigma_px)
+    sigma2 = max(f.variance_px2, sigma_px**2)
     gate = 2.0 * math.log(n / OUTLIER_ALPHA)  # the outlier rule's
     matched = np.zeros(len(xy), dtype=np.bool_)
     matched[obs] = True
