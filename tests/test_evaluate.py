@@ -1,6 +1,7 @@
 import csv
 import json
 import pickle
+import re
 from dataclasses import replace
 
 import numpy as np
@@ -457,17 +458,36 @@ def test_an_answer_whose_image_holds_more_unseen_bright_stars_than_matches_is_re
     assert r.outcome == "none" and "brighter than any it matched" in r.reason
 
 
-def test_an_answer_whose_residuals_the_centroid_sigma_cannot_explain_is_refused():
-    """The seventh million's one wrong answer (seed 20005, frame 33603, fov-off: the FOV 3.7 %
-    narrower than told): the Pleiades at the image's edge fit the told scale by themselves, a
-    false star across the field sat where that scale puts another star, and the 11 pairs
-    held the attitude 0.27° off (15-21 of its own sigmas, claim 1.5e-18). Their residuals,
-    rms 1.23 px against the told 0.5 px (chi-square 66 on 19 degrees of freedom), now refuse
-    it."""
-    config = EvalConfig(seed=20005, kinds=ADVERSARIAL)
-    r = solve_frame(config, uniform_boresights(50_000, seed=20005), 33603)
-    assert r.kind == "fov-off" and r.n_true == 20
-    assert r.outcome == "none" and "worse than their centroid sigma allows" in r.reason
+def test_residuals_the_told_centroid_sigma_cannot_explain_are_refused():
+    """Told half the true centroid sigma (0.25 px for 0.5), most true frames' residuals are
+    beyond its chi-square limit: refused, the message naming the sigma, never answered wrong;
+    told the true one, none is. (The seventh million's wrong answer this rule was made for, a
+    cluster holding a focal length 3.7 % off, is now refused by the scale test first.)"""
+    boresights = uniform_boresights(20, seed=3)
+    told_small = [solve_frame(EvalConfig(seed=3, sigma_px=0.25), boresights, i) for i in range(20)]
+    told_right = [solve_frame(EvalConfig(seed=3), boresights, i) for i in range(20)]
+    misfit = "worse than their centroid sigma allows"
+    refused = [r for r in told_small if misfit in r.reason]
+    assert len(refused) >= 8 and "sigma 0.25 px" in refused[0].reason
+    assert all(r.outcome != "wrong" for r in told_small)
+    assert not any(misfit in r.reason for r in told_right)
+
+
+@pytest.mark.parametrize("seed, index", [(20005, 33603), (30011, 6027), (40010, 34263)])
+def test_the_scale_is_tested_on_the_stars_a_free_focal_length_finds(seed, index):
+    """The fov-off wrong answers of the seventh, eighth and ninth millions (the focal length
+    told 3.7 %, 2.2 % and 2.3 % off): the Pleiades fit the told scale by themselves, one or two
+    stars across the field held the joint fit there (the eighth's scale test on its pairs: 4.7
+    sigma, under the 5), and the field's other true stars, 4-7 px from where the told scale
+    puts them, stayed unmatched. A fit with the focal length free, from that answer, matches
+    them: on those pairs the scale is plainly off, and the refusal names the focal length they
+    fit, the true one to 0.1 %."""
+    config = EvalConfig(seed=seed, kinds=ADVERSARIAL)
+    r = solve_frame(config, uniform_boresights(50_000, seed=seed), index)
+    assert r.kind == "fov-off" and r.outcome == "none"
+    fitted_px = float(re.search(r"focal length of ([0-9.]+) px", r.reason).group(1))
+    true_px = config.make_camera().focal_px * r.focal_factor
+    assert abs(fitted_px / true_px - 1.0) < 1e-3
 
 
 def test_the_misfit_limit_is_the_chi_square_quantile():

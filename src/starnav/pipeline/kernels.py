@@ -364,8 +364,15 @@ def conclude(obs, cat, R, xy, sky, allowed, model, p0, width, height, fit_focal,
     refusal = ACCEPTED
     f_scale = 0.0
     if not fit_focal and len(a.obs) >= MIN_STARS_SCALE_CHECK:
-        # a wrong focal length biases the attitude beyond its error bars: test the scale
+        # a wrong focal length biases the attitude beyond its error bars: test the scale, on
+        # the stars matched and on those a free focal length finds besides
         wrong, f_scale = scale_off(f.R, vectors[a.cat], xy[a.obs], model, p0, sigma_px)
+        if not wrong:
+            free = converge(a.obs, a.cat, f.R, xy, sky, allowed, model, p0, width, height, True,
+                            fit_distortion, radius, sigma_px, work)  # fmt: skip
+            if len(free.obs) > len(a.obs):
+                wrong, f_scale = scale_off(free.fit.R, vectors[free.cat], xy[free.obs], model,
+                                           p0, sigma_px)  # fmt: skip
         if wrong:
             refusal = WRONG_SCALE
     if refusal == ACCEPTED and misfits(f.residuals, n_fitted, known_sigma_px):
