@@ -264,8 +264,10 @@ def studentized(residuals, leverage, sigma_px):
 @njit(cache=True)
 def free_focal_step(R, icrs, xy, model, p, sigma_px=0.0):
     """(focal length px, its 1-sigma) the stars fit, by one Gauss-Newton step with the focal
-    length freed from a fit that held it (``R`` that fit's attitude). The 1-sigma is at the
-    a-posteriori variance, at least ``sigma_px``² (``variance_scale``; 0: no floor)."""
+    length freed from the attitude ``R`` at the camera ``p`` (``R`` of a fit that held the
+    focal length, or of one that freed it, as the scale test on a free fit's pairs passes).
+    The 1-sigma is at the a-posteriori variance, at least ``sigma_px``² (``variance_scale``;
+    0: no floor)."""
     free = np.zeros(N_INTRINSIC, dtype=np.bool_)
     free[0] = True
     res, J = residuals_jacobian(R, icrs, xy, model, p, free)
