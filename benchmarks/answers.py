@@ -24,9 +24,9 @@ from tqdm import tqdm
 from starnav.api import solve_verbose
 from starnav.camera import Camera
 from starnav.catalog import load_catalog
-from starnav.fov import solve_fov
 from starnav.geometry import attitude_difference_deg
 from starnav.identify import ALGORITHMS
+from starnav.pipeline.fov import solve_fov
 from starnav.simulate import simulate_frame
 
 ROOT = Path(__file__).resolve().parents[1]

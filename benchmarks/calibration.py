@@ -3,7 +3,7 @@
     python benchmarks/calibration.py [--frames 8]
 
 A 1280 x 960 px camera, 30° across, principal point off centre, barrel distortion; frames at
-random attitudes rendered with ``starnav.render`` (Hp <= 7.5) and written as 16-bit PNG; then
+random attitudes rendered with ``simulate.render`` (Hp <= 7.5) and written as 16-bit PNG; then
 ``starnav.calibrate`` on the files (FOV unknown, searched 5-40°). Also: how far the distortion
 moves the corners, and the boresight error of a single frame solved without and with the
 fitted camera. Writes the ``calibration`` block of docs/images.md.
@@ -27,8 +27,8 @@ from starnav.calibrate import calibrate
 from starnav.camera import Camera
 from starnav.catalog import load_catalog
 from starnav.geometry import attitude_difference_deg
-from starnav.image import solve_image
-from starnav.render import RenderSettings, render_frame, write_image
+from starnav.pipeline.image import solve_image
+from starnav.simulate.render import RenderSettings, render_frame, write_image
 
 DOC = Path(__file__).resolve().parents[1] / "docs" / "images.md"
 TRUE = Camera(1280, 960, Camera.from_fov(30.0, 1280).focal_px, 652.0, 471.0, -0.06, 0.02)

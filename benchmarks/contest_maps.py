@@ -18,7 +18,7 @@ import numpy as np
 from lost_in_space import machine
 from starnav.api import make_camera, solve_verbose
 from starnav.catalog import load_csv
-from starnav.plot import plot_solution
+from starnav.output.plot import plot_solution
 from starnav.starlist import read_star_csv
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "contest2019"

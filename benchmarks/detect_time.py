@@ -3,7 +3,7 @@
     python benchmarks/detect_time.py
 
 12 ``seed-1024`` frames (1024 px, 20°, Hipparcos Hp <= 7) at random attitudes (seed 3),
-``starnav.image.detect_image`` on each three times; prints the median and the minimum (ms).
+``starnav.pipeline.image.detect_image`` on each three times; prints the median and the minimum (ms).
 Run it pinned to one core (``taskset -c 1``) on each checkout to compare.
 """
 
@@ -16,8 +16,8 @@ import numpy as np
 
 from starnav.catalog import load_catalog
 from starnav.geometry import attitude_from_radec_roll
-from starnav.image import detect_image
-from starnav.render import PRESETS, render_frame
+from starnav.pipeline.image import detect_image
+from starnav.simulate.render import PRESETS, render_frame
 
 
 def main() -> None:

@@ -41,7 +41,8 @@ def main() -> None:
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as cache:
         os.environ["STARNAV_CACHE_DIR"] = cache  # a cold cache: every table is built
-        from starnav.fov import (
+        from starnav.identify.pattern4 import catalog_nbytes
+        from starnav.pipeline.fov import (
             band_grid,
             band_stars_per_field,
             diagonal_fov_deg,
@@ -49,7 +50,6 @@ def main() -> None:
             load_band,
             search_catalog,
         )
-        from starnav.identify.pattern4 import catalog_nbytes
 
         w, h = args.width, args.height
         lo, hi = (diagonal_fov_deg(v, w, h) for v in args.fov_range)
@@ -124,7 +124,7 @@ def typical_field(width: int, height: int, fov_range: tuple[float, float]) -> st
 
     from starnav.camera import Camera
     from starnav.catalog import load_catalog
-    from starnav.fov import solve_fov
+    from starnav.pipeline.fov import solve_fov
     from starnav.simulate import simulate_frame
 
     camera, sky = Camera.from_fov(20.0, width, height), load_catalog(None, mag_limit=7.0)
@@ -150,7 +150,7 @@ def nothing_to_find(width: int, height: int, fov_range: tuple[float, float]) -> 
     """What a field with no catalog pattern costs: random points, searched to the end."""
     import numpy as np
 
-    from starnav.fov import solve_fov
+    from starnav.pipeline.fov import solve_fov
 
     rng = np.random.default_rng(0)
     # one solve first, not counted: it loads the kernels' machine code (numba, on first use)

@@ -32,7 +32,7 @@ from lost_in_space import machine
 from starnav.camera import Camera
 from starnav.catalog import load_catalog
 from starnav.geometry import attitude_difference_deg, attitude_from_radec_roll
-from starnav.render import RenderSettings, render_frame, write_image
+from starnav.simulate.render import RenderSettings, render_frame, write_image
 
 ROOT = Path(__file__).resolve().parents[1]
 LOAD = os.getloadavg()[0]

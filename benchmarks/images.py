@@ -3,7 +3,7 @@
     python benchmarks/images.py --frames 200 [--seed 2026] [--keep DIR]
 
 Frames: ``--frames`` attitudes uniform on SO(3) (parity +1, as a real camera sees the sky),
-rendered with ``starnav.render`` and its ``seed-1024`` preset (1024 px, 20°, Gaussian PSF,
+rendered with ``starnav.simulate.render`` and its ``seed-1024`` preset (1024 px, 20°, Gaussian PSF,
 photon, read and quantisation noise) from the Hipparcos stars with Hp <= 7, written as 16-bit
 PNG files in a temporary folder (``--keep DIR`` keeps them there). Frame i's attitude and noise
 come from the seed (``--seed``, i). Every solver gets the same files.
@@ -124,7 +124,7 @@ class Truth:
 
 def render_files(catalog, n: int, seed: int, folder: Path) -> list[Truth]:
     """Render ``n`` frames of the preset camera at random attitudes into 16-bit PNG files."""
-    from starnav.render import PRESETS, render_frame, write_image
+    from starnav.simulate.render import PRESETS, render_frame, write_image
 
     camera, settings = PRESETS[PRESET]
     truths = []

@@ -27,7 +27,7 @@ from lost_in_space import machine
 from starnav.navigation import locate, read_observation
 from starnav.navigation.frames import radii_of_curvature_m
 from starnav.navigation.simulate import render_views, simulate_observation
-from starnav.render import RenderSettings, write_image
+from starnav.simulate.render import RenderSettings, write_image
 
 ROOT = Path(__file__).resolve().parents[1]
 DOC = ROOT / "docs" / "locate.md"

@@ -5,10 +5,10 @@
 
 Each frame: a boresight uniform on the sky with a random roll, a 1024 x 1024 px pinhole
 camera of the given horizontal FOV (and a 1280 x 720 one at 3°: a wide image has the
-narrowest diagonal), rendered with ``starnav.render`` (PSF sigma 1 px, 0.5 s exposure: stars
+narrowest diagonal), rendered with ``simulate.render`` (PSF sigma 1 px, 0.5 s exposure: stars
 are detected to about Hp 9.5-10, as a small telescope's camera sees them) and solved by
 ``starnav.solve_image`` searching ``--fov-range``. The ``--probe`` rows, fields narrower
-than the search allows (``starnav.fov.FOV_LIMITS_DEG``), are solved with that limit lifted in
+than the search allows (``pipeline.fov.FOV_LIMITS_DEG``), are solved with that limit lifted in
 this process, to show where the embedded catalog stops being enough.
 
 The sky rendered is the whole embedded Hipparcos catalog *and* the stars Hipparcos lacks: the
@@ -41,13 +41,13 @@ from tqdm import tqdm
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import starnav
-import starnav.fov
+import starnav.pipeline.fov
 from docblock import replace_block
 from lost_in_space import machine
 from starnav.camera import Camera
 from starnav.catalog import Catalog, load_catalog
 from starnav.geometry import attitude_difference_deg
-from starnav.render import RenderSettings, render_frame
+from starnav.simulate.render import RenderSettings, render_frame
 
 DOC = Path(__file__).resolve().parents[1] / "docs" / "images.md"
 # log10 of the stars brighter than V over the whole sky (Allen's Astrophysical Quantities)
@@ -201,7 +201,10 @@ def main() -> None:
     for k, (label, camera) in enumerate(cameras + probes):
         searched = fov_range if k < len(cameras) else (min(args.probe), fov_range[1])
         if k >= len(cameras):  # lifted for the probes only, after every counted row
-            starnav.fov.FOV_LIMITS_DEG = (min(args.probe), starnav.fov.FOV_LIMITS_DEG[1])
+            starnav.pipeline.fov.FOV_LIMITS_DEG = (
+                min(args.probe),
+                starnav.pipeline.fov.FOV_LIMITS_DEG[1],
+            )
         pole = 60.0 if "60°" in label else 0.0
         outs = [
             one_frame(hip, camera, args.seed * 1000 + 100 * k + i, searched, pole)

@@ -10,7 +10,7 @@ the reference being astrometry.net's answer in starnav's conventions: ``ra_deg``
 * bright: the 3 and the 10 brightest Hipparcos stars (Hp <= 8) that the reference attitude
   puts inside the frame (3 % margin, pinhole camera of the reference field of view) that
   lie within max(4 px, 1.2 % of the width) of one of the detections handed to the solver
-  (``starnav.image.detect_image``: the first 50);
+  (``starnav.pipeline.image.detect_image``: the first 50);
 * solve: ``starnav.solve_image`` with the field of view unknown; right when the boresight is
   within 0.1° of the reference and the field of view within 2 %, else wrong;
 * the detection time (ms, one run, on whatever else the machine was doing).
@@ -39,7 +39,7 @@ def run(manifest: Path, out: Path, only: list[str]) -> None:
     from starnav.catalog import load_catalog
     from starnav.detect.read import read_image
     from starnav.geometry import angle_between, attitude_from_radec_roll, radec_to_unit
-    from starnav.image import detect_image
+    from starnav.pipeline.image import detect_image
     from starnav.simulate import project_catalog
 
     catalog = load_catalog(None, mag_limit=8.0)

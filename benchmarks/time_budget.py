@@ -1,6 +1,6 @@
 """Time budgets: do the defaults cost a solve, and does any call overrun its budget?
 
-Two measurements, on the real solve paths (``starnav.budget``):
+Two measurements, on the real solve paths (``starnav.runtime.budget``):
 
 1. Solvable frames, each solved twice, with the default budget and with none
    (``time_budget_s=inf``): star lists with the FOV known (pinhole 20°, wide 120° equidistant),
@@ -30,20 +30,20 @@ from tqdm import tqdm
 from docblock import replace_block
 from lost_in_space import machine
 from starnav.api import solve_verbose
-from starnav.budget import (
+from starnav.camera import Camera, Equidistant
+from starnav.catalog import load_catalog
+from starnav.geometry import attitude_from_radec_roll
+from starnav.pipeline.fov import solve_fov
+from starnav.pipeline.image import solve_image
+from starnav.runtime.budget import (
     DEFAULTS,
     KNOWN_BUDGET_S,
     SCAN_BUDGET_S,
     SEARCH_BUDGET_S,
     WIDE_BUDGET_S,
 )
-from starnav.camera import Camera, Equidistant
-from starnav.catalog import load_catalog
-from starnav.fov import solve_fov
-from starnav.geometry import attitude_from_radec_roll
-from starnav.image import solve_image
-from starnav.render import RenderSettings, render_frame
 from starnav.simulate import simulate_frame
+from starnav.simulate.render import RenderSettings, render_frame
 
 ROOT = Path(__file__).resolve().parents[1]
 LOAD = os.getloadavg()[0]

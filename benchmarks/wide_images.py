@@ -5,7 +5,7 @@
 Cameras: 1024 x 1024 px whose 185° image circle just fits the sensor (black outside it),
 ``equidistant`` (r = f θ) and ``equisolid`` (r = 2 f sin(θ/2)), f from ``from_fov(185°)``.
 Frames: ``--frames`` attitudes uniform on SO(3) (parity +1), frame i's attitude and noise from
-(``--seed``, i), the same attitudes for both lenses, rendered by ``starnav.render`` from the
+(``--seed``, i), the same attitudes for both lenses, rendered by ``simulate.render`` from the
 Hipparcos stars with Hp <= 6.5 (about 4000 in the circle): Gaussian PSF sigma 1.2 px (the same
 over the image), sky 100 e/px, read noise 5 e, 20 hot pixels, 16 bits, vignetting cos²(θ/2)
 (one stop at 90° from the axis, the render's fisheye default). An Hp 6 star on the axis has
@@ -42,8 +42,8 @@ from tqdm import tqdm
 from starnav.camera import Equidistant, Equisolid
 from starnav.catalog import load_catalog
 from starnav.geometry import attitude_difference_deg
-from starnav.image import solve_image
-from starnav.render import RenderSettings, render_frame
+from starnav.pipeline.image import solve_image
+from starnav.simulate.render import RenderSettings, render_frame
 
 CIRCLE_DEG = 185.0
 SIZE_PX = 1024

@@ -4,12 +4,12 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from starnav.annotate import annotate_image, annotation_figure, figure_size_px
 from starnav.camera import Camera
 from starnav.catalog import Catalog, load_catalog
 from starnav.catalog.names import star_names
 from starnav.errors import ImageError, StarnavError
 from starnav.geometry import angle_between, attitude_from_radec_roll, radec_to_unit
+from starnav.output.annotate import annotate_image, annotation_figure, figure_size_px
 from starnav.simulate import project_catalog
 
 # J2000 positions (degrees) of stars whose coordinates every almanac lists

@@ -1,4 +1,4 @@
-"""Time budgets (starnav.budget): every solve stops when its budget is spent, says so, and does
+"""Time budgets (runtime.budget): every solve stops when its budget is spent, says so, and does
 not run over by more than one unit of work."""
 
 from __future__ import annotations
@@ -11,12 +11,12 @@ import numpy as np
 import pytest
 
 from starnav.api import solve_verbose
-from starnav.budget import Deadline, check_budget
 from starnav.camera import Camera
 from starnav.catalog import load_catalog
 from starnav.cli import main
 from starnav.errors import StarnavError
-from starnav.fov import solve_fov
+from starnav.pipeline.fov import solve_fov
+from starnav.runtime.budget import Deadline, check_budget
 from starnav.simulate import simulate_frame
 
 # a call may run over by one unit of work (a chunk of triangles sized to a twentieth of the

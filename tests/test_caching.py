@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import re
 
-from starnav import caching
+from starnav.runtime import caching
 
 
 def test_the_kernel_source_list_is_every_module_with_numba_kernels():

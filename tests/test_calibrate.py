@@ -12,9 +12,9 @@ from starnav.catalog import load_catalog
 from starnav.cli import main
 from starnav.errors import StarnavError
 from starnav.geometry import attitude_difference_deg, attitude_from_radec_roll
-from starnav.image import solve_image
-from starnav.render import write_image
+from starnav.pipeline.image import solve_image
 from starnav.simulate import project_catalog
+from starnav.simulate.render import write_image
 
 TRUE = dataclasses.replace(
     KannalaBrandt.from_fov(170.0, 1024, 1024, k1=0.02, k2=-0.004), cx=515.3, cy=508.7

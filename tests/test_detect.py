@@ -16,7 +16,7 @@ from starnav.detect.read import read_image
 from starnav.detect.stars import detect_stars
 from starnav.errors import ImageError
 from starnav.geometry import attitude_from_radec_roll
-from starnav.render import (
+from starnav.simulate.render import (
     PRESETS,
     RenderSettings,
     flux_e_for_snr,

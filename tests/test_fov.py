@@ -11,7 +11,9 @@ from starnav.camera import Camera, load_camera, save_camera
 from starnav.catalog import load_catalog
 from starnav.cli import main
 from starnav.errors import CameraError, StarnavError
-from starnav.fov import (
+from starnav.geometry import attitude_difference_deg, attitude_from_radec_roll
+from starnav.identify.pattern4 import catalog_nbytes
+from starnav.pipeline.fov import (
     DEFAULT_FOV_RANGE_DEG,
     FOV_LIMITS_DEG,
     band_grid,
@@ -19,11 +21,9 @@ from starnav.fov import (
     load_bands,
     solve_fov,
 )
-from starnav.geometry import attitude_difference_deg, attitude_from_radec_roll
-from starnav.identify.pattern4 import catalog_nbytes
-from starnav.image import solve_image
-from starnav.render import RenderSettings, render_frame
+from starnav.pipeline.image import solve_image
 from starnav.simulate import simulate_frame
+from starnav.simulate.render import RenderSettings, render_frame
 
 
 @pytest.fixture(scope="module")

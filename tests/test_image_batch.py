@@ -1,4 +1,4 @@
-"""Many image files in one process (starnav.image_batch, ``starnav solve A B DIR/``), image
+"""Many image files in one process (starnav.pipeline.image_batch, ``starnav solve A B DIR/``), image
 sequences tracked, FITS hints in and FITS with the WCS out, pictures of unsolved images."""
 
 from __future__ import annotations
@@ -17,9 +17,9 @@ from starnav.cli import main
 from starnav.detect.header import fits_hints
 from starnav.errors import StarnavError
 from starnav.geometry import attitude_difference_deg, attitude_from_radec_roll
-from starnav.image import solve_image
-from starnav.image_batch import ImageOutputs, image_paths, solve_files, summarize
-from starnav.render import RenderSettings, render_frame, write_image
+from starnav.pipeline.image import solve_image
+from starnav.pipeline.image_batch import ImageOutputs, image_paths, solve_files, summarize
+from starnav.simulate.render import RenderSettings, render_frame, write_image
 
 CAMERA = Camera.from_fov(12.0, 640, 480)
 # a slow pan: 0.3° between frames, the prior of each frame good to 1° (tracking's default)
@@ -212,7 +212,7 @@ def test_a_batch_on_a_local_dask_cluster_tracks_in_runs(sequence):
 
 def test_a_batch_reads_each_files_hints_unless_told_not_to(tmp_path):
     from starnav.detect.header import ImageHints
-    from starnav.image_batch import solve_file
+    from starnav.pipeline.image_batch import solve_file
 
     sky = load_catalog(None, mag_limit=7.0)
     frame = render_frame(sky, CAMERA, attitude_from_radec_roll(*PAN[3], 1), RenderSettings(seed=6))

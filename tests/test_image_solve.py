@@ -11,8 +11,8 @@ from starnav.camera import Camera, load_camera
 from starnav.catalog import load_catalog
 from starnav.cli import main
 from starnav.geometry import attitude_difference_deg, attitude_from_radec_roll
-from starnav.image import solve_image
-from starnav.render import RenderSettings, render_frame, write_image
+from starnav.pipeline.image import solve_image
+from starnav.simulate.render import RenderSettings, render_frame, write_image
 
 
 @pytest.fixture(scope="module")
@@ -159,7 +159,7 @@ def test_a_refused_identification_does_not_end_the_fov_search(sky):
 
     from scipy.spatial.transform import Rotation
 
-    from starnav.render import PRESETS
+    from starnav.simulate.render import PRESETS
 
     camera, settings = PRESETS["seed-1024"]
     seq = np.random.SeedSequence([2026, 436])

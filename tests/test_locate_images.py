@@ -16,7 +16,7 @@ from starnav.cli import main
 from starnav.navigation import ObservationError, locate, parse_observation, read_observation
 from starnav.navigation.frames import radii_of_curvature_m
 from starnav.navigation.simulate import render_views, simulate_observation
-from starnav.render import RenderSettings, write_image
+from starnav.simulate.render import RenderSettings, write_image
 
 SITE = {"lat_deg": 47.37, "lon_deg": 8.54}
 UTC = "2025-06-01T22:00:00Z"

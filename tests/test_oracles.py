@@ -22,7 +22,6 @@ from starnav.attitude import refine_attitude
 from starnav.attitude.wahba import wahba
 from starnav.camera import Camera
 from starnav.catalog import load_catalog
-from starnav.fov import solve_fov
 from starnav.geometry import (
     angle_between,
     attitude_difference_deg,
@@ -35,6 +34,7 @@ from starnav.identify.base import MatchSettings
 from starnav.identify.kernels import Q_STAR
 from starnav.identify.pyramid import catalog_triangles
 from starnav.identify.verify import Verification, match_catalog
+from starnav.pipeline.fov import solve_fov
 from starnav.simulate import FALSE_STAR_ID, simulate_frame
 
 CAMERA = Camera.from_fov(12.0, 512)

@@ -1,4 +1,4 @@
-"""starnav.plate: astrometry.net's hints in and numbers out, checked against their formulas."""
+"""pipeline.plate: astrometry.net's hints in and numbers out, checked against their formulas."""
 
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ from astropy.coordinates import angular_separation
 from astropy.wcs import WCS
 
 from starnav.errors import StarnavError
-from starnav.plate import (
+from starnav.pipeline.plate import (
     Plate,
     PlateHints,
     XYList,

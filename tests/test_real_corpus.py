@@ -191,7 +191,7 @@ def catalog_check(solution, path: Path) -> dict:
     that has no reference (by chance, about one of the ten would)."""
     from starnav.catalog import load_catalog
     from starnav.detect.read import read_image
-    from starnav.image import detect_image
+    from starnav.pipeline.image import detect_image
 
     pixels = read_image(path)
     detections = detect_image(pixels, max_stars=make_reference.CHECK_MAX_DETECTIONS).xy

@@ -1,4 +1,4 @@
-"""starnav.render: PSF placement in our pixel convention, noise model, saturation, hot pixels,
+"""simulate.render: PSF placement in our pixel convention, noise model, saturation, hot pixels,
 frames from the catalog (with distortion; fisheyes with their image circle and vignetting),
 presets, writing files and the CLI."""
 
@@ -26,7 +26,8 @@ from starnav.detect.read import read_image
 from starnav.detect.stars import detect_stars
 from starnav.errors import ImageError, StarnavError
 from starnav.geometry import attitude_from_radec_roll
-from starnav.render import (
+from starnav.simulate import project_catalog
+from starnav.simulate.render import (
     PRESETS,
     RenderSettings,
     adjust_camera,
@@ -41,7 +42,6 @@ from starnav.render import (
     write_image,
     write_truth_csv,
 )
-from starnav.simulate import project_catalog
 
 
 @pytest.fixture(scope="module")

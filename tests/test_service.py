@@ -108,7 +108,7 @@ def test_image_solved_with_nova_answers(server):
 
 def test_source_list_solved(server):
     from starnav.detect.read import read_image
-    from starnav.image import detect_image
+    from starnav.pipeline.image import detect_image
 
     xy = detect_image(read_image(PNG)).xy[:30] + 0.5
     args = {"session": _session(server), "x": xy[:, 0].tolist(), "y": xy[:, 1].tolist(),
@@ -212,7 +212,7 @@ def test_jobs_on_a_dask_cluster(tmp_path):
     """--dask: the same jobs on a (local) Dask cluster, bytes in and out."""
     pytest.importorskip("distributed", reason="Dask's distributed is not installed")
     from starnav.detect.read import read_image
-    from starnav.image import detect_image
+    from starnav.pipeline.image import detect_image
 
     xy = detect_image(read_image(PNG)).xy[:30] + 0.5
     config = ServiceConfig(data_dir=tmp_path, workers=1, dask_address="local")

@@ -34,7 +34,7 @@ from selenium.webdriver.common.by import By
 from selenium.webdriver.support.ui import Select, WebDriverWait
 
 from starnav.detect import read_image
-from starnav.image import detect_image
+from starnav.pipeline.image import detect_image
 from starnav.service.app import wait_ready
 
 CHROMIUM = Path("/usr/bin/chromium")

@@ -18,8 +18,7 @@ from starnav.camera import (
 from starnav.catalog import load_catalog
 from starnav.errors import CameraError, ImageError, StarnavError
 from starnav.geometry import attitude_from_radec_roll, radec_to_unit, unit_to_radec
-from starnav.simulate import project_catalog
-from starnav.wcs import (
+from starnav.output.wcs import (
     MAX_SIP_ORDER,
     choose_sip_order,
     fit_sip,
@@ -27,6 +26,7 @@ from starnav.wcs import (
     wcs_from_attitude,
     write_wcs,
 )
+from starnav.simulate import project_catalog
 
 
 @pytest.fixture(scope="module")

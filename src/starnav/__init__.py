@@ -13,8 +13,8 @@ from starnav.calibrate import Calibration, calibrate
 from starnav.camera import Camera, load_camera, save_camera
 from starnav.catalog import Catalog, load_catalog
 from starnav.errors import CameraError, CatalogError, ImageError, StarListError, StarnavError
-from starnav.fov import solve_fov
-from starnav.image import ImageSolveResult, solve_image
+from starnav.pipeline.fov import solve_fov
+from starnav.pipeline.image import ImageSolveResult, solve_image
 from starnav.simulate import SimulatedFrame, simulate_frame
 
 __version__ = "0.1.0"

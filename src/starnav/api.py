@@ -11,7 +11,6 @@ from pathlib import Path
 
 import numpy as np
 
-from starnav.budget import Deadline, check_budget, default_budget_s
 from starnav.camera import MODELS, CameraModel, load_camera
 from starnav.catalog import Catalog, load_catalog
 from starnav.errors import CameraError, StarnavError
@@ -29,6 +28,7 @@ from starnav.pipeline.deep import deep_catalog
 from starnav.pipeline.solver import check_prior
 from starnav.pointing import Pointing, best_triple, three_star
 from starnav.results import Solution, SolveResult, StarMatch
+from starnav.runtime.budget import Deadline, check_budget, default_budget_s
 from starnav.starlist import check_star_list
 
 __all__ = [
@@ -80,7 +80,7 @@ def make_camera(
 
 def known_budget_s(camera: CameraModel) -> float:
     """The default time budget (s) of a solve through a known ``camera``
-    (``starnav.budget``: longer for a field wider than ``WIDE_FIELD_DEG``)."""
+    (``starnav.runtime.budget``: longer for a field wider than ``WIDE_FIELD_DEG``)."""
     return default_budget_s(known=True, scan=False, field_deg=camera.diagonal_deg)
 
 

@@ -26,8 +26,8 @@ from starnav.attitude.refine import rotate_by
 from starnav.camera import MODELS, Camera, CameraModel
 from starnav.catalog import Catalog, load_catalog
 from starnav.errors import StarnavError
-from starnav.fov import DEFAULT_FOV_RANGE_DEG
-from starnav.image import ImageSolveResult, solve_image
+from starnav.pipeline.fov import DEFAULT_FOV_RANGE_DEG
+from starnav.pipeline.image import ImageSolveResult, solve_image
 from starnav.simulate import project_catalog
 
 _ROUNDS = 3  # fits on re-matched stars after the first (on the solves' own matches)

@@ -19,8 +19,8 @@ from starnav.api import (
 from starnav.camera import CameraModel
 from starnav.catalog import Catalog
 from starnav.errors import StarnavError
-from starnav.fov import DEFAULT_FOV_RANGE_DEG
 from starnav.identify import DEFAULT_ALGORITHM
+from starnav.pipeline.fov import DEFAULT_FOV_RANGE_DEG
 from starnav.results import Solution, SolveResult, solve_dict
 from starnav.starlist import StarList, read_star_csv
 
@@ -56,7 +56,7 @@ def solve_star_list(
     (``StarnavError`` otherwise; a fisheye lens's scan takes ``mag_limit``);
     ``deep_mag_limit``: the deep stage's depth (``starnav.pipeline.deep``), either way."""
     if fov_deg is None and camera is None:
-        from starnav.fov import solve_fov
+        from starnav.pipeline.fov import solve_fov
 
         needing = {
             "prior": prior is not None,

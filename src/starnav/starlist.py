@@ -12,8 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
-from starnav.csvrows import read_rows
 from starnav.errors import StarListError
+from starnav.runtime.csvrows import read_rows
 
 # A centroid may sit a little outside the image (blooming, a star cut by the edge); beyond
 # this fraction of the image size it cannot belong to the image.

@@ -31,7 +31,7 @@ from PIL import Image
 
 from starnav.camera import Camera, save_camera
 from starnav.navigation.simulate import render_views, simulate_observation
-from starnav.render import RenderSettings
+from starnav.simulate.render import RenderSettings
 
 HERE = Path(__file__).resolve().parent
 TRUTH = {"lat_deg": 47.37, "lon_deg": 8.54, "heading_deg": 30.0, "pitch_deg": 1.0}

@@ -17,9 +17,9 @@ from collections import namedtuple
 import numpy as np
 
 from starnav.attitude.rotation import rotate_by
-from starnav.caching import njit
 from starnav.camera.kernels import N_INTRINSIC, n_coefficients, project, update
 from starnav.geometry import ARCSEC_PER_RAD
+from starnav.runtime.caching import njit
 
 MAX_STEPS = 10  # Gauss-Newton steps
 STEP_TOL_RAD = 1e-9  # about 2e-6 px at f = 2500 px

@@ -9,7 +9,7 @@ import math
 
 import numpy as np
 
-from starnav.caching import njit
+from starnav.runtime.caching import njit
 
 
 @njit(cache=True)

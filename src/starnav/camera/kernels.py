@@ -25,7 +25,7 @@ import math
 
 import numpy as np
 
-from starnav.caching import njit
+from starnav.runtime.caching import njit
 
 PINHOLE = 0
 EQUIDISTANT = 1

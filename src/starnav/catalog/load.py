@@ -18,9 +18,9 @@ from pathlib import Path
 import erfa
 import numpy as np
 
-from starnav.csvrows import read_rows
 from starnav.errors import CatalogError
 from starnav.geometry import radec_to_unit
+from starnav.runtime.csvrows import read_rows
 
 DEFAULT_MAG_LIMIT = 6.0
 HIPPARCOS_EPOCH_YEAR = 1991.25

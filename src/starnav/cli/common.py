@@ -9,13 +9,13 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any, Protocol
 
-from starnav.budget import DEFAULTS
 from starnav.camera import MODELS
 from starnav.catalog import DEFAULT_MAG_LIMIT
 from starnav.errors import StarnavError
-from starnav.fov import DEFAULT_FOV_RANGE_DEG
 from starnav.identify import ALGORITHMS, DEFAULT_ALGORITHM
 from starnav.identify.options import check_algorithm_options
+from starnav.pipeline.fov import DEFAULT_FOV_RANGE_DEG
+from starnav.runtime.budget import DEFAULTS
 
 EXIT_OK, EXIT_NOT_SOLVED, EXIT_BAD_INPUT = 0, 1, 2
 # --triangle-selection is short for --algorithm-option selection=...: the algorithms that
@@ -75,7 +75,7 @@ def seconds(text: str) -> float:
 
 
 def add_time_budget(p: argparse.ArgumentParser) -> None:
-    """--time-budget (``starnav.budget``)."""
+    """--time-budget (``starnav.runtime.budget``)."""
     p.add_argument(
         "--time-budget",
         type=seconds,

@@ -172,7 +172,7 @@ def _plot(args: argparse.Namespace, result: SolveResult) -> None:
     if s is None:
         print(f"starnav identify: not solved, no plot written to {args.plot}", file=sys.stderr)
         return
-    from starnav.plot import plot_solution
+    from starnav.output.plot import plot_solution
 
     plot_solution(s, s.camera, result.database.catalog, args.plot)
 

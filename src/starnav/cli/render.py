@@ -21,8 +21,8 @@ from starnav.cli.common import (
 from starnav.cli.output import print_json
 from starnav.errors import StarnavError
 from starnav.geometry import attitude_from_radec_roll
-from starnav.render import PRESETS
 from starnav.simulate import draw_radec_roll
+from starnav.simulate.render import PRESETS
 
 SENSOR_NUMBERS = (  # RenderSettings fields with an option each (--psf-sigma-px, ...)
     "psf_sigma_px",
@@ -78,7 +78,13 @@ def add_parser(subparsers: Subparsers) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Render the image (and its truth CSV); print the truth."""
-    from starnav.render import adjust_camera, preset, render_frame, write_image, write_truth_csv
+    from starnav.simulate.render import (
+        adjust_camera,
+        preset,
+        render_frame,
+        write_image,
+        write_truth_csv,
+    )
 
     camera, settings = preset(args.preset)
     if args.camera is not None:

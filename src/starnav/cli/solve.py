@@ -1,7 +1,7 @@
 """``starnav solve``: image files (FITS, PNG, JPEG, TIFF) to verified attitudes, with the field
 of view unknown, roughly known or calibrated; optionally WCS headers, FITS copies with the WCS
 and pictures. One file prints its answer; many files (or a directory, ``--jsonl``, ``--track``)
-are a batch (``starnav.image_batch``): one line per file, a progress bar and a summary."""
+are a batch (``starnav.pipeline.image_batch``): one line per file, a progress bar and a summary."""
 
 from __future__ import annotations
 
@@ -27,7 +27,7 @@ from starnav.cli.common import (
 )
 from starnav.cli.output import print_json, print_solution, to_json
 from starnav.errors import StarnavError
-from starnav.image import DEFAULT_MAX_STARS, FISHEYE_MAX_STARS, ImageSolveResult
+from starnav.pipeline.image import DEFAULT_MAX_STARS, FISHEYE_MAX_STARS, ImageSolveResult
 
 WCS_SUFFIXES = (".fits", ".fit", ".fts", ".wcs")
 
@@ -145,7 +145,7 @@ def run(args: argparse.Namespace) -> int:
     _check_file_outputs(args)
     from starnav.detect.header import fits_hints
     from starnav.detect.read import read_image
-    from starnav.image import solve_image, write_outputs
+    from starnav.pipeline.image import solve_image, write_outputs
 
     t0 = time.perf_counter()
     pixels = read_image(paths[0])
@@ -181,11 +181,11 @@ def _check_file_outputs(args: argparse.Namespace) -> None:
 
 
 def run_batch(args: argparse.Namespace, inputs: list[Path]) -> int:
-    """Many files in one process (``starnav.image_batch``): a progress bar, one line per
+    """Many files in one process (``starnav.pipeline.image_batch``): a progress bar, one line per
     file (text, or JSON with --json; --jsonl writes them to a file as well), a summary."""
     from tqdm import tqdm
 
-    from starnav.image_batch import ImageOutputs, image_paths, solve_files, summarize
+    from starnav.pipeline.image_batch import ImageOutputs, image_paths, solve_files, summarize
 
     paths = image_paths(inputs)
     outputs = ImageOutputs.make(wcs=args.wcs, new_fits=args.new_fits, annotate=args.annotate)

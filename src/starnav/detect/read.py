@@ -9,7 +9,7 @@ stored values (no gamma decoding); an alpha channel is dropped. An EXIF orientat
 applied, so row 0 is the top of the picture as viewers show it.
 
 FITS row order: astropy's ``data[0]`` is the first row stored (FITS y = 1), and we take it as
-row 0, the top of the picture. That is what a FITS written from a PNG holds (``starnav.render.
+row 0, the top of the picture. That is what a FITS written from a PNG holds (``simulate.render.
 write_image`` writes that way), while FITS viewers such as DS9 draw y = 1 at the bottom, i.e.
 show such an image upside down; a FITS file from an astronomical camera may be stored either
 way. Only the mirror parity of the solution depends on it, and the solver reports the parity.

@@ -8,7 +8,7 @@ github.com/han-k59/astap: ``command-line_version/astap_command_line.lpr``, ``ast
 astrometry.net's), BASE being ``-o`` or the input path, its extension replaced.
 
 The solution is ASTAP's: a TAN projection whose reference pixel is the image centre, FITS
-pixel ((W+1)/2, (H+1)/2) (the plate's WCS: ``starnav.image.solution_wcs``), with CDELT and CROTA
+pixel ((W+1)/2, (H+1)/2) (the plate's WCS: ``pipeline.image.solution_wcs``), with CDELT and CROTA
 from its CD matrix by inverting the relation ASTAP makes its CD matrix with
 (``command-line_version/unit_command_line_solving.pas``: CD1_1 = CDELT1 cos CROTA1, CD1_2 =
 -CDELT1 sin CROTA1 f, CD2_1 = CDELT2 sin CROTA2 f, CD2_2 = CDELT2 cos CROTA2, CDELT2 > 0,
@@ -38,8 +38,8 @@ from astropy.wcs import WCS
 
 from starnav.cli.common import EXIT_BAD_INPUT, Parser
 from starnav.errors import CatalogError, ImageError, StarnavError
-from starnav.image import MIN_DETECTIONS
-from starnav.plate import Plate, PlateHints, PlateResult, fov_range_from_scale, solve_plate
+from starnav.pipeline.image import MIN_DETECTIONS
+from starnav.pipeline.plate import Plate, PlateHints, PlateResult, fov_range_from_scale, solve_plate
 
 PROG = "starnav-astap"
 EXIT_SOLVED, EXIT_NO_SOLUTION, EXIT_NOT_ENOUGH_STARS = 0, 1, 2
@@ -75,7 +75,7 @@ class AstapSolution:
     @classmethod
     def from_plate(cls, plate: Plate) -> AstapSolution:
         """The centred TAN solution of a plate (module docstring)."""
-        tan = plate.wcs  # TAN, CRPIX at the centre (``starnav.image.solution_wcs``)
+        tan = plate.wcs  # TAN, CRPIX at the centre (``pipeline.image.solution_wcs``)
         cd = np.array(tan.wcs.cd, dtype=float)
         f = -1.0 if np.linalg.det(cd) < 0 else 1.0
         cdelt = (f * math.hypot(cd[0, 0], cd[0, 1]), math.hypot(cd[1, 0], cd[1, 1]))
@@ -329,7 +329,7 @@ def update_input(image: Path, result: PlateResult, solution: AstapSolution) -> N
     """ASTAP's -update: the solution added to a FITS file's header, or for another format a
     new FITS file of the image (input path, extension .fits) with it."""
     from starnav.detect.header import is_fits
-    from starnav.plate import write_plate_files
+    from starnav.pipeline.plate import write_plate_files
 
     if is_fits(image):
         with fits.open(image, mode="update", memmap=False) as hdul:

@@ -4,7 +4,7 @@ Made for the programs that run ``solve-field`` and read what it prints and write
 ``indi_astrometry``, Ekos, CCDciel, ...). It takes their arguments, writes the files under
 solve-field's names (``BASE.wcs``, ``BASE.new``, ``BASE.solved``) and prints solve-field's
 result lines (``solver/solve-field.c``, ``after_solved``), with the numbers of
-``starnav.plate.Plate`` (astrometry.net's own formulas on the WCS). Pixels are FITS pixels
+``starnav.pipeline.plate.Plate`` (astrometry.net's own formulas on the WCS). Pixels are FITS pixels
 (1-based, row order of the data, no flip: a JPEG's top row is y = 1, as solve-field reads it).
 
 One line is out of solve-field's order: its engine prints "RA,Dec = (...), pixel scale S
@@ -28,7 +28,7 @@ import numpy as np
 
 from starnav.cli.common import EXIT_BAD_INPUT, Parser
 from starnav.errors import StarnavError
-from starnav.plate import (
+from starnav.pipeline.plate import (
     Plate,
     PlateHints,
     PlateResult,

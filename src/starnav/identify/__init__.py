@@ -10,10 +10,10 @@ from __future__ import annotations
 
 from importlib import import_module
 
-from starnav.caching import cache_dir
 from starnav.errors import StarnavError
 from starnav.identify.base import Identification, Identifier, IdentifyOutcome, MatchSettings
 from starnav.identify.database import PairDatabase, build_database
+from starnav.runtime.caching import cache_dir
 
 # name -> (module, class); the order is the order of the comparison tables
 ALGORITHMS: dict[str, tuple[str, str]] = {

@@ -9,8 +9,8 @@ from typing import Protocol
 
 import numpy as np
 
-from starnav.budget import Deadline
 from starnav.identify.database import PairDatabase
+from starnav.runtime.budget import Deadline
 
 # a measured angle carries two centroid errors: PAIR_TOL_SIGMAS sigma of their sum, at least
 # MIN_PAIR_TOL_PX
@@ -39,7 +39,7 @@ class MatchSettings:
     +1 or -1 when known, None to find it; ``max_stars``: triangles are made of the first
     (brightest) this many stars; ``max_screen_stars``: identification uses the first this
     many (the attitude fit then takes in the rest); ``max_hypotheses``: give up after testing
-    this many; ``deadline``: give up when it passes (``starnav.budget``); ``point_mag``: the
+    this many; ``deadline``: give up when it passes (``starnav.runtime.budget``); ``point_mag``: the
     points' magnitudes (rows as the bearings an identifier is given, NaN: not measured;
     ``starlist.point_magnitudes``), None when their brightness is not known: then the
     ``order`` an identifier is given is not the brightness order (``ranked``), and the

@@ -20,9 +20,9 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial import cKDTree
 
-from starnav.caching import cache_dir
 from starnav.catalog import Catalog
 from starnav.geometry import angle_between, chord_from_angle
+from starnav.runtime.caching import cache_dir
 
 _FORMAT_VERSION = 2
 GRID_STEP_DEG = 1.0  # cells of the RA / Dec grid the cone searches of the kernels use

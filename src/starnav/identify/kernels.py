@@ -24,7 +24,7 @@ import numpy as np
 from numba import objmode
 
 from starnav.attitude.rotation import det3, wahba
-from starnav.caching import njit
+from starnav.runtime.caching import njit
 
 # outcomes of a hypothesis test and of a search
 REJECTED, FOUND, AMBIGUOUS, NOT_FOUND, OUT_OF_TIME = 0, 1, 2, 3, 4

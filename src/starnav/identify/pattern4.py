@@ -32,12 +32,12 @@ from pathlib import Path
 
 import numpy as np
 
-from starnav.caching import cache_dir
 from starnav.errors import CatalogError, StarnavError
 from starnav.geometry import angle_between, chord_from_angle, triple_product
 from starnav.identify.base import IdentifyOutcome, MatchSettings, screen_stars_only
 from starnav.identify.database import PairDatabase, load_cached, save_cached
 from starnav.identify.verify import HypothesisTester
+from starnav.runtime.caching import cache_dir
 
 _FORMAT_VERSION = 2  # 2: stars as (field, subset, order) codes, largest edge in uint16 steps
 # the six edges of a pattern (star pairs) and its four triangles

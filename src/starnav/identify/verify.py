@@ -23,9 +23,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from starnav.budget import expired
 from starnav.identify.base import Identification, IdentifyOutcome, MatchSettings
 from starnav.identify.database import PairDatabase
+from starnav.runtime.budget import expired
 
 AMBIGUOUS_PARITY = (
     "parity ambiguous: the identified stars are nearly collinear (give the parity to solve)"

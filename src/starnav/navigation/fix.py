@@ -28,7 +28,6 @@ from starnav.attitude.wahba import wahba
 from starnav.camera import Camera, CameraModel
 from starnav.catalog import Catalog, load_catalog
 from starnav.errors import StarnavError
-from starnav.fov import solve_fov
 from starnav.geometry import ARCSEC_PER_RAD
 from starnav.navigation.frames import (
     enu_directions,
@@ -38,6 +37,7 @@ from starnav.navigation.frames import (
 )
 from starnav.navigation.observation import CameraView, Observation
 from starnav.pipeline import Solver, SolveSettings
+from starnav.pipeline.fov import solve_fov
 from starnav.results import SolveResult
 from starnav.starlist import check_star_list
 

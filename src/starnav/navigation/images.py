@@ -12,7 +12,7 @@ from pathlib import Path
 
 from starnav.detect.read import read_image
 from starnav.detect.stars import Detections
-from starnav.image import detect_image
+from starnav.pipeline.image import detect_image
 
 
 def image_stars(path: str | Path, lens: str = "pinhole") -> Detections:

@@ -20,7 +20,7 @@ from starnav.navigation.observation import (
     Observation,
     mount_from_azimuth_elevation,
 )
-from starnav.render import RenderSettings, render_stars
+from starnav.simulate.render import RenderSettings, render_stars
 
 ENU_TO_NED = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
 
@@ -126,7 +126,7 @@ def render_views(
 ) -> tuple[np.ndarray, ...]:
     """Images (uint16 / uint8 ADU, height x width) of every camera of a simulated observation:
     its stars drawn where the simulation put them, with the renderer's pixel-integrated
-    Gaussian PSF, sky, photon and read noise (``starnav.render.render_stars``), each as bright
+    Gaussian PSF, sky, photon and read noise (``simulate.render.render_stars``), each as bright
     as ``settings`` makes its catalog magnitude. Only the stars centred inside an image are
     drawn (the simulation lists no others). ``seed``: camera k's noise uses ``seed + k``."""
     settings = RenderSettings() if settings is None else settings

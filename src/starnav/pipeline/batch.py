@@ -15,10 +15,10 @@ from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
 
-from starnav.budget import Deadline
 from starnav.errors import StarnavError
 from starnav.pipeline.solver import Solver
 from starnav.results import Solution
+from starnav.runtime.budget import Deadline
 from starnav.starlist import check_star_list
 
 Frame = tuple[np.ndarray, np.ndarray | None]  # centroids (n, 2, px) and brightness or None
@@ -62,7 +62,7 @@ def solve_many(
 ) -> list[tuple[Solution | None, str, float]]:
     """``(solution or None, reason, time_ms)`` of each frame, in order, on ``workers``
     processes (default: all cores; 1: here); ``progress`` is called with the number of frames
-    finished; ``time_budget_s``: each frame's (``starnav.budget``)."""
+    finished; ``time_budget_s``: each frame's (``starnav.runtime.budget``)."""
     _init(solver, prior, prior_sigma_deg, time_budget_s)
     workers = workers or os.cpu_count() or 1
     out = []

@@ -21,7 +21,6 @@ from starnav.attitude.kernels import (
     studentized,
     variance_scale,
 )
-from starnav.caching import njit
 from starnav.camera.kernels import (
     N_INTRINSIC,
     PINHOLE,
@@ -37,6 +36,7 @@ from starnav.identify.kernels import (
     field_false_match,
     pair_catalog,
 )
+from starnav.runtime.caching import njit
 
 MAX_REMATCH = 5  # fit / rematch rounds
 MIN_FIT_STARS = 4  # outliers are only looked for when a fit keeps at least this many stars

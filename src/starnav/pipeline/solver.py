@@ -19,7 +19,6 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from starnav.budget import Deadline, compiled_s, expired
 from starnav.camera import CameraModel
 from starnav.catalog import Catalog
 from starnav.errors import CatalogError, StarnavError
@@ -30,6 +29,7 @@ from starnav.identify.tracking import Tracking
 from starnav.pipeline.conclude import conclude, elapsed_ms
 from starnav.pipeline.deep import deep_match
 from starnav.results import Solution, SolveResult
+from starnav.runtime.budget import Deadline, compiled_s, expired
 from starnav.starlist import StarList, brightness_order, point_magnitudes
 
 DEFAULT_SIGMA_PX = SEARCH_SIGMA_PX  # the tolerances' sigma when none is told
@@ -234,7 +234,7 @@ class Solver:
         (``R_cam_from_icrs``), good to ``prior_sigma_deg`` (1-sigma): tracking mode matches
         the catalog stars near it only, and falls back to lost in space when that fails
         (``Solution.algorithm`` says which answered). ``deadline``: stop identifying when it
-        passes (``starnav.budget``; None: no time limit)."""
+        passes (``starnav.runtime.budget``; None: no time limit)."""
         with first_use("solve"):
             t0 = time.perf_counter()
             bearings = self.camera.pixels_to_bearings(stars.xy)

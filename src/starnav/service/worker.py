@@ -18,7 +18,7 @@ from pathlib import Path
 from starnav.catalog.names import star_names
 from starnav.detect.read import FITS_MAGIC, GZIP_MAGIC, TIFF_MAGICS
 from starnav.errors import StarnavError
-from starnav.plate import XYList, solve_plate, write_plate_files
+from starnav.pipeline.plate import XYList, solve_plate, write_plate_files
 from starnav.service.nova import plate_hints
 
 # magic bytes -> the name the input gets in the job's directory (never the client's name)

@@ -47,7 +47,7 @@ image whose CRPIX is at the centre (its "up" is the position angle at CRVAL).
 ``check`` is the independent test of the conversion: with the converted attitude and a
 pinhole camera of the converted field (no WCS involved), the Hipparcos stars to Hp 6.5
 that fall in the image are projected to pixels and matched to starnav's detections
-(``starnav.image.detect_image``); the median distance and the number matched are written
+(``starnav.pipeline.image.detect_image``); the median distance and the number matched are written
 into reference.json (``check``), with the same for the attitude turned by 180°, mirrored
 and with the rows flipped: these put the stars nowhere near the detections. An answer of
 astrometry.net that does no better than three times those is rejected
@@ -368,7 +368,7 @@ def cmd_check(args) -> None:
     from starnav.catalog import load_catalog
     from starnav.detect.read import read_image
     from starnav.geometry import attitude_from_radec_roll
-    from starnav.image import detect_image
+    from starnav.pipeline.image import detect_image
 
     catalog = load_catalog(None, mag_limit=CHECK_MAG_LIMIT)
     folder = corpus_dir()

@@ -1,7 +1,7 @@
 """Solving a star list whose field of view is unknown (or known only roughly).
 
 The FOV range is searched with 4-star patterns matched up to a scale
-(``starnav.fov_search``); the identification then goes through the same attitude
+(``starnav.pipeline.fov_search``); the identification then goes through the same attitude
 fit and refusals as every solve, with the focal length (and, on request, the radial
 distortion) fitted. Bands sit on one fixed grid of the diagonal field of view, 40° x
 sqrt(2)^k, so every range and image shape shares the same cached tables.
@@ -16,17 +16,16 @@ from pathlib import Path
 
 import numpy as np
 
-from starnav.budget import SEARCH_BUDGET_S, Deadline, check_budget, default_budget_s, expired
 from starnav.camera import MODELS, Camera, CameraModel, focal_px_from_fov
 from starnav.catalog import Catalog, load_catalog
 from starnav.errors import CatalogError, StarnavError
-from starnav.fov_search import BAND_FACTOR, Band, search_fov
 from starnav.geometry import radec_to_unit
 from starnav.identify.base import MatchSettings
 from starnav.identify.database import PairDatabase, catalog_only
 from starnav.identify.pattern4 import FIELD_RADIUS_FRACTION, build_pattern_table
 from starnav.pipeline.conclude import elapsed_ms
 from starnav.pipeline.deep import deep_catalog
+from starnav.pipeline.fov_search import BAND_FACTOR, Band, search_fov
 from starnav.pipeline.solver import (
     DEFAULT_MAX_FALSE_MATCH_PROBABILITY,
     DEFAULT_MIN_MATCHED_FRACTION,
@@ -37,6 +36,13 @@ from starnav.pipeline.solver import (
     fit_identification,
 )
 from starnav.results import SolveResult
+from starnav.runtime.budget import (
+    SEARCH_BUDGET_S,
+    Deadline,
+    check_budget,
+    default_budget_s,
+    expired,
+)
 from starnav.starlist import StarList, brightness_order, check_star_list, point_magnitudes
 
 DEFAULT_FOV_RANGE_DEG = (5.0, 40.0)
@@ -278,7 +284,7 @@ def solve_fov(
     A fisheye ``lens`` model (``starnav.camera.MODELS``), or a fisheye ``camera``, is solved
     by ``scan_focal`` (``mag_limit``: its catalog's, default Hp <= 6; the pinhole search
     picks a depth per band and takes none). ``time_budget_s``: stop searching after this
-    many seconds (``starnav.budget.default_budget_s`` by default; counted once the tables are
+    many seconds (``runtime.budget.default_budget_s`` by default; counted once the tables are
     loaded). ``prior``: the attitude of the previous frame
     of a sequence (``R_cam_from_icrs``, good to ``prior_sigma_deg``), with a ``camera`` (the
     previous frame's fitted one): tracking, falling back to lost in space with that camera

@@ -39,9 +39,9 @@ from scipy.special import erf
 
 from starnav.camera import Camera, CameraModel
 from starnav.catalog import Catalog
-from starnav.csvrows import write_rows
 from starnav.errors import ImageError, StarnavError
 from starnav.geometry import radec_roll_from_attitude
+from starnav.runtime.csvrows import write_rows
 from starnav.simulate import project_catalog
 
 # Sky photons are drawn from the Gaussian of the same variance above this level (e/px): after

@@ -34,8 +34,8 @@ import numpy as np
 from starnav.detect.header import fits_hints
 from starnav.detect.read import read_image
 from starnav.errors import StarnavError
-from starnav.image import solve_image, write_outputs
 from starnav.pipeline.cluster import dask_client, one_blas_thread
+from starnav.pipeline.image import solve_image, write_outputs
 from starnav.results import Solution
 
 IMAGE_SUFFIXES = (".fits", ".fit", ".fts", ".fits.gz", ".fz", ".png", ".jpg", ".jpeg", ".tif",

@@ -16,13 +16,13 @@ import numpy as np
 
 from starnav.camera import Camera
 from starnav.catalog import Catalog
-from starnav.csvrows import write_rows
 from starnav.errors import StarnavError
 from starnav.geometry import (
     attitude_difference_deg,
     attitude_from_radec_roll,
     radec_roll_from_attitude,
 )
+from starnav.runtime.csvrows import write_rows
 
 if TYPE_CHECKING:
     from starnav.results import Solution

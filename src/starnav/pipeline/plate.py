@@ -3,7 +3,7 @@
 Astronomy software drives a plate solver through astrometry.net's web API (nova), its
 ``solve-field`` command line or ASTAP's. They all speak of an image in FITS pixels (1-based,
 the first pixel's centre at (1, 1)) and describe a solution by its WCS. Ours has no flip: row 0
-of the array is FITS y = 1 (``starnav.wcs``), exactly as solve-field numbers the rows of a JPEG
+of the array is FITS y = 1 (``output.wcs``), exactly as solve-field numbers the rows of a JPEG
 or PNG, so a point's FITS pixel is ours + 0.5 and the WCS is the one either tool would write.
 
 ``PlateHints`` collects what a client may say of an image (the scale in any of astrometry.net's
@@ -28,8 +28,13 @@ from astropy.wcs import WCS
 from starnav.catalog import Catalog
 from starnav.detect.header import ImageHints, fits_hints, is_fits
 from starnav.errors import StarnavError
-from starnav.fov import DEFAULT_FOV_RANGE_DEG, DEFAULT_PATTERN_STARS, FOV_LIMITS_DEG, solve_fov
-from starnav.image import (
+from starnav.pipeline.fov import (
+    DEFAULT_FOV_RANGE_DEG,
+    DEFAULT_PATTERN_STARS,
+    FOV_LIMITS_DEG,
+    solve_fov,
+)
+from starnav.pipeline.image import (
     ImageSolveResult,
     annotate_solution,
     solution_wcs,
@@ -279,8 +284,8 @@ def solve_plate(
     """Solve an image file (FITS, PNG, JPEG, TIFF) or a source list with a client's ``hints``
     (``PlateHints``, or a function of the image's width and height in px giving them, for
     scales in arcsec per pixel; they win over the FITS header's). ``time_budget_s``: the solve's
-    (``starnav.budget`` defaults). The WCS is that of the fitted camera
-    (``starnav.image.solution_wcs``)."""
+    (``starnav.runtime.budget`` defaults). The WCS is that of the fitted camera
+    (``starnav.pipeline.image.solution_wcs``)."""
     if isinstance(source, XYList):
         return _solve_plate(source, None, hints, time_budget_s)
     from starnav.detect.read import read_image
@@ -342,14 +347,14 @@ def write_plate_files(
     """Write a plate solve's files (each None: not written): ``wcs``, the WCS header
     (astrometry.net's ``.wcs``); ``new_fits``, the image with it (``.new``; a FITS ``source``
     keeps its data and header cards); ``annotate``, a PNG (solved or not; a source list is
-    drawn on a black frame). Returns the paths written, by kind (``starnav.image
+    drawn on a black frame). Returns the paths written, by kind (``starnav.pipeline.image
     .write_outputs``)."""
     paths = {"wcs": wcs, "new_fits": new_fits, "annotate": annotate}
     paths = {k: Path(v) for k, v in paths.items() if v is not None}
     plate_wcs_ = None if result.plate is None else result.plate.wcs
     if result.image is not None:
         return write_outputs(paths, source, result.pixels, result.image, wcs=plate_wcs_)
-    from starnav.wcs import write_wcs
+    from starnav.output.wcs import write_wcs
 
     written: dict[str, str] = {}
     if plate_wcs_ is not None and "wcs" in paths:
@@ -363,8 +368,8 @@ def write_plate_files(
 
 def _annotate_list(path_out: Path, result: PlateResult) -> None:
     """A source list's picture: its points on a black frame of the image's size, identified
-    (``starnav.annotate``) when solved."""
-    from starnav.annotate import save_figure, unsolved_figure
+    (``starnav.output.annotate``) when solved."""
+    from starnav.output.annotate import save_figure, unsolved_figure
 
     frame = np.zeros((result.height, result.width), dtype=np.float32)
     s, xy = result.solution, result.xy

@@ -17,7 +17,7 @@ import os
 from collections.abc import Callable
 from pathlib import Path
 
-PACKAGE = Path(__file__).resolve().parent
+PACKAGE = Path(__file__).resolve().parents[1]
 # every module with numba kernels (tests/test_caching.py checks the list against the sources)
 KERNEL_SOURCES = (
     "attitude/kernels.py",

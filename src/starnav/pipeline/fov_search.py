@@ -1,7 +1,7 @@
 """Identification when the field of view is unknown: 4-star patterns matched up to a scale.
 
 The edge ratios of a 4-star pattern (``pattern4``) hardly depend on the focal length, so
-they can be looked up before the scale is known. The caller (``starnav.fov``) cuts the FOV
+they can be looked up before the scale is known. The caller (``starnav.pipeline.fov``) cuts the FOV
 range into bands, each with its own catalog depth, KD-tree and pattern table. Within a band
 the bearings are made with a few guessed focal lengths ("cells"): a wrong focal length
 distorts the gnomonic projection towards the corners of the image (an edge at angle phi from
@@ -29,7 +29,6 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from starnav.budget import Deadline, expired, next_chunk
 from starnav.camera import Camera, focal_px_from_fov
 from starnav.catalog import Catalog
 from starnav.identify.base import Identification, MatchSettings
@@ -43,6 +42,7 @@ from starnav.identify.pattern4 import (
     pattern_edges,
 )
 from starnav.identify.verify import AMBIGUOUS_PARITY, HypothesisTester, Tally
+from starnav.runtime.budget import Deadline, expired, next_chunk
 
 BAND_FACTOR = math.sqrt(2.0)
 _LOOKUP_REL_TOL = 0.005  # ratio slack of the loose look-up (projection distortion of a cell)

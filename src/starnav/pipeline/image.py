@@ -2,7 +2,7 @@
 
 ``solve_image`` reads the file (``starnav.detect.read``), finds and centroids the stars
 (``starnav.detect.stars``) and solves them with the field of view unknown, roughly known or
-calibrated (``starnav.fov``). A camera file (JSON, written by ``starnav calibrate``) holds a
+calibrated (``pipeline.fov``). A camera file (JSON, written by ``starnav calibrate``) holds a
 calibrated camera: size, focal length, principal point and radial distortion.
 """
 
@@ -16,7 +16,6 @@ from pathlib import Path
 
 import numpy as np
 
-from starnav.budget import check_budget, default_budget_s
 from starnav.camera import CameraModel, load_camera
 from starnav.catalog import Catalog
 from starnav.detect.circle import find_image_circle
@@ -24,7 +23,7 @@ from starnav.detect.header import ImageHints, fits_hints, is_fits
 from starnav.detect.read import read_image
 from starnav.detect.stars import Detections, detect_stars
 from starnav.errors import CameraError, ImageError
-from starnav.fov import (
+from starnav.pipeline.fov import (
     DEFAULT_FOV_RANGE_DEG,
     DEFAULT_PATTERN_STARS,
     diagonal_fov_deg,
@@ -32,6 +31,7 @@ from starnav.fov import (
     solve_fov,
 )
 from starnav.results import Solution
+from starnav.runtime.budget import check_budget, default_budget_s
 
 DEFAULT_MAX_STARS = 50
 NO_HINTS = ImageHints()
@@ -112,7 +112,7 @@ def solve_image(
     ``fov_deg`` (searched within 5 %) or a calibrated ``camera`` (a camera model or a camera
     file; within 1 %) is given; the fitted one is reported either way. ``lens``: the lens
     model when no camera is given (``starnav.camera.MODELS``; a fisheye model's focal length
-    is scanned, see ``starnav.fov.scan_focal``). ``max_stars``: the brightest this many
+    is scanned, see ``starnav.pipeline.fov.scan_focal``). ``max_stars``: the brightest this many
     detections are used (default ``DEFAULT_MAX_STARS``, for a fisheye ``FISHEYE_MAX_STARS``);
     ``threshold_sigma``: detection threshold over the background noise; ``sigma_px``:
     centroid 1-sigma (px; None: unknown). With a fisheye lens (any model but
@@ -123,9 +123,9 @@ def solve_image(
     array): its FOV is searched (±5 %) when neither ``fov_deg``, ``camera`` nor another
     ``fov_range_deg`` is given and it lies within the default range, its epoch used when
     ``epoch_year`` is not, its position searched first; a solve that fails with the hinted
-    FOV is tried again without it. ``time_budget_s``: the solve's (``starnav.budget``;
+    FOV is tried again without it. ``time_budget_s``: the solve's (``starnav.runtime.budget``;
     detection is not counted). ``downsample``: stars detected on the image binned by this
-    factor, solved at full resolution. Other keywords: see ``starnav.fov.solve_fov``.
+    factor, solved at full resolution. Other keywords: see ``starnav.pipeline.fov.solve_fov``.
     """
     camera = load_camera(camera) if isinstance(camera, str | Path) else camera
     search_range(fov_deg, fov_range_deg, camera, lens)  # a bad range fails before any work
@@ -211,7 +211,7 @@ def _detect_binned(pixels, factor, lens, threshold_sigma, max_stars) -> Detectio
 
 
 def _default_budget_s(camera, fov_deg, lens: str, pixels: np.ndarray) -> float:
-    """The default time budget (s) of an image's solve (``starnav.budget.default_budget_s``)."""
+    """The default time budget (s) of an image's solve (``runtime.budget.default_budget_s``)."""
     height, width = pixels.shape
     if camera is not None:
         field_deg = camera.diagonal_deg
@@ -281,9 +281,9 @@ def _outside_circle_masked(pixels: np.ndarray) -> np.ndarray:
 
 def annotate_result(path_out: str | Path, image: np.ndarray, result: ImageSolveResult) -> None:
     """Draw an image into a PNG. Solved: detections, catalog stars, ids, names of bright stars
-    and the residuals (``starnav.annotate``); not solved: the detections by rank and the
-    reason (``starnav.annotate.unsolved_figure``)."""
-    from starnav.annotate import save_figure, unsolved_figure
+    and the residuals (``starnav.output.annotate``); not solved: the detections by rank and the
+    reason (``starnav.output.annotate.unsolved_figure``)."""
+    from starnav.output.annotate import save_figure, unsolved_figure
 
     s, cam, cat = result.solution, result.camera, result.catalog
     if s is None or cam is None or cat is None:
@@ -310,8 +310,8 @@ def annotate_solution(
     cat: Catalog,
 ) -> None:
     """Draw a solution on an image into a PNG: the ``detected_xy`` (px), the catalog stars of
-    the field, ids, names of bright stars and the residuals (``starnav.annotate``)."""
-    from starnav.annotate import annotate_image
+    the field, ids, names of bright stars and the residuals (``starnav.output.annotate``)."""
+    from starnav.output.annotate import annotate_image
 
     matched = [m for m in s.stars if m.catalog_id is not None]
     rows = cat.rows([m.catalog_id for m in matched])
@@ -348,7 +348,7 @@ def write_outputs(
     written: dict[str, str] = {}
     s = result.solution
     if s is not None and (paths.get("wcs") or paths.get("new_fits")):
-        from starnav.wcs import write_wcs
+        from starnav.output.wcs import write_wcs
 
         if wcs is None:
             wcs = solution_wcs(s.R_cam_from_icrs, result.camera)
@@ -367,10 +367,10 @@ def write_outputs(
 
 def solution_wcs(R_cam_from_icrs: np.ndarray, camera: CameraModel):
     """The WCS (astropy) written for a solved image: the fitted camera's projection
-    (``starnav.wcs.wcs_from_attitude``), with SIP polynomials of the order
+    (``starnav.output.wcs.wcs_from_attitude``), with SIP polynomials of the order
     ``choose_sip_order`` picks for its distortion (TAN without distortion). Its CRPIX is the
     principal point, the image centre unless a camera file says otherwise."""
-    from starnav.wcs import choose_sip_order, wcs_from_attitude
+    from starnav.output.wcs import choose_sip_order, wcs_from_attitude
 
     return wcs_from_attitude(R_cam_from_icrs, camera, sip_order=choose_sip_order(camera))
 
