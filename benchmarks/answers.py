@@ -21,12 +21,11 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from starnav.api import solve_verbose
+from starnav.api import solve_stars
 from starnav.camera import Camera
 from starnav.catalog import load_catalog
 from starnav.geometry import attitude_difference_deg
 from starnav.identify import ALGORITHMS
-from starnav.pipeline.fov import solve_fov
 from starnav.simulate import simulate_frame
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -58,7 +57,7 @@ def cases(catalog, frames: int):
         return simulate_frame(catalog, camera, seed=seed, **kw)
 
     def lis(camera, f, **options):
-        return lambda: solve_verbose(
+        return lambda: solve_stars(
             f.xy,
             width=camera.width,
             height=camera.height,
@@ -85,14 +84,15 @@ def cases(catalog, frames: int):
         xy = rng.uniform(0, 512, (n, 2))
         yield (
             f"random-{i}",
-            lambda xy=xy: solve_verbose(xy, width=512, fov_deg=12.0, catalog=catalog, sigma_px=0.5),
+            lambda xy=xy: solve_stars(xy, width=512, fov_deg=12.0, catalog=catalog, sigma_px=0.5),
         )
     for i in range(max(frames // 2, 1)):
         f = frame(warped, 7000 + i, noise_px=0.2)
         yield (
             f"distorted-{i}",
-            lambda f=f: solve_fov(
+            lambda f=f: solve_stars(
                 f.xy,
+                fov_exact=False,
                 width=warped.width,
                 height=warped.height,
                 brightness=f.brightness,
@@ -103,7 +103,9 @@ def cases(catalog, frames: int):
         f = frame(cam20, 8000 + i, noise_px=0.2)
         yield (
             f"fov-search-{i}",
-            lambda f=f: solve_fov(f.xy, width=1024, brightness=f.brightness, sigma_px=0.3),
+            lambda f=f: solve_stars(
+                f.xy, fov_exact=False, width=1024, brightness=f.brightness, sigma_px=0.3
+            ),
         )
     for name in ALGORITHMS:
         if name == "pyramid":

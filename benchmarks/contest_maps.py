@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from lost_in_space import machine
-from starnav.api import make_camera, solve_verbose
+from starnav.api import make_camera, solve_stars
 from starnav.catalog import load_csv
 from starnav.output.plot import plot_solution
 from starnav.starlist import read_star_csv
@@ -41,7 +41,7 @@ def main() -> None:
         width, fov = (512, 12.0) if n <= 6 else (1024, 20.0)
         stars = read_star_csv(args.data / "images" / f"xingtu0{n}.csv")
         runs = [
-            solve_verbose(stars.xy, width=width, fov_deg=fov, labels=stars.labels, catalog=catalog)
+            solve_stars(stars.xy, width=width, fov_deg=fov, labels=stars.labels, catalog=catalog)
             for _ in range(5)
         ]
         s = runs[-1].solution

@@ -35,7 +35,7 @@ from tqdm import tqdm
 
 from docblock import replace_block
 from lost_in_space import machine
-from starnav.api import solve_verbose
+from starnav.api import solve_stars
 from starnav.catalog import load_csv
 from starnav.evaluate import EvalConfig, grid_boresights, run_evaluation, summarize
 from starnav.evaluate.report import TABLE_HEADER, plot_sky_map, table_row
@@ -178,7 +178,7 @@ def part_contest(algorithms) -> tuple[str, list[dict]]:
         for n, stars in enumerate(maps, start=1):
             width, fov = (512, 12.0) if n <= 6 else (1024, 20.0)
             runs = [
-                solve_verbose(stars.xy, width=width, fov_deg=fov, catalog=catalog, algorithm=name)
+                solve_stars(stars.xy, width=width, fov_deg=fov, catalog=catalog, algorithm=name)
                 for _ in range(3)
             ]
             s = runs[-1].solution

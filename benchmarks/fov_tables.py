@@ -122,17 +122,18 @@ def typical_field(width: int, height: int, fov_range: tuple[float, float]) -> st
     noise, 2 false stars) solved with the FOV unknown."""
     import numpy as np
 
+    from starnav.api import solve_stars
     from starnav.camera import Camera
     from starnav.catalog import load_catalog
-    from starnav.pipeline.fov import solve_fov
     from starnav.simulate import simulate_frame
 
     camera, sky = Camera.from_fov(20.0, width, height), load_catalog(None, mag_limit=7.0)
     ms, solved = [], 0
     for seed in range(20):
         frame = simulate_frame(sky, camera, noise_px=0.2, false_stars=2, seed=seed)
-        res = solve_fov(
+        res = solve_stars(
             frame.xy,
+            fov_exact=False,
             width=width,
             height=height,
             brightness=frame.brightness,
@@ -150,12 +151,13 @@ def nothing_to_find(width: int, height: int, fov_range: tuple[float, float]) -> 
     """What a field with no catalog pattern costs: random points, searched to the end."""
     import numpy as np
 
-    from starnav.pipeline.fov import solve_fov
+    from starnav.api import solve_stars
 
     rng = np.random.default_rng(0)
     # one solve first, not counted: it loads the kernels' machine code (numba, on first use)
-    solve_fov(
-        rng.uniform([0, 0], [width, height], (10, 2)),
+    solve_stars(
+        fov_exact=False,
+        xy=rng.uniform([0, 0], [width, height], (10, 2)),
         width=width,
         height=height,
         fov_range_deg=fov_range,
@@ -166,7 +168,9 @@ def nothing_to_find(width: int, height: int, fov_range: tuple[float, float]) -> 
         ms, wrong = [], 0
         for _ in range(10):
             xy = rng.uniform([0, 0], [width, height], (n, 2))
-            res = solve_fov(xy, width=width, height=height, fov_range_deg=fov_range)
+            res = solve_stars(
+                xy, fov_exact=False, width=width, height=height, fov_range_deg=fov_range
+            )
             ms.append(res.time_ms)
             wrong += res.solution is not None
         lines.append(

@@ -22,7 +22,7 @@ import time
 import numpy as np
 from tqdm import tqdm
 
-from starnav.api import get_database, make_camera, solve_verbose
+from starnav.api import get_database, make_camera, solve_stars
 from starnav.catalog import load_catalog
 from starnav.geometry import attitude_difference_deg
 from starnav.simulate import FALSE_STAR_ID, SimulatedFrame, simulate_frame
@@ -64,7 +64,7 @@ def warm_up(catalog, camera) -> float:
     t0 = time.perf_counter()
     frame = simulate_frame(catalog, camera, ra_deg=10.0, dec_deg=20.0, roll_deg=30.0)
     for prior in (None, frame.R_cam_from_icrs):
-        solve_verbose(
+        solve_stars(
             frame.xy,
             width=camera.width,
             height=camera.height,
@@ -93,7 +93,7 @@ def run(name: str, frames: int, seed: int, sigma_px: float | None) -> dict:
         if len(frame.xy) < 3:
             result = None
         else:
-            result = solve_verbose(
+            result = solve_stars(
                 frame.xy,
                 width=512,
                 fov_deg=12.0,

@@ -44,7 +44,7 @@ from tqdm import tqdm
 import starnav
 from docblock import replace_block
 from lost_in_space import machine
-from starnav.api import get_database, make_camera, solve_verbose
+from starnav.api import get_database, make_camera, solve_stars
 from starnav.catalog import load_catalog
 from starnav.errors import StarnavError
 from starnav.geometry import attitude_difference_deg, attitude_from_radec_roll
@@ -278,7 +278,7 @@ def starnav_solve(frame: Frame, catalog, fov_deg: float, width: int, sigma_px: f
     """starnav's answer in the adapters' form (attitude kept as the matrix)."""
     t0 = time.perf_counter()
     try:
-        r = solve_verbose(
+        r = solve_stars(
             frame.xy,
             width=width,
             fov_deg=fov_deg,
@@ -571,7 +571,7 @@ def main() -> None:
             *table(name, len(frames), rows),
             "",
             f"starnav's time is `SolveResult.time_ms` (identification and fit); its whole "
-            f"`solve_verbose` call, input checks and database look-up included, took "
+            f"`solve_stars` call, input checks and database look-up included, took "
             f"{np.median(calls):.2f} ms median, {np.percentile(calls, 95):.2f} ms p95.",
             "",
             *targets(rows),

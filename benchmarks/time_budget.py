@@ -29,11 +29,10 @@ from tqdm import tqdm
 
 from docblock import replace_block
 from lost_in_space import machine
-from starnav.api import solve_verbose
+from starnav.api import solve_stars
 from starnav.camera import Camera, Equidistant
 from starnav.catalog import load_catalog
 from starnav.geometry import attitude_from_radec_roll
-from starnav.pipeline.fov import solve_fov
 from starnav.pipeline.image import solve_image
 from starnav.runtime.budget import (
     DEFAULTS,
@@ -69,16 +68,23 @@ def solvable_cases(frames: int, seed: int):
 
     def known(camera):
         return lambda f, b: _sol(
-            solve_verbose(f.xy, camera=camera, brightness=f.brightness, time_budget_s=b)
+            solve_stars(f.xy, camera=camera, brightness=f.brightness, time_budget_s=b)
         )
 
     def searched(f, b):
-        return _sol(solve_fov(f.xy, width=1024, brightness=f.brightness, time_budget_s=b))
+        return _sol(
+            solve_stars(f.xy, fov_exact=False, width=1024, brightness=f.brightness, time_budget_s=b)
+        )
 
     def scanned(f, b):
         return _sol(
-            solve_fov(
-                f.xy, width=1024, brightness=f.brightness, lens="equidistant", time_budget_s=b
+            solve_stars(
+                f.xy,
+                fov_exact=False,
+                width=1024,
+                brightness=f.brightness,
+                lens="equidistant",
+                time_budget_s=b,
             )
         )
 
@@ -142,21 +148,23 @@ def refusal_cases(seed: int):
         (
             "random points, FOV known (pinhole 20°)",
             KNOWN_BUDGET_S,
-            lambda b: _why(
-                solve_verbose(rng.uniform(0, 1024, (50, 2)), camera=pin, time_budget_s=b)
-            ),
+            lambda b: _why(solve_stars(rng.uniform(0, 1024, (50, 2)), camera=pin, time_budget_s=b)),
         ),
         (
             "random points, fisheye 185° known",
             WIDE_BUDGET_S,
             lambda b: _why(
-                solve_verbose(rng.uniform(0, 1024, (100, 2)), camera=fish, time_budget_s=b)
+                solve_stars(rng.uniform(0, 1024, (100, 2)), camera=fish, time_budget_s=b)
             ),
         ),
         (
             "random points, FOV searched 5-40°",
             SEARCH_BUDGET_S,
-            lambda b: _why(solve_fov(rng.uniform(0, 1024, (50, 2)), width=1024, time_budget_s=b)),
+            lambda b: _why(
+                solve_stars(
+                    fov_exact=False, xy=rng.uniform(0, 1024, (50, 2)), width=1024, time_budget_s=b
+                )
+            ),
         ),
         (
             "image of noise, FOV searched",
@@ -167,8 +175,12 @@ def refusal_cases(seed: int):
             "random points, fisheye focal scan",
             SCAN_BUDGET_S,
             lambda b: _why(
-                solve_fov(
-                    rng.uniform(0, 1024, (100, 2)), width=1024, lens="equidistant", time_budget_s=b
+                solve_stars(
+                    fov_exact=False,
+                    xy=rng.uniform(0, 1024, (100, 2)),
+                    width=1024,
+                    lens="equidistant",
+                    time_budget_s=b,
                 )
             ),
         ),
@@ -236,7 +248,12 @@ def main() -> None:
     args = ap.parse_args()
     t0 = time.perf_counter()
     # load the machine code and the tables first: the budgets do not count them either
-    solve_fov(np.random.default_rng(0).uniform(0, 1024, (20, 2)), width=1024, time_budget_s=0.1)
+    solve_stars(
+        fov_exact=False,
+        xy=np.random.default_rng(0).uniform(0, 1024, (20, 2)),
+        width=1024,
+        time_budget_s=0.1,
+    )
     solvable = run_solvable(args.frames, args.seed)
     refusals = run_refusals(args.trials, args.seed)
     text = "\n".join(

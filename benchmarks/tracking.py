@@ -22,7 +22,7 @@ from tqdm import tqdm
 
 from docblock import replace_block
 from lost_in_space import machine, warm_up
-from starnav.api import solve_verbose
+from starnav.api import solve_stars
 from starnav.camera import Camera
 from starnav.catalog import load_catalog
 from starnav.geometry import attitude_difference_deg, attitude_from_radec_roll
@@ -66,7 +66,7 @@ def main() -> None:
             continue
         for name, (options, tracks) in MODES.items():
             kwargs = dict(options, prior=prior, prior_sigma_deg=1.0) if tracks else options
-            r = solve_verbose(
+            r = solve_stars(
                 f.xy,
                 width=512,
                 fov_deg=12.0,

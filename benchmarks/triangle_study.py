@@ -8,7 +8,7 @@ order ("noisy"), and without either ("noiseless").
 
 Per field: the geometry of the triangles of the brightest stars (bad = shortest side below
 d_min = 10 px, or smallest height, over the longest side, below delta = 4 px) and the real
-solve path, ``solve_verbose(..., algorithm="triangle", algorithm_options={...})``, limited to
+solve path, ``solve_stars(..., algorithm="triangle", algorithm_options={...})``, limited to
 the first one or two measured triangles (``Triangle(max_triangles=...)``) or not limited.
 
     python benchmarks/triangle_study.py --out docs/triangle_study.md
@@ -166,7 +166,7 @@ def _frame(index: int) -> dict:
             if len(f.xy) < 3:
                 outcomes.append(("none", np.nan, "fewer than 3 stars"))
                 continue
-            r = api.solve_verbose(
+            r = api.solve_stars(
                 f.xy,
                 width=SIZE_PX,
                 fov_deg=camera.fov_deg,
@@ -311,7 +311,7 @@ def report(summaries: dict, context: dict, args, elapsed_s: float) -> str:
         f"- Stars: `simulate_frame`; *noisy*: Gaussian centroid noise of 1′ = {NOISE_PX:.3f} px "
         f"per axis and Gaussian magnitude noise of σ = {MAG_NOISE} mag, which sets the "
         "brightness order; *noiseless*: neither. No false or missing stars.",
-        f'- Solver: `solve_verbose(..., algorithm="triangle", sigma_px={NOISE_PX:.3f})`: '
+        f'- Solver: `solve_stars(..., algorithm="triangle", sigma_px={NOISE_PX:.3f})`: '
         f"inter-star angles match within 3·√2·σ = {3 * np.sqrt(2) * NOISE_PX:.2f} px "
         f"= {3 * np.sqrt(2) * NOISE_PX / FOCAL_PX * 180 / np.pi * 60:.2f}′ (published: 3′); "
         "every candidate is verified by reprojecting the catalog and bounding the "
@@ -334,7 +334,7 @@ def report(summaries: dict, context: dict, args, elapsed_s: float) -> str:
         "- **Success, geometric**: the first (first or second) triangle of the brightest "
         "order is good; for the optimized selection: a good triangle exists among the 25 "
         "brightest stars (the selection then takes it first).",
-        "- **Success, solver**: `solve_verbose` with the identifier limited to the first "
+        "- **Success, solver**: `solve_stars` with the identifier limited to the first "
         "(first two) measured triangles returns the correct attitude. For the optimized "
         'selection, "first" is the first triangle that meets both constraints.',
         "",
@@ -408,7 +408,7 @@ def report(summaries: dict, context: dict, args, elapsed_s: float) -> str:
         "A run limited to more triangles is not repeated where a shorter run of the same "
         "selection already solved the field: the identifier tries the same triangles in the "
         "same order, so it would return the same answer (its time is then the shorter "
-        "run's). Times are of `solve_verbose` (identification and least-squares fit); the "
+        "run's). Times are of `solve_stars` (identification and least-squares fit); the "
         "noiseless fields take longer in the fit, not in the identification.",
         "",
         "| scenario | selection | triangles tried | correct | wrong | none | correct % "

@@ -4,7 +4,7 @@ Frames: boresights uniform on the sphere, random roll, 1024 x 1024 px, Hipparcos
 0.5 px centroid noise, 5 false stars, 10 % of stars dropped, brightness (magnitudes) given.
 Each row is a lens model at a horizontal field of view; fields of 150° and more are circular
 fisheyes (the image circle inscribed in the image, its full angle the field). The camera is
-known (``solve_verbose(camera=...)``); a solution is correct when its boresight is within
+known (``solve_stars(camera=...)``); a solution is correct when its boresight is within
 0.02° and its roll within 0.1° of the truth, wrong otherwise; "ids off" counts the points
 of correct solutions given another star's id (close pairs a few pixels apart: at 185° over
 1024 px a pixel is 11′ of sky). Time: identification
@@ -24,7 +24,7 @@ from tqdm import tqdm
 
 from docblock import replace_block
 from lost_in_space import machine
-from starnav.api import get_database, solve_verbose
+from starnav.api import get_database, solve_stars
 from starnav.camera import MODELS, CameraModel
 from starnav.catalog import load_catalog
 from starnav.simulate import simulate_frame
@@ -67,7 +67,7 @@ def run_row(model: str, fov_deg: float, frames: int, seed: int, catalog) -> dict
     for _ in tqdm(range(frames), desc=label, file=sys.stderr):
         frame = simulate_frame(catalog, camera, seed=rng, **SCENARIO)
         n_stars.append(len(frame.xy))
-        result = solve_verbose(
+        result = solve_stars(
             frame.xy, camera=camera, brightness=frame.brightness, catalog=catalog, sigma_px=0.5
         )
         times.append(result.time_ms)

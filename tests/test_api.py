@@ -21,12 +21,12 @@ def test_solution_fields(contest_catalog):
 
 def test_solved_and_unsolved_json_have_the_same_keys(contest_catalog):
     xy = np.loadtxt(CONTEST / "images" / "xingtu02.csv", delimiter=",", skiprows=1, usecols=(1, 2))
-    solved = starnav.solve_verbose(xy, width=512, fov_deg=12.0, catalog=contest_catalog)
+    solved = starnav.solve_stars(xy, width=512, fov_deg=12.0, catalog=contest_catalog)
     d = solved.to_dict()
     assert tuple(d) == SOLVE_KEYS and d["solved"] and d["reason"] is None
     assert d["time_ms"] == solved.solution.time_ms and len(d["stars"]) == len(xy)
     random_xy = np.random.default_rng(8).uniform(0, 512, (10, 2))
-    unsolved = starnav.solve_verbose(random_xy, width=512, fov_deg=12.0, catalog=contest_catalog)
+    unsolved = starnav.solve_stars(random_xy, width=512, fov_deg=12.0, catalog=contest_catalog)
     u = unsolved.to_dict(["p"] * 10, random_xy)
     assert tuple(u) == SOLVE_KEYS and u["solved"] is False and u["reason"] == unsolved.reason
     assert u["ra_deg"] is None and u["n_matched"] == 0 and u["time_ms"] == unsolved.time_ms
@@ -40,7 +40,7 @@ def test_returns_none_when_unsure(contest_catalog):
     for _ in range(5):
         xy = rng.uniform(0, 512, (10, 2))
         assert starnav.solve(xy, width=512, fov_deg=12.0, catalog=contest_catalog) is None
-        result = starnav.solve_verbose(xy, width=512, fov_deg=12.0, catalog=contest_catalog)
+        result = starnav.solve_stars(xy, width=512, fov_deg=12.0, catalog=contest_catalog)
         assert result.solution is None and result.reason and result.hypotheses > 0
 
 

@@ -10,12 +10,11 @@ import time
 import numpy as np
 import pytest
 
-from starnav.api import solve_verbose
+from starnav.api import solve_stars
 from starnav.camera import Camera
 from starnav.catalog import load_catalog
 from starnav.cli import main
 from starnav.errors import StarnavError
-from starnav.pipeline.fov import solve_fov
 from starnav.runtime.budget import Deadline, check_budget
 from starnav.simulate import simulate_frame
 
@@ -35,8 +34,8 @@ def warm():
     """Load the machine code and tables once, the timed paths included (a kernel's clock
     compiles on its first timed run: not counted in the budget, but in ``time_ms``), so the
     budgets measure searching only."""
-    solve_verbose(random_points(0), width=1024, fov_deg=20.0, time_budget_s=0.01)
-    solve_fov(random_points(0), width=1024, time_budget_s=0.2)
+    solve_stars(random_points(0), width=1024, fov_deg=20.0, time_budget_s=0.01)
+    solve_stars(random_points(0), fov_exact=False, width=1024, time_budget_s=0.2)
 
 
 def test_budget_values_are_checked():
@@ -52,7 +51,7 @@ def test_budget_values_are_checked():
 @pytest.mark.parametrize("budget_s", [0.02, 0.06])
 def test_a_refusal_with_the_fov_known_stops_at_its_budget(warm, budget_s):
     t0 = time.perf_counter()
-    r = solve_verbose(random_points(1), width=1024, fov_deg=20.0, time_budget_s=budget_s)
+    r = solve_stars(random_points(1), width=1024, fov_deg=20.0, time_budget_s=budget_s)
     wall = time.perf_counter() - t0
     assert r.solution is None
     assert r.reason.startswith(f"time budget spent ({budget_s:g} s)")
@@ -65,7 +64,7 @@ def test_a_refusal_with_the_fov_known_stops_at_its_budget(warm, budget_s):
 # a faster CI machine finished the search first)
 @pytest.mark.parametrize("budget_s", [0.15, 0.4])
 def test_a_blind_search_stops_at_its_budget(warm, budget_s):
-    r = solve_fov(random_points(2), width=1024, time_budget_s=budget_s)
+    r = solve_stars(random_points(2), fov_exact=False, width=1024, time_budget_s=budget_s)
     assert r.solution is None
     assert r.reason.startswith(f"time budget spent ({budget_s:g} s)")
     assert "4-star patterns" in r.reason or "hypotheses" in r.reason
@@ -77,8 +76,8 @@ def test_a_budget_does_not_change_a_solve(warm):
     camera = Camera.from_fov(20.0, 1024)
     frame = simulate_frame(catalog, camera, seed=5, noise_px=0.3)
     kw = dict(width=1024, fov_deg=20.0, brightness=frame.brightness)
-    a = solve_verbose(frame.xy, **kw, time_budget_s=math.inf)
-    b = solve_verbose(frame.xy, **kw, time_budget_s=5.0)
+    a = solve_stars(frame.xy, **kw, time_budget_s=math.inf)
+    b = solve_stars(frame.xy, **kw, time_budget_s=5.0)
     assert a.solution is not None and b.solution is not None
     np.testing.assert_array_equal(a.solution.R_cam_from_icrs, b.solution.R_cam_from_icrs)
     assert [m.catalog_id for m in a.solution.stars] == [m.catalog_id for m in b.solution.stars]

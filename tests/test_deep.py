@@ -40,7 +40,7 @@ def frame():
 
 
 def _solve(frame, deep_mag_limit):
-    return api.solve_verbose(
+    return api.solve_stars(
         frame.xy,
         width=1024,
         fov_deg=6.0,
@@ -201,7 +201,7 @@ def test_match_probability_high_for_a_clean_match_low_for_a_far_one():
 def test_bad_deep_mag_limit_is_a_one_line_error():
     xy = np.arange(10.0).reshape(5, 2)
     with pytest.raises(StarnavError, match="deep_mag_limit"):
-        api.solve_verbose(xy, width=512, fov_deg=6.0, deep_mag_limit=99.0)
+        api.solve_stars(xy, width=512, fov_deg=6.0, deep_mag_limit=99.0)
 
 
 def test_cli_deep_mag_limit(capsys, tmp_path, frame):

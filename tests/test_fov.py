@@ -7,21 +7,16 @@ import numpy as np
 import pytest
 
 from conftest import CONTEST
+from starnav.api import solve_stars
 from starnav.camera import Camera, load_camera, save_camera
 from starnav.catalog import load_catalog
 from starnav.cli import main
 from starnav.errors import CameraError, StarnavError
 from starnav.geometry import attitude_difference_deg, attitude_from_radec_roll
 from starnav.identify.pattern4 import catalog_nbytes
-from starnav.pipeline.fov import (
-    DEFAULT_FOV_RANGE_DEG,
-    FOV_LIMITS_DEG,
-    band_grid,
-    band_stars_per_field,
-    load_bands,
-    solve_fov,
-)
+from starnav.pipeline.fov import FOV_LIMITS_DEG, band_grid, band_stars_per_field, load_bands
 from starnav.pipeline.image import solve_image
+from starnav.pipeline.options import DEFAULT_FOV_RANGE_DEG
 from starnav.simulate import simulate_frame
 from starnav.simulate.render import RenderSettings, render_frame
 
@@ -66,8 +61,12 @@ def test_unknown_fov_is_found_and_fitted(sky, fov, width, seed):
     hits = 0
     for k in range(3):
         frame = simulate_frame(sky, camera, noise_px=0.2, false_stars=2, seed=seed * 10 + k)
-        res = solve_fov(
-            frame.xy, width=camera.width, height=camera.height, brightness=frame.brightness
+        res = solve_stars(
+            frame.xy,
+            fov_exact=False,
+            width=camera.width,
+            height=camera.height,
+            brightness=frame.brightness,
         )
         if res.solution is None:
             continue
@@ -83,7 +82,9 @@ def test_unknown_fov_is_found_and_fitted(sky, fov, width, seed):
 def test_given_fov_a_few_percent_off_is_refined(sky):
     camera = Camera.from_fov(15.0, 1024)
     frame = simulate_frame(sky, camera, noise_px=0.1, seed=7)
-    res = solve_fov(frame.xy, width=1024, brightness=frame.brightness, fov_deg=15.0 * 1.03)
+    res = solve_stars(
+        frame.xy, fov_exact=False, width=1024, brightness=frame.brightness, fov_deg=15.0 * 1.03
+    )
     assert res.solution is not None
     assert res.solution.fov_deg == pytest.approx(15.0, rel=5e-4)
 
@@ -91,7 +92,9 @@ def test_given_fov_a_few_percent_off_is_refined(sky):
 def test_out_of_range_fov_is_not_found(sky):
     camera = Camera.from_fov(20.0, 1024)
     frame = simulate_frame(sky, camera, noise_px=0.1, seed=8)
-    res = solve_fov(frame.xy, width=1024, brightness=frame.brightness, fov_range_deg=(5, 10))
+    res = solve_stars(
+        frame.xy, fov_exact=False, width=1024, brightness=frame.brightness, fov_range_deg=(5, 10)
+    )
     assert res.solution is None and res.reason
 
 
@@ -99,14 +102,15 @@ def test_random_points_are_not_solved():
     rng = np.random.default_rng(5)
     for _ in range(3):
         xy = rng.uniform(0, 1024, (30, 2))
-        assert solve_fov(xy, width=1024).solution is None
+        assert solve_stars(xy, fov_exact=False, width=1024).solution is None
 
 
 def test_distortion_is_fitted_on_request(sky):
     camera = Camera(1024, 1024, Camera.from_fov(30.0, 1024).focal_px, k1=-0.06)
     frame = simulate_frame(sky, camera, noise_px=0.1, seed=11)
-    res = solve_fov(
+    res = solve_stars(
         frame.xy,
+        fov_exact=False,
         width=1024,
         brightness=frame.brightness,
         fov_range_deg=(25, 35),
@@ -127,7 +131,9 @@ def test_calibrated_camera_takes_the_distortion_out(sky, tmp_path):
     loaded = load_camera(path)
     assert loaded == camera
     frame = simulate_frame(sky, camera, noise_px=0.1, seed=12)
-    s = solve_fov(frame.xy, width=1024, brightness=frame.brightness, camera=loaded).solution
+    s = solve_stars(
+        frame.xy, fov_exact=False, width=1024, brightness=frame.brightness, camera=loaded
+    ).solution
     assert s is not None and s.k1 == -0.05 and s.rms_px < 0.3
 
 
@@ -155,7 +161,7 @@ def test_bad_camera_files_are_one_line_errors(tmp_path, text, message):
 @pytest.mark.parametrize("bad", [(40, 5), (0.1, 10), ("a", 3), (5,)])
 def test_bad_fov_range(bad):
     with pytest.raises(StarnavError, match="fov"):
-        solve_fov(np.zeros((5, 2)) + 10, width=100, fov_range_deg=bad)
+        solve_stars(np.zeros((5, 2)) + 10, width=100, fov_range_deg=bad)
 
 
 def test_identify_command_without_fov_matches_the_known_fov_answer(capsys):
@@ -197,7 +203,7 @@ def test_csv_catalog_sets_its_own_band_depths(capsys):
 def test_a_diagonal_beyond_the_search_limit_is_refused():
     with pytest.raises(StarnavError, match="diagonal"):
         xy = np.column_stack([np.full(5, 50.0), np.arange(5) * 300.0 + 10])
-        solve_fov(xy, width=100, height=2000, fov_range_deg=(50, 100))
+        solve_stars(xy, fov_exact=False, width=100, height=2000, fov_range_deg=(50, 100))
 
 
 MAP1 = str(CONTEST / "images" / "xingtu01.csv")
@@ -257,4 +263,4 @@ def test_a_field_below_the_limit_is_a_one_line_error_saying_why(capsys):
     xy = np.zeros((5, 2)) + 10
     for fov in ({"fov_range_deg": (2.9, 10)}, {"fov_deg": 2.5}):
         with pytest.raises(StarnavError, match="too few stars of the embedded Hipparcos"):
-            solve_fov(xy, width=100, **fov)
+            solve_stars(xy, fov_exact=False, width=100, **fov)

@@ -151,7 +151,7 @@ def test_collinear_stars_refused_for_ambiguous_parity(hip_1991):
         np.full(far.sum() + 8, 5.0),
         "a line of stars",
     )
-    result = starnav.solve_verbose(xy, width=512, fov_deg=12.0, catalog=cat, sigma_px=0.3)
+    result = starnav.solve_stars(xy, width=512, fov_deg=12.0, catalog=cat, sigma_px=0.3)
     assert result.solution is None and "parity ambiguous" in result.reason
     s = starnav.solve(xy, width=512, fov_deg=12.0, catalog=cat, sigma_px=0.3, parity=1)
     assert s is not None
@@ -168,7 +168,7 @@ def test_wrong_field_of_view_is_refused(hip_1991):
         f = simulate_frame(hip_1991, cam, noise_px=0.3, seed=rng)
         if len(f.xy) < 8:
             continue
-        result = starnav.solve_verbose(
+        result = starnav.solve_stars(
             f.xy, width=512, fov_deg=12.3, brightness=f.brightness, catalog=hip_1991
         )
         if result.solution is None:
@@ -183,7 +183,7 @@ def test_a_field_of_view_one_percent_off_is_refused_not_answered(hip_1991):
     refused = 0
     for seed in range(5):
         f = simulate_frame(hip_1991, cam, noise_px=0.1, seed=100 + seed)
-        res = starnav.solve_verbose(f.xy, width=512, fov_deg=12.12, catalog=hip_1991, sigma_px=0.3)
+        res = starnav.solve_stars(f.xy, width=512, fov_deg=12.12, catalog=hip_1991, sigma_px=0.3)
         if res.solution is None:
             refused += 1
         if res.solution is None and "focal length of" in res.reason:

@@ -17,7 +17,7 @@ from scipy.sparse.csgraph import connected_components, maximum_bipartite_matchin
 from scipy.spatial.transform import Rotation
 
 import starnav
-from starnav.api import get_database
+from starnav.api import get_database, solve_stars
 from starnav.attitude import refine_attitude
 from starnav.attitude.wahba import wahba
 from starnav.camera import Camera
@@ -34,7 +34,6 @@ from starnav.identify.base import MatchSettings
 from starnav.identify.kernels import Q_STAR
 from starnav.identify.pyramid import catalog_triangles
 from starnav.identify.verify import Verification, match_catalog
-from starnav.pipeline.fov import solve_fov
 from starnav.simulate import FALSE_STAR_ID, simulate_frame
 
 CAMERA = Camera.from_fov(12.0, 512)
@@ -589,8 +588,9 @@ METHODS = [*ALGORITHMS, "tracking"]
 
 def _solve(method, camera, xy, brightness, catalog, prior):
     if method == "fov-search":
-        return solve_fov(
+        return solve_stars(
             xy,
+            fov_exact=False,
             width=camera.width,
             height=camera.height,
             brightness=brightness,
@@ -598,7 +598,7 @@ def _solve(method, camera, xy, brightness, catalog, prior):
             sigma_px=0.3,
         )
     options = {"prior": prior} if method == "tracking" else {"algorithm": method}
-    return starnav.solve_verbose(
+    return starnav.solve_stars(
         xy,
         width=camera.width,
         height=camera.height,

@@ -24,7 +24,7 @@ def _turned(R, angle_deg, rng):
 
 
 def _solve(frame, catalog, **kwargs):
-    return starnav.solve_verbose(
+    return starnav.solve_stars(
         frame.xy,
         width=512,
         fov_deg=12.0,
@@ -127,12 +127,13 @@ def test_solve_batch_on_processes_matches_one_by_one(hip_1991):
     frames = [simulate_frame(hip_1991, CAMERA, noise_px=0.3, seed=rng) for _ in range(8)]
     frames = [f for f in frames if len(f.xy) >= 3]
     options = dict(width=512, fov_deg=12.0, catalog=hip_1991, sigma_px=0.3)
-    pooled = starnav.solve_batch(
+    pooled = starnav.solve_stars_batch(
         [f.xy for f in frames], brightness=[f.brightness for f in frames], workers=2, **options
     )
     assert len(pooled) == len(frames)
-    for f, (solution, reason, ms) in zip(frames, pooled, strict=True):
-        one = starnav.solve_verbose(f.xy, brightness=f.brightness, **options).solution
+    for f, r in zip(frames, pooled, strict=True):
+        solution, reason, ms = r.solution, r.reason, r.time_ms
+        one = starnav.solve_stars(f.xy, brightness=f.brightness, **options).solution
         assert (solution is None) == (one is None)
         if solution is not None:
             assert np.allclose(solution.R_cam_from_icrs, one.R_cam_from_icrs, atol=1e-9)
@@ -140,15 +141,16 @@ def test_solve_batch_on_processes_matches_one_by_one(hip_1991):
 
 
 def test_batch_keeps_going_past_a_bad_frame(hip_1991):
-    results = starnav.solve_batch(
+    results = starnav.solve_stars_batch(
         [np.array([[1.0, 2.0]]), np.array([[10.0, 10.0], [50.0, 60.0], [200.0, 300.0]])],
         workers=1,
         width=512,
         fov_deg=12.0,
         catalog=hip_1991,
     )
-    assert results[0][0] is None and results[0][1].startswith("error:")
-    assert results[1][0] is None and not results[1][1].startswith("error:")
+    assert results[0].solution is None and results[0].bad_input
+    assert "at least 3 stars" in results[0].error and results[0].reason == results[0].error
+    assert results[1].solution is None and not results[1].bad_input and results[1].reason
 
 
 def test_cli_identify_a_directory(tmp_path, capsys):

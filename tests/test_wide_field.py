@@ -7,7 +7,7 @@ import sys
 import numpy as np
 import pytest
 
-from starnav.api import solve_verbose
+from starnav.api import solve_stars
 from starnav.camera import MODELS, save_camera
 from starnav.catalog import load_catalog
 from starnav.simulate import simulate_frame, write_frame_csv
@@ -40,7 +40,7 @@ def test_fisheye_star_lists_solve_to_the_truth(catalog, model, fov_deg):
         frame = simulate_frame(
             catalog, camera, noise_px=0.5, false_stars=5, missing_frac=0.1, seed=seed
         )
-        result = solve_verbose(
+        result = solve_stars(
             frame.xy, camera=camera, brightness=frame.brightness, catalog=catalog, sigma_px=0.5
         )
         diff = frame.compare(result.solution)
@@ -72,7 +72,7 @@ def test_random_points_in_a_fisheye_are_refused(catalog):
     r = 400 * np.sqrt(rng.uniform(0, 1, 30))
     phi = rng.uniform(0, 2 * np.pi, 30)
     xy = np.column_stack([400 + r * np.cos(phi), 400 + r * np.sin(phi)])
-    result = solve_verbose(xy, camera=camera, brightness=rng.uniform(0, 1, 30), catalog=catalog)
+    result = solve_stars(xy, camera=camera, brightness=rng.uniform(0, 1, 30), catalog=catalog)
     assert result.solution is None
 
 

@@ -26,7 +26,6 @@ from starnav.attitude.refine import rotate_by
 from starnav.camera import MODELS, Camera, CameraModel
 from starnav.catalog import Catalog, load_catalog
 from starnav.errors import StarnavError
-from starnav.pipeline.fov import DEFAULT_FOV_RANGE_DEG
 from starnav.pipeline.image import ImageSolveResult, solve_image
 from starnav.simulate import project_catalog
 
@@ -98,7 +97,7 @@ def calibrate(
     *,
     model: str = "pinhole",
     fov_deg: float | None = None,
-    fov_range_deg: tuple[float, float] = DEFAULT_FOV_RANGE_DEG,
+    fov_range_deg: tuple[float, float] | None = None,
     catalog: Catalog | str | Path | None = None,
     progress=None,
     **options,

@@ -11,10 +11,9 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from starnav.identify.database import PairDatabase
-
 if TYPE_CHECKING:
     from starnav.camera import CameraModel
+    from starnav.catalog import Catalog
 
 # The JSON of a solve, solved or not (``solve_dict``): these keys in this order; an unsolved
 # one has null for every number, 0 matched and its input points as the stars.
@@ -140,6 +139,16 @@ class Solution:
     k4: float = 0.0
     camera: CameraModel | None = None
 
+    def __repr__(self) -> str:
+        n = len(self.star_table.labels)
+        return (
+            f"Solution(RA {self.ra_deg:.5f}° Dec {self.dec_deg:+.5f}° roll {self.roll_deg:.4f}° "
+            f"parity {self.parity:+d}, FOV {self.fov_deg:.4f}°, {self.n_matched}/{n} stars "
+            f"matched, rms {self.rms_px:.3f} px, 1σ boresight "
+            f"{self.sigma_boresight_arcsec:.3g}″, false-match probability "
+            f"{self.false_match_probability:.1e}, {self.algorithm})"
+        )
+
     @functools.cached_property
     def stars(self) -> tuple[StarMatch, ...]:
         """Every input point: label, position, catalog id (None: none), residual (px)."""
@@ -160,20 +169,52 @@ class Solution:
 @dataclass(frozen=True, eq=False)
 class SolveResult:
     """The outcome of one solve: the ``solution`` or None with the ``reason``; ``time_ms``
-    in all and ``stage_ms`` per stage (``bearings``, ``identify``, ``fit``; the FOV search
-    has ``search`` for its identification)."""
+    in all, the ``hypotheses`` tried, the ``catalog`` identified against and ``stage_ms``
+    per stage (``bearings``, ``identify``, ``fit``; the FOV search has ``search`` for its
+    identification). Prints as a one-line summary."""
 
     solution: Solution | None
     reason: str
     time_ms: float
     hypotheses: int
-    database: PairDatabase
+    catalog: Catalog | None
     stage_ms: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def solved(self) -> bool:
+        """Whether there is a solution."""
+        return self.solution is not None
+
+    def __repr__(self) -> str:
+        catalog = "no catalog" if self.catalog is None else f"catalog {self.catalog.name!r}"
+        if self.solution is None:
+            return (
+                f"SolveResult(not solved: {self.reason}; {self.hypotheses} hypotheses, "
+                f"{self.time_ms:.1f} ms, {catalog})"
+            )
+        return f"SolveResult({self.solution!r}, {self.time_ms:.1f} ms, {catalog})"
 
     def to_dict(self, labels: Sequence[str] | None = None, xy: np.ndarray | None = None) -> dict:
         """The JSON of this solve (``solve_dict``); ``labels`` and ``xy`` are the input points,
         listed as the stars when unsolved."""
         return solve_dict(self.solution, self.reason, self.time_ms, labels, xy)
+
+
+@dataclass(frozen=True, eq=False)
+class FrameResult:
+    """One frame of a batch: the ``solution`` (None with the ``reason`` when unsolved),
+    ``time_ms``, and ``error``, the one-line message when the frame's input was refused (then
+    ``reason`` is the same message): a bad frame is reported, it does not stop the batch."""
+
+    solution: Solution | None
+    reason: str
+    time_ms: float
+    error: str | None = None
+
+    @property
+    def bad_input(self) -> bool:
+        """Whether the frame's input was refused (not merely unsolved)."""
+        return self.error is not None
 
 
 def solve_dict(

@@ -7,6 +7,7 @@ starts with ``true_`` carry the truth beside simulated input and are ignored.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -23,11 +24,37 @@ _KNOWN = {"label", "x", "y", "flux", "mag"}
 
 @dataclass(frozen=True, eq=False)
 class StarList:
-    """Checked centroids: ``xy`` (n, 2, px), ``labels``, ``brightness`` (n,) or None."""
+    """Checked centroids: ``xy`` (n, 2, px), ``labels``, ``brightness`` (n,, larger is
+    brighter) or None; ``order`` (rows brightest first), ``rank`` (each row's place in it)
+    and ``magnitudes`` are made from them on first use."""
 
     xy: np.ndarray
     labels: tuple[str, ...]
     brightness: np.ndarray | None
+
+    @functools.cached_property
+    def order(self) -> np.ndarray:
+        """Rows brightest first (as given when there is no brightness)."""
+        if self.brightness is None:
+            return np.arange(len(self.xy))
+        return np.argsort(-self.brightness, kind="stable")
+
+    @functools.cached_property
+    def rank(self) -> np.ndarray:
+        """Each row's place in ``order`` (0: the brightest)."""
+        rank = np.empty(len(self.xy), dtype=np.int64)
+        rank[self.order] = np.arange(len(self.xy))
+        return rank
+
+    @functools.cached_property
+    def magnitudes(self) -> np.ndarray | None:
+        """Magnitudes from the brightness (-2.5 log10; NaN where it is not positive), None
+        when there is no brightness."""
+        if self.brightness is None:
+            return None
+        b = np.asarray(self.brightness, dtype=np.float64)
+        positive = b > 0.0
+        return np.where(positive, -2.5 * np.log10(np.where(positive, b, 1.0)), np.nan)
 
 
 def read_star_csv(path: str | Path) -> StarList:
@@ -177,17 +204,10 @@ def read_known_stars_csv(path: str | Path) -> KnownStars:
 
 
 def point_magnitudes(stars: StarList) -> np.ndarray | None:
-    """The magnitudes of ``stars`` from their brightness (-2.5 log10; NaN where it is not
-    positive), None when there is no brightness."""
-    if stars.brightness is None:
-        return None
-    b = np.asarray(stars.brightness, dtype=np.float64)
-    positive = b > 0.0
-    return np.where(positive, -2.5 * np.log10(np.where(positive, b, 1.0)), np.nan)
+    """``stars.magnitudes``."""
+    return stars.magnitudes
 
 
 def brightness_order(stars: StarList) -> np.ndarray:
-    """Rows of ``stars`` brightest first (as given when there is no brightness)."""
-    if stars.brightness is None:
-        return np.arange(len(stars.xy))
-    return np.argsort(-stars.brightness, kind="stable")
+    """``stars.order``: rows brightest first."""
+    return stars.order

@@ -48,7 +48,7 @@ def run(args: argparse.Namespace) -> int:
             args.images,
             model=args.model,
             fov_deg=args.fov_deg,
-            fov_range_deg=tuple(args.fov_range),
+            fov_range_deg=args.fov_range and tuple(args.fov_range),
             max_stars=args.max_stars,
             progress=bar.update,
         )

@@ -14,7 +14,6 @@ from starnav.catalog import DEFAULT_MAG_LIMIT
 from starnav.errors import StarnavError
 from starnav.identify import ALGORITHMS, DEFAULT_ALGORITHM
 from starnav.identify.options import check_algorithm_options
-from starnav.pipeline.fov import DEFAULT_FOV_RANGE_DEG
 from starnav.runtime.budget import DEFAULTS
 
 EXIT_OK, EXIT_NOT_SOLVED, EXIT_BAD_INPUT = 0, 1, 2
@@ -152,9 +151,8 @@ def add_fov_search(
         nargs=2,
         type=finite,
         metavar=("LO", "HI"),
-        default=DEFAULT_FOV_RANGE_DEG,
-        help="horizontal FOV range searched when the FOV is unknown (degrees, within 3-100; "
-        "default 5 40)",
+        help="horizontal FOV range searched when the FOV is unknown (degrees; default 5 40, "
+        "within 3-100, for the pinhole; 120 200, within 10-360, for a fisheye lens)",
     )
     if camera_help:
         fov.add_argument("--camera", help=camera_help)

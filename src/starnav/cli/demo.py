@@ -7,7 +7,7 @@ import time
 
 import numpy as np
 
-from starnav.api import get_database, make_camera, solve_verbose
+from starnav.api import get_database, make_camera, solve_stars
 from starnav.catalog import load_catalog
 from starnav.cli.common import (
     EXIT_NOT_SOLVED,
@@ -59,7 +59,7 @@ def run(args: argparse.Namespace) -> int:
             f"the simulated {args.fov_deg:g}° field holds only {len(frame.xy)} stars: "
             "choose a wider field of view"
         )
-    result = solve_verbose(
+    result = solve_stars(
         frame.xy,
         width=camera.width,
         fov_deg=args.fov_deg,

@@ -5,11 +5,17 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
-from starnav.api import DEFAULT_MAX_FALSE_MATCH_PROBABILITY, DEFAULT_SIGMA_PX
+from starnav.api import (
+    DEFAULT_MAX_FALSE_MATCH_PROBABILITY,
+    DEFAULT_SIGMA_PX,
+    SolveOptions,
+    solve_stars,
+)
 from starnav.cli.common import (
     EXIT_BAD_INPUT,
     EXIT_NOT_SOLVED,
@@ -29,8 +35,8 @@ from starnav.cli.output import print_json, print_solution
 from starnav.errors import StarnavError
 from starnav.geometry import attitude_from_radec_roll
 from starnav.identify import DEFAULT_ALGORITHM
+from starnav.pipeline.star_files import FileResult, read_star_files, solve_star_files
 from starnav.results import SolveResult
-from starnav.solve_lists import FileResult, read_star_files, solve_star_files, solve_star_list
 from starnav.starlist import read_star_csv
 
 
@@ -100,14 +106,13 @@ def prior_attitude(args: argparse.Namespace) -> np.ndarray | None:
     return attitude_from_radec_roll(*given, args.parity or 1)
 
 
-def solve_options(args: argparse.Namespace) -> dict:
-    """The solver options ``identify`` takes from its command line (one list or many)."""
+def solve_options(args: argparse.Namespace) -> SolveOptions:
+    """The solve options ``identify`` takes from its command line (one list or many)."""
     if args.camera is None and args.width is None:
         raise StarnavError("give --width (and --fov-deg or --fov-range), or a --camera file")
-    return dict(
-        width=args.width,
-        height=args.height,
+    return SolveOptions(
         fov_deg=args.fov_deg,
+        fov_range_deg=args.fov_range and tuple(args.fov_range),
         camera=args.camera,
         lens=args.lens,
         catalog=args.catalog,
@@ -146,13 +151,8 @@ def run(args: argparse.Namespace) -> int:
     prior = prior_attitude(args)
     if args.fov_deg is None and args.camera is None:
         _check_fov_search(args, prior)
-    result = solve_star_list(
-        stars,
-        **solve_options(args),
-        fov_range_deg=tuple(args.fov_range),
-        prior=prior,
-        prior_sigma_deg=args.prior_sigma_deg,
-    )
+    options = replace(solve_options(args), prior_sigma_deg=args.prior_sigma_deg)
+    result = solve_stars(stars, options, width=args.width, height=args.height, prior=prior)
     _plot(args, result)
     s = result.solution
     if args.json:
@@ -192,7 +192,14 @@ def run_directory(args: argparse.Namespace, source: Path) -> int:
     options = solve_options(args)
     t0 = time.perf_counter()
     with tqdm(total=len(files.lists), desc="identify", unit="file", file=sys.stderr) as bar:
-        results = solve_star_files(files, workers=args.workers, progress=bar.update, **options)
+        results = solve_star_files(
+            files,
+            options,
+            width=args.width,
+            height=args.height,
+            workers=args.workers,
+            progress=bar.update,
+        )
     wall = time.perf_counter() - t0
     for r in results:
         if args.json:

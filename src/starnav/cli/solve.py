@@ -121,7 +121,7 @@ def _options(args: argparse.Namespace) -> dict:
 
     return dict(
         fov_deg=args.fov_deg,
-        fov_range_deg=tuple(args.fov_range),
+        fov_range_deg=args.fov_range and tuple(args.fov_range),
         camera=args.camera,
         lens=args.lens,
         fit_distortion=args.fit_distortion,

@@ -37,7 +37,8 @@ from starnav.navigation.frames import (
 )
 from starnav.navigation.observation import CameraView, Observation
 from starnav.pipeline import Solver, SolveSettings
-from starnav.pipeline.fov import solve_fov
+from starnav.pipeline.options import SolveOptions
+from starnav.pipeline.stars import solve_stars
 from starnav.results import SolveResult
 from starnav.starlist import check_star_list
 
@@ -248,9 +249,8 @@ def identify_view(
     with the focal length the solution settled on (the searched one, or the model's own)."""
     stars = check_star_list(view.xy, width=view.width, height=view.height)
     if view.camera is None and view.fov_deg is None:
-        result = solve_fov(
-            stars.xy, width=view.width, height=view.height, catalog=catalog, sigma_px=sigma_px
-        )
+        options = SolveOptions(catalog=catalog, sigma_px=sigma_px)
+        result = solve_stars(stars, options, width=view.width, height=view.height)
         base: CameraModel = Camera(view.width, view.height, 1.0)
     else:
         base = view.camera

@@ -2,7 +2,8 @@
 
 Workers are forked after the solver is prepared and its machine code loaded (the parent solves
 the first frame), so they share its catalog, database and code instead of loading them again.
-A frame with bad input gets its one-line error as the reason; it never stops the batch.
+A frame with bad input gets its one-line error as data (``FrameResult.error``); it never
+stops the batch.
 """
 
 from __future__ import annotations
@@ -16,9 +17,11 @@ from concurrent.futures import ProcessPoolExecutor
 import numpy as np
 
 from starnav.errors import StarnavError
+from starnav.pipeline.options import SolveOptions
 from starnav.pipeline.solver import Solver
-from starnav.results import Solution
-from starnav.runtime.budget import Deadline
+from starnav.pipeline.stars import exact_field, known_budget_s, prepare_solver
+from starnav.results import FrameResult
+from starnav.runtime.budget import Deadline, check_budget
 from starnav.starlist import check_star_list
 
 Frame = tuple[np.ndarray, np.ndarray | None]  # centroids (n, 2, px) and brightness or None
@@ -33,21 +36,21 @@ def _init(
     )
 
 
-def _solve_one(frame: Frame) -> tuple[Solution | None, str, float]:
+def _solve_one(frame: Frame) -> FrameResult:
     solver: Solver = _WORKER["solver"]  # type: ignore[assignment]
     xy, brightness = frame
     camera = solver.camera
     try:
         stars = check_star_list(xy, width=camera.width, height=camera.height, brightness=brightness)
     except StarnavError as exc:
-        return None, f"error: {exc}", 0.0
+        return FrameResult(None, str(exc), 0.0, error=str(exc))
     r = solver.solve(
         stars,
         prior=_WORKER["prior"],
         prior_sigma_deg=_WORKER["prior_sigma_deg"],
         deadline=Deadline.after(_WORKER["time_budget_s"]),
     )
-    return r.solution, r.reason, r.time_ms
+    return FrameResult(r.solution, r.reason, r.time_ms)
 
 
 def solve_many(
@@ -59,8 +62,8 @@ def solve_many(
     prior: np.ndarray | None = None,
     prior_sigma_deg: float = 1.0,
     time_budget_s: float = math.inf,
-) -> list[tuple[Solution | None, str, float]]:
-    """``(solution or None, reason, time_ms)`` of each frame, in order, on ``workers``
+) -> list[FrameResult]:
+    """The ``FrameResult`` of each frame, in order, on ``workers``
     processes (default: all cores; 1: here); ``progress`` is called with the number of frames
     finished; ``time_budget_s``: each frame's (``starnav.runtime.budget``)."""
     _init(solver, prior, prior_sigma_deg, time_budget_s)
@@ -90,3 +93,33 @@ def solve_many(
             if progress:
                 progress(1)
     return out
+
+
+def solve_frames(
+    frames: Sequence[np.ndarray],
+    options: SolveOptions,
+    *,
+    width: float | None = None,
+    height: float | None = None,
+    brightness: Sequence[np.ndarray | None] | None = None,
+    prior: np.ndarray | None = None,
+    workers: int | None = None,
+    progress: Callable[[int], None] | None = None,
+) -> list[FrameResult]:
+    """Many star lists (each (n, 2) px) of one known field (``options.fov_deg`` across
+    ``width`` px, or ``options.camera``) through one prepared solver (``solve_many``)."""
+    if not exact_field(options):
+        raise StarnavError("a batch of star lists needs fov_deg or a camera")
+    solver = prepare_solver(options, width=width, height=height)
+    budget_s = check_budget(options.time_budget_s, known_budget_s(solver.camera))
+    lights = brightness if brightness is not None else [None] * len(frames)
+    jobs = [(np.asarray(xy, dtype=float), b) for xy, b in zip(frames, lights, strict=True)]
+    return solve_many(
+        solver,
+        jobs,
+        workers=workers,
+        progress=progress,
+        prior=prior,
+        prior_sigma_deg=options.prior_sigma_deg,
+        time_budget_s=budget_s,
+    )

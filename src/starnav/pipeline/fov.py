@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Iterator
 from dataclasses import replace
 from pathlib import Path
 
@@ -24,17 +25,11 @@ from starnav.identify.base import MatchSettings
 from starnav.identify.database import PairDatabase, catalog_only
 from starnav.identify.pattern4 import FIELD_RADIUS_FRACTION, build_pattern_table
 from starnav.pipeline.conclude import elapsed_ms
-from starnav.pipeline.deep import deep_catalog
 from starnav.pipeline.fov_search import BAND_FACTOR, Band, search_fov
-from starnav.pipeline.solver import (
-    DEFAULT_MAX_FALSE_MATCH_PROBABILITY,
-    DEFAULT_MIN_MATCHED_FRACTION,
-    Solver,
-    SolveSettings,
-    check_prior,
-    first_use,
-    fit_identification,
+from starnav.pipeline.options import (
+    SolveOptions,
 )
+from starnav.pipeline.solver import Candidate, Solver, SolveSettings, first_use, fit_first
 from starnav.results import SolveResult
 from starnav.runtime.budget import (
     SEARCH_BUDGET_S,
@@ -45,13 +40,11 @@ from starnav.runtime.budget import (
 )
 from starnav.starlist import StarList, brightness_order, check_star_list, point_magnitudes
 
-DEFAULT_FOV_RANGE_DEG = (5.0, 40.0)
 # the narrowest horizontal field searched: a 3° field holds about 12 Hipparcos stars to the
 # deepest band catalog (Hp 8.5; ~8 towards the galactic poles), narrower ones too few to
 # identify and verify on (README, "Field range")
 FOV_LIMITS_DEG = (3.0, 100.0)
 LENS_FOV_LIMITS_DEG = (10.0, 360.0)  # the focal scan of a fisheye model
-DEFAULT_LENS_FOV_RANGE_DEG = (120.0, 200.0)  # a fisheye's range when none is given
 SCAN_STARS = 60  # the focal scan identifies the brightest this many stars,
 SCAN_HYPOTHESES = 2000  # testing at most this many hypotheses per trial focal length
 GIVEN_FOV_TOLERANCE = 0.05  # a given FOV is searched within +-5 %
@@ -63,8 +56,6 @@ _MAX_MAG = 8.5
 _PATTERN_STARS_PER_FIELD = 10  # brightest stars of a lattice field making its patterns,
 _FEWER_STARS_BELOW_DEG = 10.0  # one fewer per grid step below a 10° table (9, 8, 7)
 MAX_DIAGONAL_FOV_DEG = 150.0
-DEFAULT_PATTERN_STARS = 15  # the brightest this many stars make the 4-star patterns
-POSITION_HINT_RADIUS_DEG = 10.0  # a position hint's boresight is searched first within this
 HINT_BUDGET_SHARE = 0.25  # of the time budget, for the search near a position hint
 _SLIVER = 0.05  # a band narrower than this (relative) is merged into the next wider one
 _DATABASES: dict[tuple, PairDatabase] = {}  # per process: catalog vectors and KD-tree
@@ -247,90 +238,60 @@ def search_range(
     return check_fov_range(fov_range_deg, limits)
 
 
-def solve_fov(
+def solve_unknown_field(
     xy: np.ndarray,
+    options: SolveOptions,
     *,
-    width: float,
+    width: float | None = None,
     height: float | None = None,
     brightness: np.ndarray | None = None,
     labels: list[str] | tuple[str, ...] | None = None,
-    fov_deg: float | None = None,
-    fov_range_deg: tuple[float, float] = DEFAULT_FOV_RANGE_DEG,
-    camera: CameraModel | None = None,
-    lens: str = "pinhole",
-    fit_distortion: bool = False,
-    catalog: Catalog | str | Path | None = None,
-    epoch_year: float | None = None,
-    parity: int | None = None,
-    sigma_px: float | None = None,
-    max_false_match_probability: float = DEFAULT_MAX_FALSE_MATCH_PROBABILITY,
-    min_matched_fraction: float = DEFAULT_MIN_MATCHED_FRACTION,
-    pattern_stars: int = DEFAULT_PATTERN_STARS,
-    mag_limit: float | None = None,
-    time_budget_s: float | None = None,
     prior: np.ndarray | None = None,
-    prior_sigma_deg: float = 1.0,
     position_hint_deg: tuple[float, float] | None = None,
-    position_radius_deg: float = POSITION_HINT_RADIUS_DEG,
-    deep_mag_limit: float | None = None,
 ) -> SolveResult:
     """Identify stars at ``xy`` (n, 2, px) in an image ``width`` x ``height`` px whose field
-    of view is unknown: searched within ``fov_range_deg`` (horizontal, degrees), or within
-    5 % of ``fov_deg``, or within 1 % of a calibrated ``camera`` (whose principal point and
-    distortion are then used). The solution's ``fov_deg``/``focal_px`` are fitted;
-    ``fit_distortion`` fits k1, k2 as well (with at least 12 matched stars). A fisheye lens
-    given with the (pinhole's) default range searches ``DEFAULT_LENS_FOV_RANGE_DEG``.
-    ``brightness``: larger is brighter (without it the rows are taken as brightest first).
-    A fisheye ``lens`` model (``starnav.camera.MODELS``), or a fisheye ``camera``, is solved
-    by ``scan_focal`` (``mag_limit``: its catalog's, default Hp <= 6; the pinhole search
-    picks a depth per band and takes none). ``time_budget_s``: stop searching after this
-    many seconds (``runtime.budget.default_budget_s`` by default; counted once the tables are
-    loaded). ``prior``: the attitude of the previous frame
-    of a sequence (``R_cam_from_icrs``, good to ``prior_sigma_deg``), with a ``camera`` (the
-    previous frame's fitted one): tracking, falling back to lost in space with that camera
-    (``tracking_solver``). ``position_hint_deg``: (RA, Dec) of the boresight, roughly (e.g.
-    a FITS header's): the catalog within ``position_radius_deg`` of it is searched first,
-    then the whole sky (the pinhole search). ``deep_mag_limit``: match every point to the
-    catalog down to this magnitude after the fit (``starnav.pipeline.deep``). Other options
-    as ``starnav.solve_verbose``.
-    """
+    of view is unknown: searched within ``options.search_range_deg`` (horizontal, degrees),
+    or within 5 % of ``options.fov_deg``, or within 1 % of a calibrated ``options.camera``
+    (whose principal point and distortion are then used). The solution's ``fov_deg`` /
+    ``focal_px`` are fitted; ``fit_distortion`` fits k1, k2 as well (with at least 12 matched
+    stars). A fisheye lens model, or a fisheye camera, is solved by ``scan_focal``
+    (``mag_limit``: its catalog's, default Hp <= 6; the pinhole search picks a depth per band
+    and takes none). ``prior``: the attitude of the previous frame of a sequence
+    (``R_cam_from_icrs``, checked), with a camera (the previous frame's fitted one):
+    tracking, falling back to lost in space with that camera (``tracking_solver``).
+    ``position_hint_deg``: (RA, Dec) of the boresight, roughly (e.g. a FITS header's): the
+    catalog within ``options.position_radius_deg`` of it is searched first, then the whole
+    sky (the pinhole search). The time budget counts once the tables are loaded."""
+    camera = options.camera
     if camera is not None:
-        width, height, lens = camera.width, camera.height, camera.model
-    if lens not in MODELS:
-        raise StarnavError(f"unknown lens model {lens!r}; known: {', '.join(MODELS)}")
-    if lens != "pinhole" and tuple(fov_range_deg) == DEFAULT_FOV_RANGE_DEG:
-        fov_range_deg = DEFAULT_LENS_FOV_RANGE_DEG  # the default range of a fisheye
-    lo, hi = search_range(fov_deg, fov_range_deg, camera, lens)
+        width, height = camera.width, camera.height
+    lens = options.lens_model
+    lo, hi = search_range(options.fov_deg, options.search_range_deg, camera, lens)
     height = width if height is None else height
     if camera is not None:
         base = camera
-    elif lens == "pinhole":
+    elif not options.fisheye:
         base = Camera.from_fov(0.5 * (lo + hi), width, height)
     else:  # the scan sets the focal length
         base = MODELS[lens](int(width), int(height), 1.0)
-    known = fov_deg is not None or camera is not None
-    default_s = default_budget_s(known=known, scan=lens != "pinhole", field_deg=base.diagonal_deg)
-    budget_s = check_budget(time_budget_s, default_s)
+    default_s = default_budget_s(
+        known=options.field_known, scan=options.fisheye, field_deg=base.diagonal_deg
+    )
+    budget_s = check_budget(options.time_budget_s, default_s)
     stars = check_star_list(
         xy, width=base.width, height=base.height, brightness=brightness, labels=labels
     )
-    settings = SolveSettings(
-        sigma_px=sigma_px,
-        parity=parity,
-        fit_focal=True,
-        fit_distortion=fit_distortion,
-        max_false_match_probability=max_false_match_probability,
-        min_matched_fraction=min_matched_fraction,
-        deep_catalog=deep_catalog(catalog, deep_mag_limit, epoch_year),
-    )
-    R = check_prior(prior, prior_sigma_deg)
-    if R is not None:
+    settings = SolveSettings.from_options(options, fit_focal=True)
+    catalog, epoch_year, mag_limit = options.catalog, options.epoch_year, options.mag_limit
+    if prior is not None:
         if camera is None:
             raise StarnavError("tracking (a prior) needs the camera, e.g. the previous frame's")
         solver = tracking_solver(camera, catalog, epoch_year, mag_limit, settings)
         deadline = Deadline.after(budget_s)
-        return solver.solve(stars, prior=R, prior_sigma_deg=prior_sigma_deg, deadline=deadline)
-    if lens != "pinhole":
+        return solver.solve(
+            stars, prior=prior, prior_sigma_deg=options.prior_sigma_deg, deadline=deadline
+        )
+    if options.fisheye:
         cat = load_catalog(catalog, mag_limit=mag_limit, epoch_year=epoch_year)
         focal_range = lens_focal_range(base, camera, (lo, hi))
         solver = Solver(
@@ -340,11 +301,11 @@ def solve_fov(
     if mag_limit is not None:
         raise StarnavError("mag_limit needs fov_deg (the FOV search chooses its own)")
     bands = load_bands(lo, hi, base.width, base.height, catalog, epoch_year)
-    near = _near(position_hint_deg, position_radius_deg)
+    near = _near(position_hint_deg, options.position_radius_deg)
     deadline = Deadline.after(budget_s)
     with first_use("solve"):
         return _search_and_fit(
-            stars, base, bands, settings, (lo, hi), pattern_stars, deadline, near
+            stars, base, bands, settings, (lo, hi), options.pattern_stars, deadline, near
         )
 
 
@@ -352,10 +313,6 @@ def _near(position_hint_deg, radius_deg: float):
     """(unit vector, radius in rad) of a position hint (RA, Dec in degrees), or None."""
     if position_hint_deg is None:
         return None
-    if not (math.isfinite(radius_deg) and 0 < radius_deg <= 180):
-        raise StarnavError(
-            f"the position hint's radius must be in (0, 180] degrees, got {radius_deg}"
-        )
     ra, dec = (math.radians(float(v)) for v in position_hint_deg)
     return radec_to_unit(ra, dec), math.radians(radius_deg)
 
@@ -489,68 +446,49 @@ def _search_and_fit(
         if where is not None:
             whole = deadline or Deadline.after(SEARCH_BUDGET_S)
             share = replace(whole, budget_s=HINT_BUDGET_SHARE * whole.budget_s)
-        result = _fit_candidates(
-            search_fov(
-                xy_sorted[: MatchSettings.max_screen_stars],
-                bands,
-                width=base.width,
-                height=base.height,
-                cx=base.cx,
-                cy=base.cy,
-                sigma_px=settings.sigma_px,
-                focal_range_px=(
-                    focal_px_from_fov(hi, base.width),
-                    focal_px_from_fov(lo, base.width),
+        result = fit_first(
+            _candidates(
+                search_fov(
+                    xy_sorted[: MatchSettings.max_screen_stars],
+                    bands,
+                    width=base.width,
+                    height=base.height,
+                    cx=base.cx,
+                    cy=base.cy,
+                    sigma_px=settings.sigma_px,
+                    focal_range_px=(
+                        focal_px_from_fov(hi, base.width),
+                        focal_px_from_fov(lo, base.width),
+                    ),
+                    parity=settings.parity,
+                    max_false_match_probability=settings.max_false_match_probability,
+                    pattern_stars=pattern_stars,
+                    deadline=share,
+                    point_mag=point_mag,
+                    near=where,
                 ),
-                parity=settings.parity,
-                max_false_match_probability=settings.max_false_match_probability,
-                pattern_stars=pattern_stars,
-                deadline=share,
-                point_mag=point_mag,
-                near=where,
+                order,
+                base,
             ),
             stars,
-            order,
-            base,
-            bands,
             settings,
-            t0,
+            bands[0].database.catalog,
+            t0=t0,
         )
         if result.solution is not None or expired(deadline):
             break
     return result
 
 
-def _fit_candidates(candidates, stars, order, base, bands, settings, t0) -> SolveResult:
-    """The first of the search's ``candidates`` the solver's fit accepts, or why none was."""
-    # a verified identification that the fit then refuses (too few of the stars it predicts
-    # agree, ...) does not end the search: the next hypothesis may be the right one
-    refused: SolveResult | None = None
-    t_search = time.perf_counter()
-    for found in candidates:
+def _candidates(found_matches, order, base: Camera) -> Iterator[Candidate]:
+    """The FOV search's matches as the fit's candidates (their stars' rows back in the
+    list's order, the camera at the focal length each was found at)."""
+    for found in found_matches:
         if found.final:
-            stages = {"search": elapsed_ms(t_search)}
-            if refused is not None and not found.ambiguous:
-                return replace(refused, time_ms=elapsed_ms(t0))
-            database = bands[0].database
-            return SolveResult(
-                None, found.reason, elapsed_ms(t0), found.hypotheses, database, stages
+            yield Candidate(
+                None, reason=found.reason, hypotheses=found.hypotheses, ambiguous=found.ambiguous
             )
+            return
         ident = replace(found.identification, obs_index=order[found.identification.obs_index])
         camera = base.with_focal(found.focal_px)
-        result = fit_identification(
-            ident,
-            stars,
-            camera,
-            found.band.database,
-            settings,
-            settings.match_settings(camera),
-            t0=t0,
-            t_fit=time.perf_counter(),
-            algorithm="fov-search",
-            stages={"search": elapsed_ms(t_search)},
-        )
-        if result.solution is not None:
-            return result
-        refused = result
-    return refused or SolveResult(None, "nothing searched", elapsed_ms(t0), 0, bands[0].database)
+        yield Candidate(ident, camera, found.band.database, "fov-search")

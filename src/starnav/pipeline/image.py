@@ -13,30 +13,31 @@ import time
 from collections.abc import Mapping
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
-from starnav.camera import CameraModel, load_camera
+from starnav.camera import CameraModel
 from starnav.catalog import Catalog
 from starnav.detect.circle import find_image_circle
 from starnav.detect.header import ImageHints, fits_hints, is_fits
 from starnav.detect.read import read_image
 from starnav.detect.stars import Detections, detect_stars
 from starnav.errors import CameraError, ImageError
-from starnav.pipeline.fov import (
+from starnav.pipeline.fov import diagonal_fov_deg, search_range
+from starnav.pipeline.options import (
     DEFAULT_FOV_RANGE_DEG,
+    DEFAULT_MAX_STARS,
     DEFAULT_PATTERN_STARS,
-    diagonal_fov_deg,
-    search_range,
-    solve_fov,
+    DEFAULT_THRESHOLD_SIGMA,
+    FISHEYE_MAX_STARS,
+    SolveOptions,
 )
+from starnav.pipeline.stars import solve_stars
 from starnav.results import Solution
 from starnav.runtime.budget import check_budget, default_budget_s
 
-DEFAULT_MAX_STARS = 50
 NO_HINTS = ImageHints()
-FISHEYE_MAX_STARS = 100  # a whole sky's brightest detections hold horizon lights and glow
-DEFAULT_THRESHOLD_SIGMA = 5.0  # detection threshold over the background noise
 MIN_DETECTIONS = 4  # fewer detected stars than this: not solved, without a search
 
 
@@ -89,51 +90,35 @@ class ImageSolveResult:
 
 def solve_image(
     image: str | Path | np.ndarray,
+    options: SolveOptions | None = None,
     *,
-    fov_deg: float | None = None,
-    fov_range_deg: tuple[float, float] = DEFAULT_FOV_RANGE_DEG,
-    camera: CameraModel | str | Path | None = None,
-    lens: str = "pinhole",
-    fit_distortion: bool = False,
-    max_stars: int | None = None,
-    threshold_sigma: float = DEFAULT_THRESHOLD_SIGMA,
-    sigma_px: float | None = None,
-    catalog: Catalog | str | Path | None = None,
-    epoch_year: float | None = None,
-    parity: int | None = None,
     hints: ImageHints | None = None,
-    time_budget_s: float | None = None,
-    downsample: int = 1,
-    **options,
+    position_hint_deg: tuple[float, float] | None = None,
+    prior: np.ndarray | None = None,
+    **option_fields: Any,
 ) -> ImageSolveResult:
-    """Solve an image file (FITS, PNG, JPEG, TIFF) or a 2-D array (row 0 at the top).
+    """Solve an image file (FITS, PNG, JPEG, TIFF) or a 2-D array (row 0 at the top) with
+    ``options`` (``SolveOptions``; keyword ``option_fields`` override its fields).
 
-    The field of view is searched within ``fov_range_deg`` (horizontal, degrees) unless
-    ``fov_deg`` (searched within 5 %) or a calibrated ``camera`` (a camera model or a camera
-    file; within 1 %) is given; the fitted one is reported either way. ``lens``: the lens
-    model when no camera is given (``starnav.camera.MODELS``; a fisheye model's focal length
-    is scanned, see ``starnav.pipeline.fov.scan_focal``). ``max_stars``: the brightest this many
-    detections are used (default ``DEFAULT_MAX_STARS``, for a fisheye ``FISHEYE_MAX_STARS``);
-    ``threshold_sigma``: detection threshold over the background noise; ``sigma_px``:
-    centroid 1-sigma (px; None: unknown). With a fisheye lens (any model but
-    the pinhole), detections outside the image circle found in the image
-    (``starnav.detect.circle``) are not made: the dark frame around an all-sky camera's disc
-    often holds burned-in text. ``hints``: what the file's header says
-    (``starnav.detect.header.fits_hints``; read from a FITS file when None, none for an
-    array): its FOV is searched (±5 %) when neither ``fov_deg``, ``camera`` nor another
-    ``fov_range_deg`` is given and it lies within the default range, its epoch used when
-    ``epoch_year`` is not, its position searched first; a solve that fails with the hinted
-    FOV is tried again without it. ``time_budget_s``: the solve's (``starnav.runtime.budget``;
-    detection is not counted). ``downsample``: stars detected on the image binned by this
-    factor, solved at full resolution. Other keywords: see ``starnav.pipeline.fov.solve_fov``.
+    The field of view is searched within ``options.fov_range_deg`` (horizontal, degrees)
+    unless ``fov_deg`` (searched within 5 %) or a calibrated ``camera`` (within 1 %) is
+    given (``fov_exact=True``: taken as given); the fitted one is reported either way. A
+    fisheye ``lens`` model's focal length is scanned (``pipeline.fov.scan_focal``), and its
+    detections outside the image circle found in the image (``starnav.detect.circle``) are
+    not made: the dark frame around an all-sky camera's disc often holds burned-in text.
+    ``hints``: what the file's header says (``starnav.detect.header.fits_hints``; read from
+    a FITS file when None, none for an array): its FOV is searched (±5 %) when neither
+    ``fov_deg``, ``camera`` nor another range is given and it lies within the default range,
+    its epoch used when ``epoch_year`` is not, its position searched first; a solve that
+    fails with the hinted FOV is tried again without it. ``position_hint_deg``: (RA, Dec)
+    of the boresight, roughly (wins over the header's). ``prior``: the previous frame's
+    attitude (``R_cam_from_icrs``) of a sequence, with its fitted ``camera``: tracking. The
+    time budget is the solve's
+    (``starnav.runtime.budget``; detection is not counted).
     """
-    camera = load_camera(camera) if isinstance(camera, str | Path) else camera
-    search_range(fov_deg, fov_range_deg, camera, lens)  # a bad range fails before any work
-    bad = isinstance(max_stars, bool) or not (isinstance(max_stars, int) and max_stars >= 4)
-    if max_stars is not None and bad:
-        raise ImageError(f"max_stars must be an integer >= 4, got {max_stars!r}")
-    lens = camera.model if camera is not None else lens
-    check_budget(time_budget_s, 1.0)  # a bad budget fails before any work
+    options = SolveOptions.make(options, **option_fields)
+    camera = options.camera
+    search_range(options.fov_deg, options.search_range_deg, camera, options.lens_model)
     t0 = time.perf_counter()
     if isinstance(image, np.ndarray):
         pixels, read_ms = image, 0.0
@@ -151,30 +136,25 @@ def solve_image(
             f"the camera file is for {camera.width} x {camera.height} px images, this image is "
             f"{width} x {height} px"
         )
-    budget_s = check_budget(time_budget_s, _default_budget_s(camera, fov_deg, lens, pixels))
+    budget_s = check_budget(options.time_budget_s, _default_budget_s(options, pixels))
     t1 = time.perf_counter()
-    found = _detect_binned(pixels, downsample, lens, threshold_sigma, max_stars)
+    found = _detect_binned(pixels, options)
     detect_ms = (time.perf_counter() - t1) * 1e3
     if len(found.xy) < MIN_DETECTIONS:
         reason = f"{len(found.xy)} stars detected, at least {MIN_DETECTIONS} are needed"
         return ImageSolveResult(None, reason, found, None, read_ms, detect_ms, 0.0, hints=hints)
-    solve = functools.partial(
-        solve_fov,
+    if options.epoch_year is None and hints.epoch_year is not None:
+        options = replace(options, epoch_year=hints.epoch_year)
+    searched = not options.field_known and not options.fisheye
+    result = _solve_hinted(
         found.xy,
-        width=width,
-        height=height,
-        fov_range_deg=fov_range_deg,
-        camera=camera,
-        lens=lens,
-        fit_distortion=fit_distortion,
-        sigma_px=sigma_px,
-        catalog=catalog,
-        epoch_year=epoch_year if epoch_year is not None else hints.epoch_year,
-        parity=parity,
+        (width, height),
+        options,
+        hints if searched else NO_HINTS,
+        budget_s,
+        position_hint_deg,
+        prior,
     )
-    searched = fov_deg is None and camera is None and lens == "pinhole"
-    result = _solve_hinted(solve, hints if searched else NO_HINTS, fov_deg, fov_range_deg,
-                           budget_s, options)  # fmt: skip
     sol = result.solution
     return ImageSolveResult(
         sol,
@@ -184,19 +164,24 @@ def solve_image(
         read_ms,
         detect_ms,
         result.time_ms,
-        result.database.catalog,
+        result.catalog,
         hints,
     )
 
 
-def _detect_binned(pixels, factor, lens, threshold_sigma, max_stars) -> Detections:
-    """``detect_image`` on the image binned ``factor`` x ``factor`` (each block's mean; the
-    last partial row and column of blocks dropped), in full-resolution pixels."""
-    if isinstance(factor, bool) or not (isinstance(factor, int) and factor >= 1):
-        raise ImageError(f"downsample must be an integer >= 1, got {factor!r}")
+def _detect_binned(pixels: np.ndarray, options: SolveOptions) -> Detections:
+    """``detect_image`` on the image binned ``options.downsample`` x ``options.downsample``
+    (each block's mean; the last partial row and column of blocks dropped), in
+    full-resolution pixels."""
+    factor = options.downsample
+    detect = functools.partial(
+        detect_image,
+        lens=options.lens_model,
+        threshold_sigma=options.threshold_sigma,
+        max_stars=options.max_stars,
+    )
     if factor == 1:
-        return detect_image(pixels, lens=lens, threshold_sigma=threshold_sigma,
-                            max_stars=max_stars)  # fmt: skip
+        return detect(pixels)
     height, width = (n // factor for n in pixels.shape)
     if min(height, width) < 16:
         raise ImageError(
@@ -205,41 +190,52 @@ def _detect_binned(pixels, factor, lens, threshold_sigma, max_stars) -> Detectio
         )
     blocks = np.asarray(pixels[: height * factor, : width * factor], dtype=np.float32)
     binned = blocks.reshape(height, factor, width, factor).mean(axis=(1, 3))
-    found = detect_image(binned, lens=lens, threshold_sigma=threshold_sigma, max_stars=max_stars)
+    found = detect(binned)
     # a block's centre is its pixel's centre times the factor
     return replace(found, xy=found.xy * factor, width=pixels.shape[1], height=pixels.shape[0])
 
 
-def _default_budget_s(camera, fov_deg, lens: str, pixels: np.ndarray) -> float:
+def _default_budget_s(options: SolveOptions, pixels: np.ndarray) -> float:
     """The default time budget (s) of an image's solve (``runtime.budget.default_budget_s``)."""
     height, width = pixels.shape
-    if camera is not None:
-        field_deg = camera.diagonal_deg
+    if options.camera is not None:
+        field_deg = options.camera.diagonal_deg
     else:
-        field_deg = diagonal_fov_deg(fov_deg, width, height) if fov_deg else 0.0
-    known = camera is not None or fov_deg is not None
-    return default_budget_s(known=known, scan=lens != "pinhole", field_deg=field_deg)
+        fov = options.fov_deg
+        field_deg = diagonal_fov_deg(fov, width, height) if fov else 0.0
+    return default_budget_s(known=options.field_known, scan=options.fisheye, field_deg=field_deg)
 
 
-def _solve_hinted(solve, hints: ImageHints, fov_deg, fov_range_deg, budget_s: float, options):
-    """``solve`` (``solve_fov`` of the detections) with the ``hints`` of a pinhole search:
-    the position searched first; the FOV, when in the default range searched, tried first
-    and, if that fails, the whole range on what is left of the budget."""
-    options = dict(options)
-    if hints.ra_deg is not None and hints.dec_deg is not None:
-        options.setdefault("position_hint_deg", (hints.ra_deg, hints.dec_deg))
+def _solve_hinted(xy, size, options: SolveOptions, hints: ImageHints, budget_s, position, prior):
+    """The detections ``xy`` of an image of ``size`` (width, height px) solved
+    (``pipeline.stars.solve_stars``) with the ``hints`` of a pinhole search: the position
+    searched first (unless ``position`` is given); the FOV, when in the default range
+    searched, tried first and, if that fails, the whole range on what is left of the
+    budget."""
+    if position is None and hints.ra_deg is not None and hints.dec_deg is not None:
+        position = (hints.ra_deg, hints.dec_deg)
+    width, height = size
+
+    def solve(fov_deg, time_budget_s):
+        return solve_stars(
+            xy,
+            replace(options, fov_deg=fov_deg, time_budget_s=time_budget_s),
+            width=width,
+            height=height,
+            position_hint_deg=position,
+            prior=prior,
+            images=True,
+        )
+
     hinted = None
     lo, hi = DEFAULT_FOV_RANGE_DEG
-    if (
-        tuple(fov_range_deg) == DEFAULT_FOV_RANGE_DEG
-        and hints.fov_deg
-        and lo <= hints.fov_deg <= hi
-    ):
-        hinted = hints.fov_deg  # else ignored: outside what the search is for
-    result = solve(fov_deg=fov_deg if hinted is None else hinted, time_budget_s=budget_s, **options)
+    if options.fov_range_deg in (None, DEFAULT_FOV_RANGE_DEG) and hints.fov_deg:
+        if lo <= hints.fov_deg <= hi:
+            hinted = hints.fov_deg  # else ignored: outside what the search is for
+    result = solve(options.fov_deg if hinted is None else hinted, budget_s)
     left_s = budget_s - result.time_ms / 1e3
     if result.solution is None and hinted is not None and left_s > 0:
-        again = solve(fov_deg=None, time_budget_s=left_s, **options)  # the FOV may be wrong
+        again = solve(None, left_s)  # the FOV may be wrong
         result = replace(
             again,
             reason=f"{again.reason} (and with the header's FOV {hinted:.3f}°: {result.reason})",

@@ -28,12 +28,7 @@ from astropy.wcs import WCS
 from starnav.catalog import Catalog
 from starnav.detect.header import ImageHints, fits_hints, is_fits
 from starnav.errors import StarnavError
-from starnav.pipeline.fov import (
-    DEFAULT_FOV_RANGE_DEG,
-    DEFAULT_PATTERN_STARS,
-    FOV_LIMITS_DEG,
-    solve_fov,
-)
+from starnav.pipeline.fov import FOV_LIMITS_DEG
 from starnav.pipeline.image import (
     ImageSolveResult,
     annotate_solution,
@@ -41,6 +36,8 @@ from starnav.pipeline.image import (
     solve_image,
     write_outputs,
 )
+from starnav.pipeline.options import DEFAULT_FOV_RANGE_DEG, DEFAULT_PATTERN_STARS, SolveOptions
+from starnav.pipeline.stars import solve_stars
 from starnav.results import Solution
 
 SCALE_UNITS = ("degwidth", "arcminwidth", "arcsecperpix", "focalmm")
@@ -310,13 +307,21 @@ def _solve_plate(source, pixels, hints, time_budget_s) -> PlateResult:
             raise StarnavError(f"Dec must be within ±90°, got {hints.dec_deg}")
         options["position_radius_deg"] = hints.radius_deg or DEFAULT_POSITION_RADIUS_DEG
     if isinstance(source, XYList):
+        position = None
         if hints.ra_deg is not None:
-            options["position_hint_deg"] = (float(hints.ra_deg), float(hints.dec_deg))
-        res = solve_fov(source.xy, width=source.width, height=source.height, **options)
+            position = (float(hints.ra_deg), float(hints.dec_deg))
+        res = solve_stars(
+            source.xy,
+            SolveOptions(fov_exact=False, **options),
+            width=source.width,
+            height=source.height,
+            position_hint_deg=position,
+            images=True,
+        )
         sol = res.solution
         cam = None if sol is None else sol.camera
         return _result(sol, cam, res.reason, source.width, source.height, res.time_ms,
-                       xy=source.xy, catalog=res.database.catalog)  # fmt: skip
+                       xy=source.xy, catalog=res.catalog)  # fmt: skip
     path = source
     header = fits_hints(path)
     if hints.ra_deg is not None:

@@ -13,7 +13,7 @@ import copy
 import sys
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
 
@@ -23,18 +23,21 @@ from starnav.camera import CameraModel
 from starnav.catalog import Catalog
 from starnav.errors import CatalogError, StarnavError
 from starnav.identify import DEFAULT_ALGORITHM, MatchSettings, PairDatabase, make_identifier
-from starnav.identify.base import SEARCH_SIGMA_PX, Identification, Identifier, IdentifyOutcome
+from starnav.identify.base import Identification, Identifier, IdentifyOutcome
 from starnav.identify.database import build_database, database_angle_deg
 from starnav.identify.tracking import Tracking
 from starnav.pipeline.conclude import conclude, elapsed_ms
-from starnav.pipeline.deep import deep_match
+from starnav.pipeline.deep import deep_catalog, deep_match
+from starnav.pipeline.options import (
+    DEFAULT_MAX_FALSE_MATCH_PROBABILITY,
+    DEFAULT_MIN_MATCHED_FRACTION,
+    DEFAULT_SIGMA_PX,
+    SolveOptions,
+)
 from starnav.results import Solution, SolveResult
 from starnav.runtime.budget import Deadline, compiled_s, expired
 from starnav.starlist import StarList, brightness_order, point_magnitudes
 
-DEFAULT_SIGMA_PX = SEARCH_SIGMA_PX  # the tolerances' sigma when none is told
-DEFAULT_MAX_FALSE_MATCH_PROBABILITY = 1e-4
-DEFAULT_MIN_MATCHED_FRACTION = 0.5
 MAX_PAIRS = 3e7  # largest pair database built (about 0.5 GB)
 MAX_PAIR_DEG = 60.0  # wider fields identify on star triangles of sides up to this (degrees)
 WIDE_PAIR_CANDIDATES = 2000  # catalog pairs a measured side of a wide field may match
@@ -75,6 +78,20 @@ class SolveSettings:
         p = self.max_false_match_probability
         if not 0.0 < p < 1.0:
             raise StarnavError(f"max_false_match_probability must be in (0, 1), got {p!r}")
+
+    @classmethod
+    def from_options(cls, options: SolveOptions, *, fit_focal: bool | None = None) -> SolveSettings:
+        """The settings of ``options`` (``fit_focal`` overriding the option's), with the deep
+        stage's catalog loaded."""
+        return cls(
+            sigma_px=options.sigma_px,
+            parity=options.parity,
+            fit_focal=options.fit_focal if fit_focal is None else fit_focal,
+            fit_distortion=options.fit_distortion,
+            max_false_match_probability=options.max_false_match_probability,
+            min_matched_fraction=options.min_matched_fraction,
+            deep_catalog=deep_catalog(options.catalog, options.deep_mag_limit, options.epoch_year),
+        )
 
     @property
     def search_sigma_px(self) -> float:
@@ -249,7 +266,12 @@ class Solver:
             found = outcome.identification
             if found is None:
                 return SolveResult(
-                    None, outcome.reason, elapsed_ms(t0), outcome.hypotheses, self.database, stages
+                    None,
+                    outcome.reason,
+                    elapsed_ms(t0),
+                    outcome.hypotheses,
+                    self.database.catalog,
+                    stages,
                 )
             return self.fit(found, stars, t0=t0, t_fit=t2, algorithm=algorithm, stages=stages)
 
@@ -294,6 +316,63 @@ class Solver:
         )
 
 
+@dataclass(frozen=True, eq=False)
+class Candidate:
+    """What a search offers the fit: an ``identification`` made through ``camera`` on
+    ``database`` by ``algorithm``; or, with ``identification`` None, the search's last word:
+    its ``reason`` and ``hypotheses``, and whether it ended ``ambiguous`` (then a candidate
+    the fit refused before it does not stand as the answer)."""
+
+    identification: Identification | None
+    camera: CameraModel | None = None
+    database: PairDatabase | None = None
+    algorithm: str = ""
+    reason: str = ""
+    hypotheses: int = 0
+    ambiguous: bool = False
+
+
+def fit_first(
+    candidates: Iterable[Candidate],
+    stars: StarList,
+    settings: SolveSettings,
+    catalog: Catalog,
+    *,
+    t0: float,
+) -> SolveResult:
+    """The first of a search's ``candidates`` the fit accepts (``fit_identification``), or
+    why none was: a verified identification that the fit then refuses (too few of the stars
+    it predicts agree, ...) does not end the search, the next may be the right one.
+    ``catalog``: the one searched (for an answer without a fit); ``t0``: when the solve
+    began (``time.perf_counter()``); the search's own time is stage ``search``."""
+    refused: SolveResult | None = None
+    t_search = time.perf_counter()
+    for found in candidates:
+        if found.identification is None:
+            if refused is not None and not found.ambiguous:
+                return replace(refused, time_ms=elapsed_ms(t0))
+            stages = {"search": elapsed_ms(t_search)}
+            return SolveResult(
+                None, found.reason, elapsed_ms(t0), found.hypotheses, catalog, stages
+            )
+        result = fit_identification(
+            found.identification,
+            stars,
+            found.camera,
+            found.database,
+            settings,
+            settings.match_settings(found.camera),
+            t0=t0,
+            t_fit=time.perf_counter(),
+            algorithm=found.algorithm,
+            stages={"search": elapsed_ms(t_search)},
+        )
+        if result.solution is not None:
+            return result
+        refused = result
+    return refused or SolveResult(None, "nothing searched", elapsed_ms(t0), 0, catalog)
+
+
 def fit_identification(
     found: Identification,
     stars: StarList,
@@ -333,4 +412,4 @@ def fit_identification(
     ms = elapsed_ms(t0)
     if solution is not None:
         solution = replace(solution, time_ms=ms, algorithm=algorithm)
-    return SolveResult(solution, reason, ms, found.hypotheses, database, stages)
+    return SolveResult(solution, reason, ms, found.hypotheses, database.catalog, stages)

@@ -1,0 +1,194 @@
+"""``SolveOptions``: every option of a solve in one frozen object, checked once.
+
+Every entry (``starnav.solve_stars`` and ``solve`` for star lists, ``solve_image``, batches,
+plates, positioning) takes one; keyword options given beside it override its fields
+(``SolveOptions.make``). What belongs to one frame rather than to the camera and the method —
+the points, their brightness, a prior attitude, a position hint — is passed with the call.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field, fields, replace
+from pathlib import Path
+from typing import Any
+
+from starnav.camera import MODELS, CameraModel, load_camera
+from starnav.catalog import Catalog
+from starnav.errors import CameraError, ImageError, StarnavError
+from starnav.identify import ALGORITHMS, DEFAULT_ALGORITHM
+from starnav.identify.base import SEARCH_SIGMA_PX
+from starnav.runtime.budget import check_budget
+
+DEFAULT_SIGMA_PX = SEARCH_SIGMA_PX  # the tolerances' sigma when none is told
+DEFAULT_MAX_FALSE_MATCH_PROBABILITY = 1e-4
+DEFAULT_MIN_MATCHED_FRACTION = 0.5
+DEFAULT_FOV_RANGE_DEG = (5.0, 40.0)  # the pinhole FOV search's range when none is given
+DEFAULT_LENS_FOV_RANGE_DEG = (120.0, 200.0)  # a fisheye focal scan's
+DEFAULT_PATTERN_STARS = 15  # the brightest this many stars make the 4-star patterns
+POSITION_HINT_RADIUS_DEG = 10.0  # a position hint's boresight is searched first within this
+DEFAULT_MAX_STARS = 50  # an image's brightest detections solved
+FISHEYE_MAX_STARS = 100  # a whole sky's brightest detections hold horizon lights and glow
+DEFAULT_THRESHOLD_SIGMA = 5.0  # detection threshold over the background noise
+
+
+@dataclass(frozen=True, kw_only=True)
+class SolveOptions:
+    """The options of a solve (all keyword, all with defaults; units in the names).
+
+    The field: ``fov_deg`` (horizontal field of view, degrees) or ``camera`` (a camera model
+    or a camera file), or neither, when ``fov_range_deg`` (horizontal, degrees; None: the
+    lens model's default, 5-40° for the pinhole, 120-200° for a fisheye) is searched for a
+    pinhole or a fisheye's focal length is scanned. ``fov_exact``: whether a given ``fov_deg``
+    / ``camera`` is taken as it is (True) or searched within 5 % / 1 % with the focal length
+    fitted (False); None: exact for star lists, approximate for images. ``lens``: the lens
+    model without a camera (``starnav.camera.MODELS``); ``fit_focal``, ``fit_distortion``:
+    fit the focal length (and k1, k2, from 12 matched stars) with the attitude.
+
+    The catalog: ``catalog`` (a ``Catalog``, a CSV path, or None for the embedded
+    Hipparcos), ``mag_limit`` (None: the field's default), ``epoch_year`` (proper motion;
+    None: now), ``deep_mag_limit`` (match every point to the catalog down to this magnitude
+    after the fit, with a per-star ``match_probability``; None: no deep stage).
+
+    The identification: ``algorithm`` (``starnav.identify.ALGORITHMS``) and its
+    ``algorithm_options``; ``sigma_px`` (1-sigma centroid error, px; None: not known, the
+    tolerances allow ``DEFAULT_SIGMA_PX`` and the false-match probability takes the sigma the
+    residuals fit best); ``parity`` (+1 / -1 when known); ``max_false_match_probability``
+    and ``min_matched_fraction`` (refuse less certain answers); ``pattern_stars`` (the FOV
+    search's brightest stars); ``prior_sigma_deg`` (1-sigma of a prior attitude);
+    ``position_radius_deg`` (a position hint is searched first within this).
+
+    ``time_budget_s``: give up after this many seconds ("time budget spent"; None: the
+    default of the field, ``starnav.runtime.budget``; ``math.inf``: no limit).
+
+    Images only: ``max_stars`` (the brightest detections solved; None: 50, 100 for a
+    fisheye), ``threshold_sigma`` (detection threshold over the background noise),
+    ``downsample`` (detect on the image binned by this factor).
+    """
+
+    fov_deg: float | None = None
+    fov_range_deg: tuple[float, float] | None = None
+    fov_exact: bool | None = None
+    camera: CameraModel | None = None
+    lens: str = "pinhole"
+    fit_focal: bool = False
+    fit_distortion: bool = False
+    catalog: Catalog | str | Path | None = field(default=None, repr=False)
+    mag_limit: float | None = None
+    epoch_year: float | None = None
+    deep_mag_limit: float | None = None
+    algorithm: str = DEFAULT_ALGORITHM
+    algorithm_options: tuple[tuple[str, Any], ...] = ()
+    sigma_px: float | None = None
+    parity: int | None = None
+    max_false_match_probability: float = DEFAULT_MAX_FALSE_MATCH_PROBABILITY
+    min_matched_fraction: float = DEFAULT_MIN_MATCHED_FRACTION
+    pattern_stars: int = DEFAULT_PATTERN_STARS
+    prior_sigma_deg: float = 1.0
+    position_radius_deg: float = POSITION_HINT_RADIUS_DEG
+    time_budget_s: float | None = None
+    max_stars: int | None = None
+    threshold_sigma: float = DEFAULT_THRESHOLD_SIGMA
+    downsample: int = 1
+
+    def __post_init__(self) -> None:
+        if isinstance(self.camera, str | Path):
+            object.__setattr__(self, "camera", load_camera(self.camera))
+        elif self.camera is not None and not hasattr(self.camera, "pixels_to_bearings"):
+            given = type(self.camera).__name__
+            raise CameraError(f"camera must be a camera model or a camera file, got a {given}")
+        if isinstance(self.algorithm_options, Mapping):
+            items = tuple(sorted(self.algorithm_options.items()))
+            object.__setattr__(self, "algorithm_options", items)
+        if self.fov_range_deg is not None:
+            object.__setattr__(self, "fov_range_deg", tuple(self.fov_range_deg))
+        if self.lens not in MODELS:
+            raise CameraError(f"unknown lens model {self.lens!r}; known: {', '.join(MODELS)}")
+        if self.algorithm not in ALGORITHMS:
+            known = ", ".join(ALGORITHMS)
+            raise StarnavError(f"unknown algorithm {self.algorithm!r}; known: {known}")
+        check_budget(self.time_budget_s, 1.0)
+        s = self.sigma_px
+        if s is not None and not (_number(s) and math.isfinite(s) and s > 0):
+            raise StarnavError(f"sigma_px must be a positive number of pixels, got {_show(s)}")
+        if self.parity not in (None, 1, -1):
+            raise StarnavError(f"parity must be +1, -1 or None, got {self.parity!r}")
+        if not (_number(self.min_matched_fraction) and 0.0 <= self.min_matched_fraction <= 1.0):
+            f = _show(self.min_matched_fraction)
+            raise StarnavError(f"min_matched_fraction must be in [0, 1], got {f}")
+        p = self.max_false_match_probability
+        if not (_number(p) and 0.0 < p < 1.0):
+            raise StarnavError(f"max_false_match_probability must be in (0, 1), got {_show(p)}")
+        d = self.prior_sigma_deg
+        if not (_number(d) and math.isfinite(d) and 0.0 < d <= 30.0):
+            raise StarnavError(f"prior_sigma_deg must be in (0, 30] degrees, got {_show(d)}")
+        r = self.position_radius_deg
+        if not (_number(r) and math.isfinite(r) and 0 < r <= 180):
+            raise StarnavError(f"the position hint's radius must be in (0, 180] degrees, got {r}")
+        m = self.max_stars
+        if m is not None and not (isinstance(m, int) and not isinstance(m, bool) and m >= 4):
+            raise ImageError(f"max_stars must be an integer >= 4, got {m!r}")
+        k = self.downsample
+        if not (isinstance(k, int) and not isinstance(k, bool) and k >= 1):
+            raise ImageError(f"downsample must be an integer >= 1, got {k!r}")
+
+    @classmethod
+    def make(cls, options: SolveOptions | None = None, **overrides: Any) -> SolveOptions:
+        """``options`` (default: all defaults) with the fields in ``overrides`` replaced; a
+        one-line error naming an option that does not exist."""
+        names = {f.name for f in fields(cls)}
+        unknown = sorted(set(overrides) - names)
+        if unknown:
+            raise StarnavError(
+                f"unknown solve option{'s' if len(unknown) > 1 else ''}: {', '.join(unknown)}"
+            )
+        base = options if options is not None else cls()
+        if not isinstance(base, SolveOptions):
+            raise StarnavError(f"options must be a SolveOptions, got {type(base).__name__}")
+        return replace(base, **overrides) if overrides else base
+
+    @property
+    def lens_model(self) -> str:
+        """The lens model solved with: the camera's, or ``lens``."""
+        return self.camera.model if self.camera is not None else self.lens
+
+    @property
+    def fisheye(self) -> bool:
+        """Whether the lens is one of the fisheye models (its focal length is scanned when not
+        known, not FOV-searched)."""
+        return self.lens_model != "pinhole"
+
+    @property
+    def field_known(self) -> bool:
+        """Whether the field of view is given (``fov_deg`` or ``camera``)."""
+        return self.fov_deg is not None or self.camera is not None
+
+    @property
+    def search_range_deg(self) -> tuple[float, float]:
+        """The horizontal FOV range searched when the field is not given: ``fov_range_deg``
+        or the lens model's default."""
+        if self.fov_range_deg is not None:
+            return self.fov_range_deg
+        return DEFAULT_LENS_FOV_RANGE_DEG if self.fisheye else DEFAULT_FOV_RANGE_DEG
+
+    @property
+    def image_max_stars(self) -> int:
+        """The brightest detections of an image solved: ``max_stars`` or the lens's default."""
+        if self.max_stars is not None:
+            return self.max_stars
+        return FISHEYE_MAX_STARS if self.fisheye else DEFAULT_MAX_STARS
+
+    @property
+    def algorithm_kwargs(self) -> dict[str, Any]:
+        """``algorithm_options`` as keyword arguments."""
+        return dict(self.algorithm_options)
+
+
+def _number(value: object) -> bool:
+    return isinstance(value, int | float) and not isinstance(value, bool)
+
+
+def _show(value: object) -> str:
+    """A number as the user would write it (``nan``, ``12.5``), anything else as its repr."""
+    return f"{float(value):g}" if _number(value) else repr(value)
