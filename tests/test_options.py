@@ -51,11 +51,11 @@ def test_make_overrides_fields_and_names_an_unknown_option():
     made = SolveOptions.make(base, sigma_px=0.3)
     assert made.fov_deg == 12.0 and made.sigma_px == 0.3 and base.sigma_px == 0.5
     assert SolveOptions.make(base) is base
-    with pytest.raises(StarnavError, match="unknown solve option: sigma$"):
+    with pytest.raises(StarnavError, match=r"unknown solve option: sigma$"):
         SolveOptions.make(base, sigma=1.0)
     with pytest.raises(StarnavError, match="options must be a SolveOptions"):
         SolveOptions.make({"fov_deg": 12.0})
-    with pytest.raises(Exception, match="frozen|cannot assign"):
+    with pytest.raises(Exception, match=r"frozen|cannot assign"):
         base.fov_deg = 3.0  # type: ignore[misc]
 
 

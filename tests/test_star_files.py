@@ -4,10 +4,10 @@ files read and solved in order."""
 import pytest
 
 from conftest import CONTEST
-from starnav.errors import StarnavError
-from starnav.results import SOLVE_KEYS
 from starnav.api import SolveOptions, solve_stars
+from starnav.errors import StarnavError
 from starnav.pipeline.star_files import read_star_files, solve_star_files
+from starnav.results import SOLVE_KEYS
 from starnav.starlist import read_star_csv
 
 CATALOG = CONTEST / "catalog.csv"
