@@ -20,6 +20,7 @@ import numpy as np
 
 from starnav.errors import CatalogError
 from starnav.geometry import radec_to_unit
+from starnav.runtime.caches import process_cache
 from starnav.runtime.csvrows import read_rows
 
 DEFAULT_MAG_LIMIT = 6.0
@@ -216,7 +217,7 @@ def load_catalog(
     return cat
 
 
-_HIP_CACHE: dict[tuple[float, float], Catalog] = {}
+_HIP_CACHE = process_cache("Hipparcos catalogs")
 
 
 def _cached_hipparcos(mag_limit: float, epoch_year: float) -> Catalog:

@@ -84,7 +84,7 @@ def add_time_budget(p: argparse.ArgumentParser) -> None:
 
 
 def add_dask(p: argparse.ArgumentParser, what: str) -> None:
-    """--dask ADDRESS: run ``what`` on a Dask cluster (``starnav.pipeline.cluster``)."""
+    """--dask ADDRESS: run ``what`` on a Dask cluster (``starnav.runtime.pools``)."""
     p.add_argument(
         "--dask",
         metavar="ADDRESS",

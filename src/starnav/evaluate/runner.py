@@ -9,12 +9,11 @@ adversarial (``starnav.evaluate.kinds``): frame i is of kind ``kinds[i % len(kin
 
 from __future__ import annotations
 
-import multiprocessing
 import os
 import sys
 import time
 from collections.abc import Callable, Iterator, Sequence
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures import as_completed
 from dataclasses import asdict, dataclass
 
 import numpy as np
@@ -33,7 +32,8 @@ from starnav.pipeline import (
     SolveSettings,
     get_database,
 )
-from starnav.pipeline.cluster import dask_client, one_blas_thread
+from starnav.runtime.caches import process_cache
+from starnav.runtime.pools import dask_client, process_pool
 from starnav.simulate import FALSE_STAR_ID, SimulatedFrame, simulate_frame
 from starnav.starlist import check_star_list
 
@@ -155,7 +155,7 @@ class FrameResult:
     focal_factor: float = 1.0
 
 
-_SOLVERS: dict[EvalConfig, Solver] = {}  # per process
+_SOLVERS = process_cache("evaluation solvers")
 
 
 def config_solver(config: EvalConfig) -> Solver:
@@ -328,9 +328,8 @@ def _serial(config, boresights, chunks) -> Iterator[list[FrameResult]]:
 
 
 def _processes(config, boresights, chunks, workers) -> Iterator[list[FrameResult]]:
-    one_blas_thread()
-    context = multiprocessing.get_context("spawn")  # fresh interpreters read the setting
-    with ProcessPoolExecutor(max_workers=workers, mp_context=context) as pool:
+    # spawn: fresh interpreters read the one-BLAS-thread setting
+    with process_pool(workers, start="spawn") as pool:
         futures = [pool.submit(solve_chunk, config, boresights, c) for c in chunks]
         for future in as_completed(futures):
             yield future.result()

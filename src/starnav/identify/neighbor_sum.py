@@ -32,11 +32,12 @@ from starnav.identify.verify import (
     best_case_probability,
     field_radius_rad,
 )
+from starnav.runtime.caches import process_cache
 
 DEFAULT_K = 2
 # catalog features, per (catalog fingerprint, largest pair angle, k): built in milliseconds
 # for Hipparcos-size catalogs, so memory is the only cache
-_FEATURES: dict[tuple[str, float, int], tuple[np.ndarray, np.ndarray]] = {}
+_FEATURES = process_cache("neighbor-sum features")
 
 
 def catalog_neighbor_sums(database: PairDatabase, k: int) -> tuple[np.ndarray, np.ndarray]:

@@ -37,6 +37,7 @@ from starnav.geometry import angle_between, chord_from_angle, triple_product
 from starnav.identify.base import IdentifyOutcome, MatchSettings, screen_stars_only
 from starnav.identify.database import PairDatabase, load_cached, save_cached
 from starnav.identify.verify import HypothesisTester
+from starnav.runtime.caches import process_cache
 from starnav.runtime.caching import cache_dir
 
 _FORMAT_VERSION = 2  # 2: stars as (field, subset, order) codes, largest edge in uint16 steps
@@ -287,7 +288,7 @@ def _pattern_keys(
     return key[order], np.concatenate(codes)[order], np.concatenate(largest)[order]
 
 
-_TABLES: dict[tuple, PatternTable] = {}  # in-memory, per process
+_TABLES = process_cache("4-star pattern tables")
 
 
 def build_pattern_table(

@@ -9,10 +9,7 @@ stops the batch.
 from __future__ import annotations
 
 import math
-import multiprocessing
-import os
 from collections.abc import Callable, Sequence
-from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
 
@@ -22,6 +19,7 @@ from starnav.pipeline.solver import Solver
 from starnav.pipeline.stars import exact_field, known_budget_s, prepare_solver
 from starnav.results import FrameResult
 from starnav.runtime.budget import Deadline, check_budget
+from starnav.runtime.pools import process_pool, worker_count
 from starnav.starlist import check_star_list
 
 Frame = tuple[np.ndarray, np.ndarray | None]  # centroids (n, 2, px) and brightness or None
@@ -67,7 +65,7 @@ def solve_many(
     processes (default: all cores; 1: here); ``progress`` is called with the number of frames
     finished; ``time_budget_s``: each frame's (``starnav.runtime.budget``)."""
     _init(solver, prior, prior_sigma_deg, time_budget_s)
-    workers = workers or os.cpu_count() or 1
+    workers = worker_count(workers)
     out = []
     todo = list(frames)
     if workers == 1 or len(todo) < 2:
@@ -80,10 +78,8 @@ def solve_many(
     if progress:
         progress(1)
     todo = todo[1:]
-    context = multiprocessing.get_context("fork" if os.name == "posix" else "spawn")
-    with ProcessPoolExecutor(
-        max_workers=workers,
-        mp_context=context,
+    with process_pool(
+        workers,
         initializer=_init,
         initargs=(solver, prior, prior_sigma_deg, time_budget_s),
     ) as pool:

@@ -22,7 +22,7 @@ from starnav.catalog import Catalog, load_catalog
 from starnav.errors import CatalogError, StarnavError
 from starnav.geometry import radec_to_unit
 from starnav.identify.base import MatchSettings
-from starnav.identify.database import PairDatabase, catalog_only
+from starnav.identify.database import catalog_only
 from starnav.identify.pattern4 import FIELD_RADIUS_FRACTION, build_pattern_table
 from starnav.pipeline.conclude import elapsed_ms
 from starnav.pipeline.fov_search import BAND_FACTOR, Band, search_fov
@@ -38,6 +38,7 @@ from starnav.runtime.budget import (
     default_budget_s,
     expired,
 )
+from starnav.runtime.caches import process_cache
 from starnav.starlist import StarList, brightness_order, check_star_list, point_magnitudes
 
 # the narrowest horizontal field searched: a 3° field holds about 12 Hipparcos stars to the
@@ -58,8 +59,8 @@ _FEWER_STARS_BELOW_DEG = 10.0  # one fewer per grid step below a 10° table (9, 
 MAX_DIAGONAL_FOV_DEG = 150.0
 HINT_BUDGET_SHARE = 0.25  # of the time budget, for the search near a position hint
 _SLIVER = 0.05  # a band narrower than this (relative) is merged into the next wider one
-_DATABASES: dict[tuple, PairDatabase] = {}  # per process: catalog vectors and KD-tree
-_BANDS: dict[tuple, list[Band]] = {}  # per process: the bands of a catalog, range and shape
+_DATABASES = process_cache("FOV-search catalogs")  # catalog vectors and KD-tree
+_BANDS = process_cache("FOV-search bands")  # of a catalog, range and image shape
 
 
 def band_grid(fov_lo_deg: float, fov_hi_deg: float) -> list[tuple[float, float, float]]:
@@ -317,7 +318,7 @@ def _near(position_hint_deg, radius_deg: float):
     return radec_to_unit(ra, dec), math.radians(radius_deg)
 
 
-_TRACKING: dict[tuple, Solver] = {}  # per process: the solvers of the cameras tracked
+_TRACKING = process_cache("tracking solvers", max_items=8)  # of the cameras tracked
 
 
 def tracking_solver(
@@ -338,8 +339,6 @@ def tracking_solver(
             cat = full.brighter_than(band_mag_limit(camera.diagonal_deg, np.sort(full.mag)))
         else:
             cat = load_catalog(catalog, mag_limit=mag_limit, epoch_year=epoch_year)
-        if len(_TRACKING) >= 8:
-            _TRACKING.clear()
         _TRACKING[key] = Solver(camera, cat, settings=settings)
     return _TRACKING[key]
 

@@ -21,11 +21,8 @@ the file, into a directory, as ``<stem>.wcs``, ``<stem>.new.fits``, ``<stem>.png
 from __future__ import annotations
 
 import math
-import multiprocessing
-import os
 import time
 from collections.abc import Callable, Sequence
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -34,9 +31,9 @@ import numpy as np
 from starnav.detect.header import fits_hints
 from starnav.detect.read import read_image
 from starnav.errors import StarnavError
-from starnav.pipeline.cluster import dask_client, one_blas_thread
 from starnav.pipeline.image import solve_image, write_outputs
 from starnav.results import Solution
+from starnav.runtime.pools import dask_client, process_pool, worker_count
 
 IMAGE_SUFFIXES = (".fits", ".fit", ".fts", ".fits.gz", ".fz", ".png", ".jpg", ".jpeg", ".tif",
                   ".tiff")  # fmt: skip
@@ -205,7 +202,7 @@ def solve_files(
     scheduler, or "local" for a LocalCluster of ``workers`` processes; ``track``: a
     sequence; ``progress``: called with the number of files finished."""
     outputs = outputs or ImageOutputs()
-    workers = workers or os.cpu_count() or 1
+    workers = worker_count(workers)
     progress = progress or (lambda n: None)
     paths = list(paths)
     if dask_address:
@@ -216,15 +213,8 @@ def solve_files(
     first = solve_file(paths[0], options, outputs)
     progress(1)
     rest = paths[1:]
-    one_blas_thread()
-    context = multiprocessing.get_context("fork" if os.name == "posix" else "spawn")
     out = [first]
-    with ProcessPoolExecutor(
-        max_workers=workers,
-        mp_context=context,
-        initializer=_init,
-        initargs=(options, outputs, track),
-    ) as pool:
+    with process_pool(workers, initializer=_init, initargs=(options, outputs, track)) as pool:
         runs = _runs(rest, workers, track)
         jobs = [(run, first.solution if k == 0 and track else None) for k, run in enumerate(runs)]
         for done in pool.map(_run, jobs):

@@ -36,13 +36,14 @@ from starnav.pipeline.options import (
 )
 from starnav.results import Solution, SolveResult
 from starnav.runtime.budget import Deadline, compiled_s, expired
+from starnav.runtime.caches import process_cache
 from starnav.starlist import StarList, brightness_order, point_magnitudes
 
 MAX_PAIRS = 3e7  # largest pair database built (about 0.5 GB)
 MAX_PAIR_DEG = 60.0  # wider fields identify on star triangles of sides up to this (degrees)
 WIDE_PAIR_CANDIDATES = 2000  # catalog pairs a measured side of a wide field may match
-_DATABASES: dict[tuple[str, float, int], PairDatabase] = {}  # in-memory, per process
-_LOADED: set[str] = set()  # what this process has run once (its machine code is loaded)
+_DATABASES = process_cache("pair databases")
+_LOADED = process_cache("first uses")  # what this process has run once (machine code loaded)
 
 
 @dataclass(frozen=True)
@@ -154,7 +155,7 @@ def check_prior(prior: Solution | np.ndarray | None, prior_sigma_deg: float) -> 
 
 def _say_compiling() -> None:
     if "notice" not in _LOADED:  # once per process
-        _LOADED.add("notice")
+        _LOADED["notice"] = True
         print(
             "starnav: compiling the solver's machine code (once per installation, ~1-2 min)",
             file=sys.stderr,
@@ -184,7 +185,7 @@ def first_use(what: str) -> Iterator[None]:
         yield
     finally:
         done.set()
-        _LOADED.add(what)
+        _LOADED[what] = True
 
 
 def steady_malloc() -> None:
@@ -194,7 +195,7 @@ def steady_malloc() -> None:
     are often larger (the voting search ran 2x slower in a process that had never freed a
     large block), so timings would depend on the process's history."""
     if "malloc" not in _LOADED:
-        _LOADED.add("malloc")
+        _LOADED["malloc"] = True
         np.empty(16 << 20, dtype=np.uint8)
 
 

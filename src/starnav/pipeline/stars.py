@@ -19,10 +19,10 @@ from starnav.pipeline.options import SolveOptions
 from starnav.pipeline.solver import Solver, SolveSettings, check_prior
 from starnav.results import Solution, SolveResult
 from starnav.runtime.budget import Deadline, check_budget, default_budget_s
+from starnav.runtime.caches import process_cache
 from starnav.starlist import StarList, check_star_list
 
-_SOLVERS: dict[tuple, Solver] = {}  # per process: the prepared solvers of recent options
-_MAX_SOLVERS = 32
+_SOLVERS = process_cache("prepared solvers", max_items=32)  # of recent options
 
 
 def make_camera(
@@ -79,8 +79,6 @@ def prepare_solver(
     )
     solver = _SOLVERS.get(key)
     if solver is None:
-        if len(_SOLVERS) >= _MAX_SOLVERS:
-            _SOLVERS.clear()
         solver = Solver(
             camera,
             catalog,

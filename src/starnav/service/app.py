@@ -23,7 +23,6 @@ import concurrent.futures
 import contextlib
 import json
 import logging
-import multiprocessing
 import time
 import urllib.request
 from dataclasses import dataclass
@@ -36,7 +35,7 @@ from starlette.responses import FileResponse, JSONResponse, Response
 from starlette.routing import Mount, Route
 from starlette.staticfiles import StaticFiles
 
-from starnav.pipeline.cluster import dask_client, one_blas_thread
+from starnav.runtime.pools import dask_client, one_blas_thread, process_pool
 from starnav.service import nova
 from starnav.service.store import JobStore
 from starnav.service.worker import OUTPUTS, input_name, run_job
@@ -97,8 +96,7 @@ class Jobs:
 
     def _new_pool(self) -> concurrent.futures.ProcessPoolExecutor:
         # forkserver: a worker must not inherit the server's event loop and threads
-        ctx = multiprocessing.get_context("forkserver")
-        return concurrent.futures.ProcessPoolExecutor(self.config.workers, mp_context=ctx)
+        return process_pool(self.config.workers, start="forkserver")
 
     async def stop(self) -> None:
         """Stop: running jobs stay "solving" and are failed as interrupted at the next start."""
