@@ -23,7 +23,7 @@ from starnav.detect.circle import find_image_circle
 from starnav.detect.header import ImageHints, fits_hints, is_fits
 from starnav.detect.read import read_image
 from starnav.detect.stars import Detections, detect_stars
-from starnav.errors import CameraError, ImageError
+from starnav.errors import CameraError, ImageError, shown
 from starnav.fov import (
     DEFAULT_FOV_RANGE_DEG,
     DEFAULT_PATTERN_STARS,
@@ -131,7 +131,7 @@ def solve_image(
     search_range(fov_deg, fov_range_deg, camera, lens)  # a bad range fails before any work
     bad = isinstance(max_stars, bool) or not (isinstance(max_stars, int) and max_stars >= 4)
     if max_stars is not None and bad:
-        raise ImageError(f"max_stars must be an integer >= 4, got {max_stars!r}")
+        raise ImageError(f"max_stars must be an integer >= 4, got {shown(max_stars)}")
     lens = camera.model if camera is not None else lens
     check_budget(time_budget_s, 1.0)  # a bad budget fails before any work
     t0 = time.perf_counter()
@@ -193,7 +193,7 @@ def _detect_binned(pixels, factor, lens, threshold_sigma, max_stars) -> Detectio
     """``detect_image`` on the image binned ``factor`` x ``factor`` (each block's mean; the
     last partial row and column of blocks dropped), in full-resolution pixels."""
     if isinstance(factor, bool) or not (isinstance(factor, int) and factor >= 1):
-        raise ImageError(f"downsample must be an integer >= 1, got {factor!r}")
+        raise ImageError(f"downsample must be an integer >= 1, got {shown(factor)}")
     if factor == 1:
         return detect_image(pixels, lens=lens, threshold_sigma=threshold_sigma,
                             max_stars=max_stars)  # fmt: skip
