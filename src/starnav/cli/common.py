@@ -13,7 +13,14 @@ from starnav.budget import DEFAULTS
 from starnav.camera import MODELS
 from starnav.catalog import DEFAULT_MAG_LIMIT
 from starnav.errors import StarnavError
-from starnav.fov import DEFAULT_FOV_RANGE_DEG
+from starnav.fov import (
+    DEFAULT_FOV_RANGE_DEG,
+    DEFAULT_LENS_FOV_RANGE_DEG,
+    FOV_LIMITS_DEG,
+    LENS_FOV_LIMITS_DEG,
+    lens_fov_range,
+    search_range,
+)
 from starnav.identify import ALGORITHMS, DEFAULT_ALGORITHM
 from starnav.identify.options import check_algorithm_options
 
@@ -127,34 +134,54 @@ def check_parent_dir(option: str, path: str | None) -> None:
 
 def add_camera(p: argparse.ArgumentParser, *, required: bool = True) -> None:
     """--fov-deg, --width, --height."""
-    p.add_argument("--fov-deg", type=finite, required=required, help="horizontal field of view")
+    p.add_argument(
+        "--fov-deg", type=finite, required=required, help="horizontal field of view (degrees)"
+    )
     p.add_argument("--width", type=positive_int, required=required, help="image width (px)")
     p.add_argument("--height", type=positive_int, help="image height (px; default: width)")
 
 
 def add_attitude(p: argparse.ArgumentParser) -> None:
     """--ra-deg, --dec-deg, --roll-deg (each random when left out) and --parity."""
-    p.add_argument("--ra-deg", type=finite, help="boresight RA (default: random)")
-    p.add_argument("--dec-deg", type=finite, help="boresight Dec (default: random)")
-    p.add_argument("--roll-deg", type=finite, help="roll (default: random)")
-    p.add_argument("--parity", type=int, choices=(1, -1), default=1)
+    p.add_argument("--ra-deg", type=finite, help="boresight RA (degrees; default: random)")
+    p.add_argument("--dec-deg", type=finite, help="boresight Dec (degrees; default: random)")
+    p.add_argument("--roll-deg", type=finite, help="roll (degrees; default: random)")
+    p.add_argument(
+        "--parity",
+        type=int,
+        choices=(1, -1),
+        default=1,
+        help="1, or -1 for a mirrored image (default %(default)s)",
+    )
+
+
+# the fields of view --fov-deg and --fov-range take, by lens model (``starnav.fov.fov_limits_deg``)
+FOV_LIMITS_HELP = (
+    f"{FOV_LIMITS_DEG[0]:g}-{FOV_LIMITS_DEG[1]:g} for the pinhole lens, "
+    f"{LENS_FOV_LIMITS_DEG[0]:g}-{LENS_FOV_LIMITS_DEG[1]:g} for a fisheye"
+)
 
 
 def add_fov_search(
     p: argparse.ArgumentParser, fov_help: str, *, camera_help: str | None = None
 ) -> None:
     """--fov-deg or --fov-range (the FOV search), or --camera (a camera file) when
-    ``camera_help`` is given."""
+    ``camera_help`` is given; ``check_fov`` checks them against the lens model."""
     fov = p.add_mutually_exclusive_group()
-    fov.add_argument("--fov-deg", type=finite, help=fov_help)
+    fov.add_argument(
+        "--fov-deg",
+        type=finite,
+        help=f"{fov_help} (degrees, {FOV_LIMITS_HELP}; default: not known, --fov-range searched)",
+    )
     fov.add_argument(
         "--fov-range",
         nargs=2,
         type=finite,
         metavar=("LO", "HI"),
         default=DEFAULT_FOV_RANGE_DEG,
-        help="horizontal FOV range searched when the FOV is unknown (degrees, within 3-100; "
-        "default 5 40)",
+        help=f"horizontal FOV range searched when the FOV is unknown (degrees, within "
+        f"{FOV_LIMITS_HELP}; default {DEFAULT_FOV_RANGE_DEG[0]:g} {DEFAULT_FOV_RANGE_DEG[1]:g}, "
+        f"{DEFAULT_LENS_FOV_RANGE_DEG[0]:g} {DEFAULT_LENS_FOV_RANGE_DEG[1]:g} for a fisheye)",
     )
     if camera_help:
         fov.add_argument("--camera", help=camera_help)
@@ -162,10 +189,18 @@ def add_fov_search(
             "--lens",
             choices=tuple(MODELS),
             default="pinhole",
-            help="the lens model when no camera file is given (default pinhole); without "
-            "--fov-deg a fisheye model's focal length is scanned over --fov-range (default "
-            "120 200 for a fisheye)",
+            help="the lens model when no camera file is given (default %(default)s); without "
+            "--fov-deg a fisheye model's focal length is scanned over --fov-range",
         )
+
+
+def check_fov(args: argparse.Namespace, lens: str) -> None:
+    """--fov-deg, or else --fov-range, against the fields the ``lens`` model takes (the one
+    definition, ``starnav.fov.fov_limits_deg``: ``solve``, ``identify`` and ``calibrate``
+    refuse the same values with the same message), before any work; a --camera file
+    brings its own field."""
+    if getattr(args, "camera", None) is None:
+        search_range(args.fov_deg, lens_fov_range(args.fov_range, lens), None, lens)
 
 
 def add_catalog(p: argparse.ArgumentParser) -> None:

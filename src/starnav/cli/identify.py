@@ -21,6 +21,7 @@ from starnav.cli.common import (
     add_fov_search,
     add_time_budget,
     algorithm_options,
+    check_fov,
     finite,
     png_path,
     positive_int,
@@ -43,7 +44,7 @@ def add_parser(subparsers: Subparsers) -> None:
     )
     add_fov_search(
         p,
-        "horizontal field of view (without it the FOV is searched)",
+        "horizontal field of view",
         camera_help="camera file (any lens model; width and height come from it)",
     )
     p.add_argument("--width", type=positive_int, help="image width (px; or give --camera)")
@@ -57,7 +58,12 @@ def add_parser(subparsers: Subparsers) -> None:
         f"tolerances allow {DEFAULT_SIGMA_PX:g} px, the false-match probability takes the sigma "
         "the stars fit best)",
     )
-    p.add_argument("--parity", type=int, choices=(1, -1), help="force parity (default: find)")
+    p.add_argument(
+        "--parity",
+        type=int,
+        choices=(1, -1),
+        help="force parity: 1, or -1 for a mirrored image (default: find)",
+    )
     p.add_argument("--fit-focal", action="store_true", help="fit the focal length too")
     p.add_argument(
         "--max-false-match-probability",
@@ -69,14 +75,24 @@ def add_parser(subparsers: Subparsers) -> None:
     p.add_argument(
         "--workers", type=positive_int, help="a directory: processes (default: all cores)"
     )
-    p.add_argument("--prior-ra-deg", type=finite, help="tracking: previous boresight RA")
-    p.add_argument("--prior-dec-deg", type=finite, help="tracking: previous boresight Dec")
-    p.add_argument("--prior-roll-deg", type=finite, help="tracking: previous roll")
+    p.add_argument(
+        "--prior-ra-deg",
+        type=finite,
+        help="tracking: previous boresight RA (degrees; default: none, lost in space)",
+    )
+    p.add_argument(
+        "--prior-dec-deg",
+        type=finite,
+        help="tracking: previous boresight Dec (degrees; default: none)",
+    )
+    p.add_argument(
+        "--prior-roll-deg", type=finite, help="tracking: previous roll (degrees; default: none)"
+    )
     p.add_argument(
         "--prior-sigma-deg",
         type=finite,
         default=1.0,
-        help="tracking: 1-sigma error of the previous attitude (default 1)",
+        help="tracking: 1-sigma error of the previous attitude (degrees; default %(default)g)",
     )
     p.add_argument(
         "--plot", metavar="PNG", type=png_path, help="draw the identified map into this PNG file"
@@ -139,6 +155,7 @@ def _check_fov_search(args: argparse.Namespace, prior: np.ndarray | None) -> Non
 
 def run(args: argparse.Namespace) -> int:
     """Identify one star list, or every ``*.csv`` of a directory."""
+    check_fov(args, args.lens)
     source = Path(args.stars)
     if source.is_dir():
         return run_directory(args, source)

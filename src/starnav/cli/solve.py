@@ -20,6 +20,7 @@ from starnav.cli.common import (
     add_deep_mag_limit,
     add_fov_search,
     add_time_budget,
+    check_fov,
     check_parent_dir,
     finite,
     int_at_least,
@@ -35,12 +36,20 @@ WCS_SUFFIXES = (".fits", ".fit", ".fts", ".wcs")
 def add_parser(subparsers: Subparsers) -> None:
     """The ``solve`` command and its options."""
     p = subparsers.add_parser(
-        "solve", help="solve image files (FITS, PNG, JPEG, TIFF): FOV may be unknown"
+        "solve",
+        help="solve image files (FITS, PNG, JPEG, TIFF, BMP, ...: what Pillow reads): FOV may "
+        "be unknown",
     )
-    p.add_argument("images", nargs="+", metavar="IMAGE", help="image files or directories of them")
+    p.add_argument(
+        "images",
+        nargs="+",
+        metavar="IMAGE",
+        help="image files, or directories of them (their files of the formats read; the "
+        "others are named on stderr)",
+    )
     add_fov_search(
         p,
-        "horizontal FOV, roughly (searched ±5 %%)",
+        "horizontal FOV, roughly: searched ±5 %%",
         camera_help="camera file (any lens model, e.g. from 'starnav calibrate'; its focal "
         "length searched ±1 %%)",
     )
@@ -66,11 +75,20 @@ def add_parser(subparsers: Subparsers) -> None:
         type=finite,
         help="centroid error, 1 sigma (px; default: not known, estimated as by identify)",
     )
-    p.add_argument("--parity", type=int, choices=(1, -1), help="force parity (default: find)")
+    p.add_argument(
+        "--parity",
+        type=int,
+        choices=(1, -1),
+        help="force parity: 1, or -1 for a mirrored image (default: find)",
+    )
     p.add_argument(
         "--catalog", help="CSV catalog id,ra_deg,dec_deg,mag (default: embedded Hipparcos)"
     )
-    p.add_argument("--epoch", type=finite, help="year for Hipparcos proper motion")
+    p.add_argument(
+        "--epoch",
+        type=finite,
+        help="year for Hipparcos proper motion (default: a FITS header's DATE-OBS, else now)",
+    )
     add_deep_mag_limit(p)
     p.add_argument(
         "--wcs",
@@ -139,6 +157,7 @@ def _options(args: argparse.Namespace) -> dict:
 
 def run(args: argparse.Namespace) -> int:
     """One file: read, detect, solve, write the outputs, print. Many: ``run_batch``."""
+    check_fov(args, args.lens)
     paths = [Path(p) for p in args.images]
     if len(paths) > 1 or paths[0].is_dir() or args.jsonl or args.track or args.dask:
         return run_batch(args, paths)
@@ -185,9 +204,18 @@ def run_batch(args: argparse.Namespace, inputs: list[Path]) -> int:
     file (text, or JSON with --json; --jsonl writes them to a file as well), a summary."""
     from tqdm import tqdm
 
-    from starnav.image_batch import ImageOutputs, image_paths, solve_files, summarize
+    from starnav.image_batch import (
+        ImageOutputs,
+        image_paths,
+        skipped_line,
+        solve_files,
+        summarize,
+    )
 
-    paths = image_paths(inputs)
+    skipped: list[Path] = []
+    paths = image_paths(inputs, skipped)
+    if skipped:
+        print(f"starnav solve: {skipped_line(skipped)}", file=sys.stderr)
     outputs = ImageOutputs.make(wcs=args.wcs, new_fits=args.new_fits, annotate=args.annotate)
     jsonl = None
     if args.jsonl:
