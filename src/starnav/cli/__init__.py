@@ -68,9 +68,9 @@ def version() -> str:
     try:
         return installed("starnav")
     except PackageNotFoundError:
-        from starnav import __version__
+        import starnav
 
-        return __version__
+        return starnav.__version__
 
 
 def main(argv: list[str] | None = None) -> int:

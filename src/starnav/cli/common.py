@@ -16,8 +16,7 @@ from starnav.errors import StarnavError
 from starnav.fov import (
     DEFAULT_FOV_RANGE_DEG,
     DEFAULT_LENS_FOV_RANGE_DEG,
-    FOV_LIMITS_DEG,
-    LENS_FOV_LIMITS_DEG,
+    fov_limits_deg,
     lens_fov_range,
     search_range,
 )
@@ -134,9 +133,7 @@ def check_parent_dir(option: str, path: str | None) -> None:
 
 def add_camera(p: argparse.ArgumentParser, *, required: bool = True) -> None:
     """--fov-deg, --width, --height."""
-    p.add_argument(
-        "--fov-deg", type=finite, required=required, help="horizontal field of view (degrees)"
-    )
+    p.add_argument("--fov-deg", type=finite, required=required, help="horizontal FOV (degrees)")
     p.add_argument("--width", type=positive_int, required=required, help="image width (px)")
     p.add_argument("--height", type=positive_int, help="image height (px; default: width)")
 
@@ -147,19 +144,13 @@ def add_attitude(p: argparse.ArgumentParser) -> None:
     p.add_argument("--dec-deg", type=finite, help="boresight Dec (degrees; default: random)")
     p.add_argument("--roll-deg", type=finite, help="roll (degrees; default: random)")
     p.add_argument(
-        "--parity",
-        type=int,
-        choices=(1, -1),
-        default=1,
-        help="1, or -1 for a mirrored image (default %(default)s)",
+        "--parity", type=int, choices=(1, -1), default=1, help="-1: a mirrored image (default 1)"
     )
 
 
-# the fields of view --fov-deg and --fov-range take, by lens model (``starnav.fov.fov_limits_deg``)
-FOV_LIMITS_HELP = (
-    f"{FOV_LIMITS_DEG[0]:g}-{FOV_LIMITS_DEG[1]:g} for the pinhole lens, "
-    f"{LENS_FOV_LIMITS_DEG[0]:g}-{LENS_FOV_LIMITS_DEG[1]:g} for a fisheye"
-)
+FOV_LIMITS_HELP = "{:g}-{:g} for the pinhole lens, {:g}-{:g} for a fisheye".format(
+    *fov_limits_deg("pinhole"), *fov_limits_deg("equidistant")
+)  # the fields --fov-deg and --fov-range take
 
 
 def add_fov_search(
@@ -195,10 +186,8 @@ def add_fov_search(
 
 
 def check_fov(args: argparse.Namespace, lens: str) -> None:
-    """--fov-deg, or else --fov-range, against the fields the ``lens`` model takes (the one
-    definition, ``starnav.fov.fov_limits_deg``: ``solve``, ``identify`` and ``calibrate``
-    refuse the same values with the same message), before any work; a --camera file
-    brings its own field."""
+    """--fov-deg, else --fov-range, against ``starnav.fov.fov_limits_deg(lens)`` before any
+    work (the same error from each command); a --camera file brings its own field."""
     if getattr(args, "camera", None) is None:
         search_range(args.fov_deg, lens_fov_range(args.fov_range, lens), None, lens)
 

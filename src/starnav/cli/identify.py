@@ -58,12 +58,7 @@ def add_parser(subparsers: Subparsers) -> None:
         f"tolerances allow {DEFAULT_SIGMA_PX:g} px, the false-match probability takes the sigma "
         "the stars fit best)",
     )
-    p.add_argument(
-        "--parity",
-        type=int,
-        choices=(1, -1),
-        help="force parity: 1, or -1 for a mirrored image (default: find)",
-    )
+    p.add_argument("--parity", type=int, choices=(1, -1), help="force parity (default: find)")
     p.add_argument("--fit-focal", action="store_true", help="fit the focal length too")
     p.add_argument(
         "--max-false-match-probability",

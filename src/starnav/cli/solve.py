@@ -36,17 +36,9 @@ WCS_SUFFIXES = (".fits", ".fit", ".fts", ".wcs")
 def add_parser(subparsers: Subparsers) -> None:
     """The ``solve`` command and its options."""
     p = subparsers.add_parser(
-        "solve",
-        help="solve image files (FITS, PNG, JPEG, TIFF, BMP, ...: what Pillow reads): FOV may "
-        "be unknown",
+        "solve", help="solve image files (FITS, PNG, JPEG, TIFF, BMP, ...): FOV may be unknown"
     )
-    p.add_argument(
-        "images",
-        nargs="+",
-        metavar="IMAGE",
-        help="image files, or directories of them (their files of the formats read; the "
-        "others are named on stderr)",
-    )
+    p.add_argument("images", nargs="+", metavar="IMAGE", help="image files or directories of them")
     add_fov_search(
         p,
         "horizontal FOV, roughly: searched ±5 %%",
@@ -75,19 +67,12 @@ def add_parser(subparsers: Subparsers) -> None:
         type=finite,
         help="centroid error, 1 sigma (px; default: not known, estimated as by identify)",
     )
-    p.add_argument(
-        "--parity",
-        type=int,
-        choices=(1, -1),
-        help="force parity: 1, or -1 for a mirrored image (default: find)",
-    )
+    p.add_argument("--parity", type=int, choices=(1, -1), help="force parity (default: find)")
     p.add_argument(
         "--catalog", help="CSV catalog id,ra_deg,dec_deg,mag (default: embedded Hipparcos)"
     )
     p.add_argument(
-        "--epoch",
-        type=finite,
-        help="year for Hipparcos proper motion (default: a FITS header's DATE-OBS, else now)",
+        "--epoch", type=finite, help="year of Hipparcos proper motion (default: DATE-OBS, else now)"
     )
     add_deep_mag_limit(p)
     p.add_argument(
@@ -204,13 +189,7 @@ def run_batch(args: argparse.Namespace, inputs: list[Path]) -> int:
     file (text, or JSON with --json; --jsonl writes them to a file as well), a summary."""
     from tqdm import tqdm
 
-    from starnav.image_batch import (
-        ImageOutputs,
-        image_paths,
-        skipped_line,
-        solve_files,
-        summarize,
-    )
+    from starnav.image_batch import ImageOutputs, image_paths, skipped_line, solve_files, summarize
 
     skipped: list[Path] = []
     paths = image_paths(inputs, skipped)
