@@ -316,3 +316,16 @@ def test_every_help_page_renders(capsys):
         argv = ["--help"] if name == "starnav" else [name, "--help"]
         code, out, _ = run_cli(capsys, *argv)
         assert code == 0 and "usage:" in out
+
+
+def test_a_negative_seed_is_a_usage_error_in_every_command(capsys):
+    """``evaluate --seed -1`` and ``locate-study --seed -1`` ended in numpy's traceback."""
+    seeded = [
+        name
+        for name, parser in _commands().items()
+        if any("--seed" in a.option_strings for a in parser._actions)
+    ]
+    assert {"evaluate", "locate-study", "simulate", "render"} <= set(seeded)
+    for name in seeded:
+        message = _one_line_error(*run_cli(capsys, name, "--seed", "-1"))
+        assert "--seed" in message, name

@@ -108,7 +108,7 @@ def add_parser(subparsers: Subparsers) -> None:
     )
     p.add_argument(
         "--seed",
-        type=int,
+        type=count,
         default=0,
         help="random seed of the boresights' rolls and of every frame (default %(default)s)",
     )

@@ -14,6 +14,7 @@ from starnav.cli.common import (
     Subparsers,
     add_catalog,
     check_parent_dir,
+    count,
     finite,
     png_path,
     positive_int,
@@ -50,7 +51,7 @@ def add_parser(subparsers: Subparsers) -> None:
         default=20.0,
         help="camera FOV (degrees; default %(default)g)",
     )
-    p.add_argument("--seed", type=int, default=0, help="random seed (default %(default)s)")
+    p.add_argument("--seed", type=count, default=0, help="random seed (default %(default)s)")
     p.add_argument(
         "--upward-camera",
         metavar="CAMERA_JSON",
