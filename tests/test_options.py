@@ -28,7 +28,7 @@ def map1():
     ("fields", "needle"),
     [
         ({"sigma_px": float("nan")}, "sigma_px must be a positive number of pixels, got nan"),
-        ({"sigma_px": np.float64(-1.0)}, "got -1$"),
+        ({"sigma_px": np.float64(-1.0)}, "got -1.0$"),
         ({"parity": 2}, "parity must be"),
         ({"max_false_match_probability": 1.5}, "max_false_match_probability"),
         ({"min_matched_fraction": -0.1}, "min_matched_fraction"),

@@ -20,7 +20,7 @@ from itertools import combinations
 import numpy as np
 from scipy.optimize import brentq, minimize_scalar
 
-from starnav.errors import PointingError
+from starnav.errors import PointingError, shown
 from starnav.geometry import (
     ARCSEC_PER_RAD,
     angle_between,
@@ -206,7 +206,7 @@ def _check_image(xy, r_px, width, height) -> tuple[np.ndarray | None, np.ndarray
         raise PointingError("give either xy (pixel positions) or r_px (distances), not both")
     for name, value in (("width", width), ("height", height)):
         if value is not None and not (np.isfinite(value) and value > 0):
-            raise PointingError(f"{name} must be a positive number of pixels, got {value!r}")
+            raise PointingError(f"{name} must be a positive number of pixels, got {shown(value)}")
     offsets = None
     if xy is not None:
         xy = np.asarray(xy, dtype=float)
@@ -258,14 +258,16 @@ def three_star(
     U = _check_stars(ra_deg, dec_deg)
     offsets, a = _check_image(xy, r_px, width, height)
     if sigma_px is not None and not (np.isfinite(sigma_px) and sigma_px >= 0):
-        raise PointingError(f"sigma_px must be >= 0, got {sigma_px!r}")
+        raise PointingError(f"sigma_px must be >= 0, got {shown(sigma_px)}")
     if parity not in (None, 1, -1):
-        raise PointingError(f"parity must be +1, -1 or None, got {parity!r}")
+        raise PointingError(f"parity must be +1, -1 or None, got {shown(parity)}")
     misfit_tol = 3.0 if sigma_px is None else max(5.0 * sigma_px, 2.0)
     if focal_px is not None:
         lo, hi = FOCAL_RANGE_PX
         if not (np.isfinite(focal_px) and lo <= focal_px <= hi):
-            raise PointingError(f"focal_px must be between {lo:g} and {hi:g}, got {focal_px!r}")
+            raise PointingError(
+                f"focal_px must be between {lo:g} and {hi:g}, got {shown(focal_px)}"
+            )
         return _with_known_focal(U, a, offsets, float(focal_px), sigma_px, parity, misfit_tol)
     return _with_focal_solved(U, a, offsets, sigma_px, parity, misfit_tol)
 
@@ -496,7 +498,7 @@ def best_triple(
     if not len(ra) == len(dec) == len(xy) or len(ra) < 3:
         raise PointingError(f"need at least 3 stars with ra, dec, x, y; got {len(ra)}")
     if not (np.isfinite(focal_px) and focal_px > 0):
-        raise PointingError(f"focal_px must be positive, got {focal_px!r}")
+        raise PointingError(f"focal_px must be positive, got {shown(focal_px)}")
     n = min(len(ra), MAX_BEST_TRIPLE_STARS)
     height = width if height is None else height
     U = radec_to_unit(np.radians(ra[:n]), np.radians(dec[:n]))

@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from starnav.camera.lens import Lens, check_size, kernels
-from starnav.errors import CameraError
+from starnav.errors import CameraError, shown
 
 
 @dataclass(frozen=True)
@@ -44,10 +44,10 @@ class Fisheye(Lens):
         for name in self.coefficients:
             value = getattr(self, name)
             if not np.isfinite(value):
-                raise CameraError(f"{name} must be finite, got {value!r}")
+                raise CameraError(f"{name} must be finite, got {shown(value)}")
         circle = self.image_circle_deg
         if circle is not None and not (np.isfinite(circle) and 0.0 < circle <= 360.0):
-            raise CameraError(f"image_circle_deg must be in (0, 360], got {circle!r}")
+            raise CameraError(f"image_circle_deg must be in (0, 360], got {shown(circle)}")
         limit = math.pi if circle is None else math.radians(0.5 * circle)
         coefficients = [getattr(self, name) for name in self.coefficients]
         self._centre_and_params([*coefficients, *[0.0] * (4 - len(coefficients)), limit])
@@ -72,7 +72,7 @@ class Fisheye(Lens):
         if not (np.isfinite(fov_deg) and 0.0 < fov_deg <= top):
             raise CameraError(
                 f"fov_deg must be above 0 and at most {top:.0f} degrees for the {cls.model} "
-                f"model, got {fov_deg!r}"
+                f"model, got {shown(fov_deg)}"
             )
         height = width if height is None else height
         unit = cls(int(width), int(height), 1.0, **coefficients)

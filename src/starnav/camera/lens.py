@@ -15,7 +15,7 @@ import math
 
 import numpy as np
 
-from starnav.errors import CameraError
+from starnav.errors import CameraError, shown
 
 _SCALE_SAMPLES = 64  # angles from the axis at which the angular scale is taken
 _MONOTONIC_SAMPLES = 4096  # angles at which a camera file's r(θ) is checked to increase
@@ -32,9 +32,9 @@ def check_size(width: float, height: float, focal_px: float) -> None:
     """One-line errors for an image size or focal length that cannot be."""
     for name, value in (("width", width), ("height", height)):
         if not (np.isfinite(value) and value > 0):
-            raise CameraError(f"{name} must be a positive number of pixels, got {value!r}")
+            raise CameraError(f"{name} must be a positive number of pixels, got {shown(value)}")
     if not (np.isfinite(focal_px) and focal_px > 0):
-        raise CameraError(f"focal_px must be positive, got {focal_px!r}")
+        raise CameraError(f"focal_px must be positive, got {shown(focal_px)}")
 
 
 class Lens:

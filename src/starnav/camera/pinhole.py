@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from starnav.camera.lens import Lens, check_size
-from starnav.errors import CameraError
+from starnav.errors import CameraError, shown
 
 
 def focal_px_from_fov(fov_deg: float, width: int) -> float:
@@ -52,12 +52,14 @@ class Camera(Lens):
     def from_fov(cls, fov_deg: float, width: int, height: int | None = None) -> Camera:
         """Camera whose horizontal field of view across ``width`` px is ``fov_deg`` degrees."""
         if not (np.isfinite(fov_deg) and 0.0 < fov_deg < 179.0):
-            raise CameraError(f"fov_deg must be above 0 and below 179 degrees, got {fov_deg!r}")
+            raise CameraError(
+                f"fov_deg must be above 0 and below 179 degrees, got {shown(fov_deg)}"
+            )
         if not (np.isfinite(width) and width >= 8):
-            raise CameraError(f"width must be at least 8 px, got {width!r}")
+            raise CameraError(f"width must be at least 8 px, got {shown(width)}")
         height = width if height is None else height
         if not (np.isfinite(height) and height >= 8):
-            raise CameraError(f"height must be at least 8 px, got {height!r}")
+            raise CameraError(f"height must be at least 8 px, got {shown(height)}")
         return cls(int(width), int(height), focal_px_from_fov(fov_deg, width))
 
     @property

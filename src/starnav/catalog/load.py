@@ -18,7 +18,7 @@ from pathlib import Path
 import erfa
 import numpy as np
 
-from starnav.errors import CatalogError
+from starnav.errors import CatalogError, shown
 from starnav.geometry import radec_to_unit
 from starnav.runtime.caches import process_cache
 from starnav.runtime.csvrows import read_rows
@@ -115,9 +115,9 @@ def load_hipparcos(
     if epoch_year is None:
         epoch_year = default_epoch_year()
     if not np.isfinite(mag_limit):
-        raise CatalogError(f"magnitude limit must be a finite number, got {mag_limit!r}")
+        raise CatalogError(f"magnitude limit must be a finite number, got {shown(mag_limit)}")
     if not np.isfinite(epoch_year) or not 1000.0 <= epoch_year <= 3000.0:
-        raise CatalogError(f"epoch must be a year between 1000 and 3000, got {epoch_year!r}")
+        raise CatalogError(f"epoch must be a year between 1000 and 3000, got {shown(epoch_year)}")
     data = _hipparcos_table()
     data = data[data[:, 6] <= mag_limit]
     hip, ra, dec, plx_mas, pmra_mas, pmdec_mas, hp = data.T

@@ -50,10 +50,27 @@ def build_parser() -> Parser:
         description="Star identification and attitude from star-camera centroids and images. "
         "Exit status: 0 done/solved, 1 not solved, 2 bad input.",
     )
+    parser.add_argument(
+        "--version", action="version", version=f"%(prog)s {version()}", help="print the version"
+    )
     subparsers = parser.add_subparsers(dest="command", required=True, parser_class=Parser)
     for module in COMMAND_MODULES:
         module.add_parser(subparsers)
     return parser
+
+
+def version() -> str:
+    """The installed package's version (``importlib.metadata``), else ``starnav.__version__``
+    (the source tree run without installing it)."""
+    from importlib.metadata import PackageNotFoundError
+    from importlib.metadata import version as installed
+
+    try:
+        return installed("starnav")
+    except PackageNotFoundError:
+        import starnav
+
+        return starnav.__version__
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -74,4 +91,4 @@ def main(argv: list[str] | None = None) -> int:
         return 130
 
 
-__all__ = ["build_parser", "main"]
+__all__ = ["build_parser", "main", "version"]

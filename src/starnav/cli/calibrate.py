@@ -10,9 +10,9 @@ from starnav.camera import MODELS
 from starnav.cli.common import (
     EXIT_OK,
     Subparsers,
-    add_fov_search,
     int_at_least,
 )
+from starnav.cli.field import add_fov_search, check_fov
 from starnav.cli.output import print_json
 
 
@@ -23,7 +23,7 @@ def add_parser(subparsers: Subparsers) -> None:
     )
     p.add_argument("images", nargs="+", help="image files of one camera")
     p.add_argument("-o", "--output", required=True, help="camera file (JSON) to write")
-    add_fov_search(p, "horizontal FOV, roughly (searched ±5 %%)")
+    add_fov_search(p, "horizontal FOV, roughly: searched ±5 %%")
     p.add_argument(
         "--model",
         choices=tuple(MODELS),
@@ -31,7 +31,12 @@ def add_parser(subparsers: Subparsers) -> None:
         help="lens model fitted (default pinhole: k1, k2; kannala-brandt: k1..k4; the other "
         "fisheyes have no coefficients; give a fisheye --fov-deg or e.g. --fov-range 150 200)",
     )
-    p.add_argument("--max-stars", type=int_at_least(4), default=100)
+    p.add_argument(
+        "--max-stars",
+        type=int_at_least(4),
+        default=100,
+        help="use the brightest this many detections of each image (default %(default)s)",
+    )
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(run=run)
 
@@ -43,6 +48,7 @@ def run(args: argparse.Namespace) -> int:
     from starnav.calibrate import calibrate
     from starnav.camera import save_camera
 
+    check_fov(args, args.model)
     with tqdm(total=len(args.images), desc="calibrate", unit="image", file=sys.stderr) as bar:
         cal = calibrate(
             args.images,

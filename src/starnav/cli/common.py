@@ -9,7 +9,6 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any, Protocol
 
-from starnav.camera import MODELS
 from starnav.catalog import DEFAULT_MAG_LIMIT
 from starnav.errors import StarnavError
 from starnav.identify import ALGORITHMS, DEFAULT_ALGORITHM
@@ -126,44 +125,19 @@ def check_parent_dir(option: str, path: str | None) -> None:
 
 def add_camera(p: argparse.ArgumentParser, *, required: bool = True) -> None:
     """--fov-deg, --width, --height."""
-    p.add_argument("--fov-deg", type=finite, required=required, help="horizontal field of view")
+    p.add_argument("--fov-deg", type=finite, required=required, help="horizontal FOV (degrees)")
     p.add_argument("--width", type=positive_int, required=required, help="image width (px)")
     p.add_argument("--height", type=positive_int, help="image height (px; default: width)")
 
 
 def add_attitude(p: argparse.ArgumentParser) -> None:
     """--ra-deg, --dec-deg, --roll-deg (each random when left out) and --parity."""
-    p.add_argument("--ra-deg", type=finite, help="boresight RA (default: random)")
-    p.add_argument("--dec-deg", type=finite, help="boresight Dec (default: random)")
-    p.add_argument("--roll-deg", type=finite, help="roll (default: random)")
-    p.add_argument("--parity", type=int, choices=(1, -1), default=1)
-
-
-def add_fov_search(
-    p: argparse.ArgumentParser, fov_help: str, *, camera_help: str | None = None
-) -> None:
-    """--fov-deg or --fov-range (the FOV search), or --camera (a camera file) when
-    ``camera_help`` is given."""
-    fov = p.add_mutually_exclusive_group()
-    fov.add_argument("--fov-deg", type=finite, help=fov_help)
-    fov.add_argument(
-        "--fov-range",
-        nargs=2,
-        type=finite,
-        metavar=("LO", "HI"),
-        help="horizontal FOV range searched when the FOV is unknown (degrees; default 5 40, "
-        "within 3-100, for the pinhole; 120 200, within 10-360, for a fisheye lens)",
+    p.add_argument("--ra-deg", type=finite, help="boresight RA (degrees; default: random)")
+    p.add_argument("--dec-deg", type=finite, help="boresight Dec (degrees; default: random)")
+    p.add_argument("--roll-deg", type=finite, help="roll (degrees; default: random)")
+    p.add_argument(
+        "--parity", type=int, choices=(1, -1), default=1, help="-1: a mirrored image (default 1)"
     )
-    if camera_help:
-        fov.add_argument("--camera", help=camera_help)
-        p.add_argument(
-            "--lens",
-            choices=tuple(MODELS),
-            default="pinhole",
-            help="the lens model when no camera file is given (default pinhole); without "
-            "--fov-deg a fisheye model's focal length is scanned over --fov-range (default "
-            "120 200 for a fisheye)",
-        )
 
 
 def add_catalog(p: argparse.ArgumentParser) -> None:

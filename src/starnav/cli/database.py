@@ -22,7 +22,7 @@ def add_parser(subparsers: Subparsers) -> None:
     p = subparsers.add_parser("database", help="build (or load) the pair database and report it")
     add_camera(p)
     add_catalog(p)
-    p.add_argument("--json", action="store_true")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(run=run)
 
 

@@ -29,12 +29,31 @@ def add_parser(subparsers: Subparsers) -> None:
         "demo", help="simulate a random frame, identify it, compare with truth"
     )
     p.add_argument("--seed", type=count, help="random seed (default: random)")
-    p.add_argument("--fov-deg", type=finite, default=12.0)
-    p.add_argument("--width", type=positive_int, default=512)
-    p.add_argument("--noise-px", type=finite, default=0.5)
-    p.add_argument("--false-stars", type=count, default=2)
-    p.add_argument("--missing-frac", type=finite, default=0.1)
-    p.add_argument("--json", action="store_true")
+    p.add_argument(
+        "--fov-deg",
+        type=finite,
+        default=12.0,
+        help="horizontal field of view (degrees; default %(default)g)",
+    )
+    p.add_argument(
+        "--width", type=positive_int, default=512, help="image width (px; default %(default)s)"
+    )
+    p.add_argument(
+        "--noise-px",
+        type=finite,
+        default=0.5,
+        help="centroid noise, 1 sigma (px; default %(default)g)",
+    )
+    p.add_argument(
+        "--false-stars", type=count, default=2, help="false stars added (default %(default)s)"
+    )
+    p.add_argument(
+        "--missing-frac",
+        type=finite,
+        default=0.1,
+        help="fraction of the stars dropped (default %(default)g)",
+    )
+    p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(run=run)
 
 

@@ -22,40 +22,73 @@ from starnav.cli.common import (
 from starnav.cli.output import print_json
 from starnav.errors import StarnavError
 
+DEFAULT_GRID_STEP_DEG = 3.0  # 120 x 60 = 7200 boresights, the published grid
+DEFAULT_FRAMES = 1000  # frames of --sampling uniform
+
 
 def add_parser(subparsers: Subparsers) -> None:
     """The ``evaluate`` command and its options."""
     p = subparsers.add_parser(
         "evaluate", help="lost-in-space evaluation over the whole sky (simulated frames)"
     )
-    p.add_argument("--sampling", choices=("grid", "uniform"), default="grid")
+    p.add_argument(
+        "--sampling",
+        choices=("grid", "uniform"),
+        help="the boresights: grid (an RA/Dec grid, --grid-step-deg) or uniform (at random, "
+        "uniform on the sphere, --frames); default: uniform when --frames is given, else grid",
+    )
     p.add_argument(
         "--grid-step-deg",
         type=finite,
-        default=3.0,
-        help="RA/Dec grid step (default 3: 7200 boresights)",
+        help=f"RA/Dec grid step of --sampling grid (degrees; default {DEFAULT_GRID_STEP_DEG:g}: "
+        "7200 boresights)",
     )
-    p.add_argument("--frames", type=positive_int, default=1000, help="frames of --sampling uniform")
+    p.add_argument(
+        "--frames",
+        type=positive_int,
+        help=f"frames of --sampling uniform (default {DEFAULT_FRAMES}); --frames alone means "
+        "--sampling uniform",
+    )
     p.add_argument(
         "--camera",
         metavar="CAM.json",
         help="camera file (any lens model, e.g. a fisheye) instead of the pinhole of --fov-deg, "
         "--width, --height",
     )
-    p.add_argument("--fov-deg", type=finite, help="horizontal FOV (default 12)")
-    p.add_argument("--width", type=positive_int, help="image width (default 512)")
+    p.add_argument("--fov-deg", type=finite, help="horizontal FOV (degrees; default 12)")
+    p.add_argument("--width", type=positive_int, help="image width (px; default 512)")
     p.add_argument("--height", type=positive_int, help="image height (px; default: width)")
-    p.add_argument("--mag-limit", type=finite, default=DEFAULT_MAG_LIMIT, help="Hipparcos Hp limit")
     p.add_argument(
-        "--noise-px", type=finite, default=0.5, help="centroid noise, 1 sigma (default 0.5)"
-    )
-    p.add_argument("--false-stars", type=count, default=2, help="per frame (default 2)")
-    p.add_argument("--missing-frac", type=finite, default=0.1, help="stars dropped (default 0.1)")
-    p.add_argument(
-        "--mag-noise", type=finite, default=0.0, help="magnitude noise, 1 sigma (default 0)"
+        "--mag-limit",
+        type=finite,
+        default=DEFAULT_MAG_LIMIT,
+        help="Hipparcos Hp limit of the stars simulated and identified (default %(default)g)",
     )
     p.add_argument(
-        "--sigma-px", type=finite, help="centroid sigma told to the solver (default: the noise)"
+        "--noise-px",
+        type=finite,
+        default=0.5,
+        help="centroid noise, 1 sigma (px; default %(default)g)",
+    )
+    p.add_argument(
+        "--false-stars", type=count, default=2, help="false stars per frame (default %(default)s)"
+    )
+    p.add_argument(
+        "--missing-frac",
+        type=finite,
+        default=0.1,
+        help="fraction of the stars dropped (default %(default)g)",
+    )
+    p.add_argument(
+        "--mag-noise",
+        type=finite,
+        default=0.0,
+        help="magnitude noise, 1 sigma (mag; default %(default)g)",
+    )
+    p.add_argument(
+        "--sigma-px",
+        type=finite,
+        help="centroid sigma told to the solver (px; default: the noise)",
     )
     add_algorithm(p)
     p.add_argument(
@@ -73,7 +106,12 @@ def add_parser(subparsers: Subparsers) -> None:
         metavar="P",
         help=f"refuse less certain answers (default {DEFAULT_MAX_FALSE_MATCH_PROBABILITY:g})",
     )
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument(
+        "--seed",
+        type=count,
+        default=0,
+        help="random seed of the boresights' rolls and of every frame (default %(default)s)",
+    )
     p.add_argument(
         "--workers", type=positive_int, help="processes (default: all cores; 1: this process)"
     )
@@ -97,6 +135,7 @@ def run(args: argparse.Namespace) -> int:
     from starnav.evaluate.kinds import parse_kinds
     from starnav.evaluate.report import describe, markdown, plot_sky_map, write_frames_csv
 
+    drawn, amount = choose_sampling(args.sampling, args.frames, args.grid_step_deg)
     size = {k: getattr(args, k) for k in ("fov_deg", "width", "height")}
     size = {k: v for k, v in size.items() if v is not None}
     if args.camera is not None:
@@ -126,11 +165,11 @@ def run(args: argparse.Namespace) -> int:
     )
     check_parent_dir("--frames-csv", args.frames_csv)
     check_parent_dir("--sky-map", args.sky_map)
-    if args.sampling == "grid":
-        boresights = grid_boresights(args.grid_step_deg, seed=args.seed)
-        sampling = f"{len(boresights)} boresights on a {args.grid_step_deg:g}° RA/Dec grid"
+    if drawn == "grid":
+        boresights = grid_boresights(amount, seed=args.seed)
+        sampling = f"{len(boresights)} boresights on a {amount:g}° RA/Dec grid"
     else:
-        boresights = uniform_boresights(args.frames, seed=args.seed)
+        boresights = uniform_boresights(amount, seed=args.seed)
         sampling = f"{len(boresights)} boresights uniform on the sphere"
     summary, results = evaluate(config, boresights, workers=args.workers, dask_address=args.dask)
     if args.frames_csv:
@@ -147,3 +186,28 @@ def run(args: argparse.Namespace) -> int:
     else:
         print(markdown(config, sampling, summary))
     return EXIT_OK
+
+
+def choose_sampling(
+    sampling: str | None, frames: int | None, grid_step_deg: float | None
+) -> tuple[str, float]:
+    """The boresights of --sampling, --frames and --grid-step-deg: ("grid", step in degrees)
+    or ("uniform", frames). Without --sampling, --frames means uniform and otherwise the grid
+    is run; an option of the other sampling is a one-line error (never silently ignored)."""
+    if sampling is None:
+        if frames is not None and grid_step_deg is not None:
+            raise StarnavError(
+                "--frames is for --sampling uniform, --grid-step-deg for --sampling grid: give one"
+            )
+        sampling = "uniform" if frames is not None else "grid"
+    if sampling == "grid":
+        if frames is not None:
+            raise StarnavError(
+                "--frames is for --sampling uniform; the grid's size is --grid-step-deg"
+            )
+        return "grid", DEFAULT_GRID_STEP_DEG if grid_step_deg is None else grid_step_deg
+    if grid_step_deg is not None:
+        raise StarnavError(
+            "--grid-step-deg is for --sampling grid; uniform sampling takes --frames"
+        )
+    return "uniform", DEFAULT_FRAMES if frames is None else frames

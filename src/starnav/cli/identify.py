@@ -24,13 +24,13 @@ from starnav.cli.common import (
     add_algorithm,
     add_catalog,
     add_deep_mag_limit,
-    add_fov_search,
     add_time_budget,
     algorithm_options,
     finite,
     png_path,
     positive_int,
 )
+from starnav.cli.field import add_fov_search, check_fov
 from starnav.cli.output import print_json, print_solution
 from starnav.errors import StarnavError
 from starnav.geometry import attitude_from_radec_roll
@@ -49,7 +49,7 @@ def add_parser(subparsers: Subparsers) -> None:
     )
     add_fov_search(
         p,
-        "horizontal field of view (without it the FOV is searched)",
+        "horizontal field of view",
         camera_help="camera file (any lens model; width and height come from it)",
     )
     p.add_argument("--width", type=positive_int, help="image width (px; or give --camera)")
@@ -75,14 +75,24 @@ def add_parser(subparsers: Subparsers) -> None:
     p.add_argument(
         "--workers", type=positive_int, help="a directory: processes (default: all cores)"
     )
-    p.add_argument("--prior-ra-deg", type=finite, help="tracking: previous boresight RA")
-    p.add_argument("--prior-dec-deg", type=finite, help="tracking: previous boresight Dec")
-    p.add_argument("--prior-roll-deg", type=finite, help="tracking: previous roll")
+    p.add_argument(
+        "--prior-ra-deg",
+        type=finite,
+        help="tracking: previous boresight RA (degrees; default: none, lost in space)",
+    )
+    p.add_argument(
+        "--prior-dec-deg",
+        type=finite,
+        help="tracking: previous boresight Dec (degrees; default: none)",
+    )
+    p.add_argument(
+        "--prior-roll-deg", type=finite, help="tracking: previous roll (degrees; default: none)"
+    )
     p.add_argument(
         "--prior-sigma-deg",
         type=finite,
         default=1.0,
-        help="tracking: 1-sigma error of the previous attitude (default 1)",
+        help="tracking: 1-sigma error of the previous attitude (degrees; default %(default)g)",
     )
     p.add_argument(
         "--plot", metavar="PNG", type=png_path, help="draw the identified map into this PNG file"
@@ -144,6 +154,7 @@ def _check_fov_search(args: argparse.Namespace, prior: np.ndarray | None) -> Non
 
 def run(args: argparse.Namespace) -> int:
     """Identify one star list, or every ``*.csv`` of a directory."""
+    check_fov(args, args.lens, exact=True)
     source = Path(args.stars)
     if source.is_dir():
         return run_directory(args, source)
@@ -174,7 +185,7 @@ def _plot(args: argparse.Namespace, result: SolveResult) -> None:
         return
     from starnav.output.plot import plot_solution
 
-    plot_solution(s, s.camera, result.database.catalog, args.plot)
+    plot_solution(s, s.camera, result.catalog, args.plot)
 
 
 def run_directory(args: argparse.Namespace, source: Path) -> int:

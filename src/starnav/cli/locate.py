@@ -14,6 +14,7 @@ from starnav.cli.common import (
     Subparsers,
     add_catalog,
     check_parent_dir,
+    count,
     finite,
     png_path,
     positive_int,
@@ -44,8 +45,13 @@ def add_parser(subparsers: Subparsers) -> None:
         "locate-study", help="sensitivity of the fix to tilt and star errors (Monte Carlo)"
     )
     p.add_argument("--trials", type=positive_int, default=50, help="per setting (default 50)")
-    p.add_argument("--fov-deg", type=finite, default=20.0, help="camera FOV (default 20)")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument(
+        "--fov-deg",
+        type=finite,
+        default=20.0,
+        help="camera FOV (degrees; default %(default)g)",
+    )
+    p.add_argument("--seed", type=count, default=0, help="random seed (default %(default)s)")
     p.add_argument(
         "--upward-camera",
         metavar="CAMERA_JSON",

@@ -29,24 +29,52 @@ def add_parser(subparsers: Subparsers) -> None:
     p.add_argument("--focal-px", type=finite, help="focal length (px); default: solve for it")
     p.add_argument("--width", type=positive_int, help="image width (px), needed with x,y")
     p.add_argument("--height", type=positive_int, help="image height (px; default: width)")
-    p.add_argument("--sigma-px", type=finite, help="centroid noise per axis, for the 1σ error")
-    p.add_argument("--parity", type=int, choices=(1, -1), help="default: found from x,y")
+    p.add_argument(
+        "--sigma-px",
+        type=finite,
+        help="centroid noise per axis (px), for the 1σ error (default: none, no 1σ error)",
+    )
+    p.add_argument(
+        "--parity",
+        type=int,
+        choices=(1, -1),
+        help="1, or -1 for a mirrored image (default: found from x,y)",
+    )
     p.add_argument(
         "--select-best",
         action="store_true",
         help="from N > 3 stars pick the three with the smallest predicted error",
     )
-    p.add_argument("--json", action="store_true")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(run=run)
 
     p = subparsers.add_parser("pointing-study", help="boresight error of classic star arrangements")
-    p.add_argument("--fov-deg", type=finite, default=12.0)
-    p.add_argument("--width", type=positive_int, default=512)
-    p.add_argument("--sigma-px", type=finite, default=0.5)
-    p.add_argument("--trials", type=positive_int, default=20000, help="Monte Carlo draws")
-    p.add_argument("--seed", type=count, default=0)
-    p.add_argument("--out-dir", default=".", help="where the PNG figures go")
-    p.add_argument("--json", action="store_true")
+    p.add_argument(
+        "--fov-deg",
+        type=finite,
+        default=12.0,
+        help="horizontal field of view (degrees, 1-120; default %(default)g)",
+    )
+    p.add_argument(
+        "--width", type=positive_int, default=512, help="image width (px; default %(default)s)"
+    )
+    p.add_argument(
+        "--sigma-px",
+        type=finite,
+        default=0.5,
+        help="centroid noise per axis (px; default %(default)g)",
+    )
+    p.add_argument(
+        "--trials",
+        type=positive_int,
+        default=20000,
+        help="Monte Carlo draws (default %(default)s)",
+    )
+    p.add_argument("--seed", type=count, default=0, help="random seed (default %(default)s)")
+    p.add_argument(
+        "--out-dir", default=".", help="where the PNG figures go (default: this directory)"
+    )
+    p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(run=run_study)
 
 

@@ -32,7 +32,29 @@ SENSOR_NUMBERS = (  # RenderSettings fields with an option each (--psf-sigma-px,
     "read_noise_e",
     "gain_e_per_adu",
 )
+SENSOR_HELP = {  # what each of SENSOR_NUMBERS is, and its unit
+    "psf_sigma_px": ("Gaussian PSF sigma", "px"),
+    "exposure_s": ("exposure time", "s"),
+    "zero_point_e_per_s": ("flux of a magnitude-0 star", "electrons/s"),
+    "background_e": ("sky and dark per pixel over the exposure", "electrons"),
+    "read_noise_e": ("read noise", "electrons rms"),
+    "gain_e_per_adu": ("gain", "electrons/ADU"),
+}
 DEFAULT_FAINTEST_MAG = 8.0  # stars drawn when the preset sets no magnitude limit
+DEFAULT_PRESET = "seed-1024"
+
+
+def preset_default(name: str) -> str:
+    """'default X' of a camera or sensor value the presets set (``name``: a ``RenderSettings``
+    field or a camera property such as fov_deg, width, height), naming the preset when the
+    presets differ."""
+    values = {}
+    for key, (camera, settings) in sorted(PRESETS.items()):
+        value = getattr(settings, name) if hasattr(settings, name) else getattr(camera, name)
+        values[key] = DEFAULT_FAINTEST_MAG if value is None else value
+    if len(set(values.values())) == 1:
+        return f"default {values[DEFAULT_PRESET]:g}"
+    return "default: the preset's, " + ", ".join(f"{v:g} for {k}" for k, v in values.items())
 
 
 def add_parser(subparsers: Subparsers) -> None:
@@ -44,7 +66,7 @@ def add_parser(subparsers: Subparsers) -> None:
     p.add_argument(
         "--preset",
         choices=sorted(PRESETS),
-        default="seed-1024",
+        default=DEFAULT_PRESET,
         help="camera and sensor (default %(default)s); the options below override it",
     )
     p.add_argument(
@@ -53,24 +75,49 @@ def add_parser(subparsers: Subparsers) -> None:
         help="camera file (any lens model; size, focal length and coefficients come from it, "
         "instead of the preset's pinhole and the five options below)",
     )
-    p.add_argument("--fov-deg", type=finite, help="horizontal FOV")
-    p.add_argument("--width", type=positive_int, help="image width (px)")
-    p.add_argument("--height", type=positive_int, help="image height (px; default: width)")
+    p.add_argument(
+        "--fov-deg", type=finite, help=f"horizontal FOV (degrees; {preset_default('fov_deg')})"
+    )
+    p.add_argument(
+        "--width", type=positive_int, help=f"image width (px; {preset_default('width')})"
+    )
+    p.add_argument(
+        "--height",
+        type=positive_int,
+        help="image height (px; default: the preset's, or the width given)",
+    )
     p.add_argument("--k1", type=finite, help="radial distortion k1 (default 0)")
     p.add_argument("--k2", type=finite, help="radial distortion k2 (default 0)")
     add_attitude(p)
     for name in SENSOR_NUMBERS:
-        p.add_argument(f"--{name.replace('_', '-')}", type=finite, help=f"sensor: {name}")
+        p.add_argument(
+            f"--{name.replace('_', '-')}",
+            type=finite,
+            help="sensor: {} ({}; {})".format(*SENSOR_HELP[name], preset_default(name)),
+        )
     p.add_argument(
         "--vignetting-power",
         type=finite,
         help="p of the relative illumination cos(θ/2)^p (0: none; default 2 for a fisheye, "
         "one stop at 90° from the axis, 0 for a pinhole)",
     )
-    p.add_argument("--bit-depth", type=int, choices=(8, 16), help="8 or 16 bit output")
-    p.add_argument("--hot-pixels", type=count, help="hot pixels at random places")
-    p.add_argument("--mag-limit", type=finite, help="faintest Hipparcos star drawn")
-    p.add_argument("--seed", type=count, help="random seed")
+    p.add_argument(
+        "--bit-depth",
+        type=int,
+        choices=(8, 16),
+        help=f"8 or 16 bit output ({preset_default('bit_depth')})",
+    )
+    p.add_argument(
+        "--hot-pixels",
+        type=count,
+        help=f"hot pixels at random places ({preset_default('hot_pixels')})",
+    )
+    p.add_argument(
+        "--mag-limit",
+        type=finite,
+        help=f"faintest Hipparcos star drawn (Hp; {preset_default('mag_limit')})",
+    )
+    p.add_argument("--seed", type=count, help="random seed (default: random)")
     p.add_argument("--truth", metavar="CSV", help="write the drawn stars (x, y, id, mag) here")
     p.add_argument("--json", action="store_true", help="print the truth as one JSON object")
     p.set_defaults(run=run)

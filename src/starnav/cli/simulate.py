@@ -25,11 +25,28 @@ def add_parser(subparsers: Subparsers) -> None:
     add_attitude(p)
     add_camera(p)
     add_catalog(p)
-    p.add_argument("--noise-px", type=finite, default=0.0, help="centroid noise, 1 sigma")
-    p.add_argument("--false-stars", type=count, default=0, help="false stars added")
-    p.add_argument("--missing-frac", type=finite, default=0.0, help="fraction of stars dropped")
-    p.add_argument("--mag-noise", type=finite, default=0.0, help="magnitude noise, 1 sigma")
-    p.add_argument("--seed", type=count, help="random seed")
+    p.add_argument(
+        "--noise-px",
+        type=finite,
+        default=0.0,
+        help="centroid noise, 1 sigma (px; default %(default)g)",
+    )
+    p.add_argument(
+        "--false-stars", type=count, default=0, help="false stars added (default %(default)s)"
+    )
+    p.add_argument(
+        "--missing-frac",
+        type=finite,
+        default=0.0,
+        help="fraction of the stars dropped (default %(default)g)",
+    )
+    p.add_argument(
+        "--mag-noise",
+        type=finite,
+        default=0.0,
+        help="magnitude noise, 1 sigma (mag; default %(default)g)",
+    )
+    p.add_argument("--seed", type=count, help="random seed (default: random)")
     p.add_argument("-o", "--output", required=True, help="frame CSV to write")
     p.add_argument("--json", action="store_true", help="print the truth as one JSON object")
     p.set_defaults(run=run)

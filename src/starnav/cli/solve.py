@@ -18,13 +18,13 @@ from starnav.cli.common import (
     Subparsers,
     add_dask,
     add_deep_mag_limit,
-    add_fov_search,
     add_time_budget,
     check_parent_dir,
     finite,
     int_at_least,
     positive_int,
 )
+from starnav.cli.field import add_fov_search, check_fov
 from starnav.cli.output import print_json, print_solution, to_json
 from starnav.errors import StarnavError
 from starnav.pipeline.image import DEFAULT_MAX_STARS, FISHEYE_MAX_STARS, ImageSolveResult
@@ -35,12 +35,12 @@ WCS_SUFFIXES = (".fits", ".fit", ".fts", ".wcs")
 def add_parser(subparsers: Subparsers) -> None:
     """The ``solve`` command and its options."""
     p = subparsers.add_parser(
-        "solve", help="solve image files (FITS, PNG, JPEG, TIFF): FOV may be unknown"
+        "solve", help="solve image files (FITS, PNG, JPEG, TIFF, BMP, ...): FOV may be unknown"
     )
     p.add_argument("images", nargs="+", metavar="IMAGE", help="image files or directories of them")
     add_fov_search(
         p,
-        "horizontal FOV, roughly (searched ±5 %%)",
+        "horizontal FOV, roughly: searched ±5 %%",
         camera_help="camera file (any lens model, e.g. from 'starnav calibrate'; its focal "
         "length searched ±1 %%)",
     )
@@ -70,7 +70,9 @@ def add_parser(subparsers: Subparsers) -> None:
     p.add_argument(
         "--catalog", help="CSV catalog id,ra_deg,dec_deg,mag (default: embedded Hipparcos)"
     )
-    p.add_argument("--epoch", type=finite, help="year for Hipparcos proper motion")
+    p.add_argument(
+        "--epoch", type=finite, help="year of Hipparcos proper motion (default: DATE-OBS, else now)"
+    )
     add_deep_mag_limit(p)
     p.add_argument(
         "--wcs",
@@ -139,6 +141,7 @@ def _options(args: argparse.Namespace) -> dict:
 
 def run(args: argparse.Namespace) -> int:
     """One file: read, detect, solve, write the outputs, print. Many: ``run_batch``."""
+    check_fov(args, args.lens)
     paths = [Path(p) for p in args.images]
     if len(paths) > 1 or paths[0].is_dir() or args.jsonl or args.track or args.dask:
         return run_batch(args, paths)
@@ -185,10 +188,13 @@ def run_batch(args: argparse.Namespace, inputs: list[Path]) -> int:
     file (text, or JSON with --json; --jsonl writes them to a file as well), a summary."""
     from tqdm import tqdm
 
-    from starnav.pipeline.image_batch import ImageOutputs, image_paths, solve_files, summarize
+    from starnav.pipeline import image_batch as batch
 
-    paths = image_paths(inputs)
-    outputs = ImageOutputs.make(wcs=args.wcs, new_fits=args.new_fits, annotate=args.annotate)
+    skipped: list[Path] = []
+    paths = batch.image_paths(inputs, skipped)
+    if skipped:
+        print(f"starnav solve: {batch.skipped_line(skipped)}", file=sys.stderr)
+    outputs = batch.ImageOutputs.make(wcs=args.wcs, new_fits=args.new_fits, annotate=args.annotate)
     jsonl = None
     if args.jsonl:
         check_parent_dir("--jsonl", args.jsonl)
@@ -198,7 +204,7 @@ def run_batch(args: argparse.Namespace, inputs: list[Path]) -> int:
             raise StarnavError(f"cannot write {args.jsonl!r}: {exc.strerror or exc}") from None
     t0 = time.perf_counter()
     with tqdm(total=len(paths), desc="solve", unit="file", file=sys.stderr) as bar:
-        results = solve_files(
+        results = batch.solve_files(
             paths,
             _options(args),
             outputs=outputs,
@@ -207,7 +213,7 @@ def run_batch(args: argparse.Namespace, inputs: list[Path]) -> int:
             track=args.track,
             progress=bar.update,
         )
-    summary = summarize(results, time.perf_counter() - t0)
+    summary = batch.summarize(results, time.perf_counter() - t0)
     for r in results:
         if jsonl is not None:
             jsonl.write(to_json(r.record) + "\n")

@@ -20,6 +20,7 @@ Values are stored values (BSCALE/BZERO applied for FITS); non-finite values come
 
 from __future__ import annotations
 
+import functools
 import warnings
 from pathlib import Path
 
@@ -32,6 +33,10 @@ FITS_SUFFIXES = (".fits", ".fit", ".fts", ".fits.gz", ".fit.gz", ".fts.gz", ".fz
 FITS_MAGIC = b"SIMPLE  ="  # the first bytes of a FITS file
 GZIP_MAGIC = b"\x1f\x8b"  # of a gzip file (a FITS file when its name says so)
 TIFF_MAGICS = (b"II*\x00", b"MM\x00*", b"II+\x00", b"MM\x00+")  # TIFF and BigTIFF
+# formats Pillow opens that ``read_image`` does not read as pictures: MPEG (no decoder), EPS
+# (needs Ghostscript), IPTC (metadata); Pillow's stubs (BUFR, GRIB, HDF5, WMF) are left out by
+# their class
+_PILLOW_NOT_READ = ("MPEG", "EPS", "IPTC")
 _COLOUR_MODES = (
     "RGB",
     "RGBA",
@@ -73,6 +78,29 @@ def read_image(path: str | Path) -> np.ndarray:
     else:
         data = _read_pillow(path)
     return _finish(data, name)
+
+
+@functools.cache
+def readable_suffixes() -> tuple[str, ...]:
+    """The file-name endings (lower case) of the formats ``read_image`` reads: FITS's and
+    those of every format Pillow opens and decodes (PNG, JPEG, TIFF, BMP, GIF, WebP, PNM,
+    JPEG 2000, ...). A directory given to ``starnav solve`` is listed by them."""
+    from PIL import Image, ImageFile
+
+    Image.init()
+    pillow = {
+        ext.lower()
+        for ext, fmt in Image.registered_extensions().items()
+        if fmt in Image.OPEN
+        and fmt not in _PILLOW_NOT_READ
+        and not _is_stub(Image.OPEN[fmt][0], ImageFile.StubImageFile)
+    }
+    return tuple(sorted(pillow | set(FITS_SUFFIXES)))
+
+
+def _is_stub(factory: object, stub: type) -> bool:
+    """Whether a Pillow format's factory (a class, or a function for JPEG) is a stub."""
+    return isinstance(factory, type) and issubclass(factory, stub)
 
 
 def luminance(rgb: np.ndarray) -> np.ndarray:

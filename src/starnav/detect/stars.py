@@ -67,7 +67,7 @@ from starnav.detect.background import (
 from starnav.detect.hot import clean_hot_pixels
 from starnav.detect.photometry import local_photometry, misshapen
 from starnav.detect.psf import measure_psf_sigma
-from starnav.errors import ImageError
+from starnav.errors import ImageError, shown
 
 _DEFAULT_KERNEL = np.array([[1.0, 2.0, 1.0], [2.0, 4.0, 2.0], [1.0, 2.0, 1.0]], dtype=np.float32)
 _NOISE_FREE_RMS = 1e-3  # rms assumed for a noise-free image, as a fraction of its range
@@ -399,17 +399,19 @@ def _centroids(
 
 def _check_options(threshold_sigma, max_stars, min_area_px, saturation, psf_sigma_px) -> None:
     if not (_is_real(threshold_sigma) and np.isfinite(threshold_sigma) and threshold_sigma > 0):
-        raise ImageError(f"threshold_sigma must be a positive number, got {threshold_sigma!r}")
+        raise ImageError(f"threshold_sigma must be a positive number, got {shown(threshold_sigma)}")
     if max_stars is not None and not (_is_int(max_stars) and max_stars >= 1):
-        raise ImageError(f"max_stars must be an integer >= 1 or None, got {max_stars!r}")
+        raise ImageError(f"max_stars must be an integer >= 1 or None, got {shown(max_stars)}")
     if not (_is_int(min_area_px) and min_area_px >= 1):
-        raise ImageError(f"min_area_px must be an integer >= 1, got {min_area_px!r}")
+        raise ImageError(f"min_area_px must be an integer >= 1, got {shown(min_area_px)}")
     if saturation is not None and not (_is_real(saturation) and np.isfinite(saturation)):
-        raise ImageError(f"saturation must be a pixel value or None, got {saturation!r}")
+        raise ImageError(f"saturation must be a pixel value or None, got {shown(saturation)}")
     if psf_sigma_px is not None and not (
         _is_real(psf_sigma_px) and np.isfinite(psf_sigma_px) and 0.2 <= psf_sigma_px <= 20.0
     ):
-        raise ImageError(f"psf_sigma_px must be within 0.2..20 px or None, got {psf_sigma_px!r}")
+        raise ImageError(
+            f"psf_sigma_px must be within 0.2..20 px or None, got {shown(psf_sigma_px)}"
+        )
 
 
 def _is_real(value) -> bool:

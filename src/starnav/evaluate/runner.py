@@ -21,7 +21,7 @@ from tqdm import tqdm
 
 from starnav.camera import Camera, CameraModel, camera_from_dict
 from starnav.catalog import load_catalog
-from starnav.errors import StarnavError
+from starnav.errors import StarnavError, shown
 from starnav.evaluate.kinds import KINDS, NO_ANSWER_KINDS, make_frame, parse_kinds
 from starnav.evaluate.sampling import Boresights, frame_rng
 from starnav.geometry import angle_between, attitude_difference_deg
@@ -95,7 +95,7 @@ class EvalConfig:
         camera = self.make_camera()
         make_identifier(self.algorithm, **self.identifier_options)
         if not (np.isfinite(self.mag_limit) and -2.0 <= self.mag_limit <= 12.0):
-            raise StarnavError(f"mag limit must be between -2 and 12, got {self.mag_limit!r}")
+            raise StarnavError(f"mag limit must be between -2 and 12, got {shown(self.mag_limit)}")
         if self.sigma_px is not None and not (np.isfinite(self.sigma_px) and self.sigma_px > 0):
             raise StarnavError(f"sigma_px must be a positive number of pixels, got {self.sigma_px}")
         if parse_kinds(",".join(self.kinds)) != tuple(self.kinds):

@@ -23,7 +23,7 @@ from collections.abc import Iterator
 
 import numpy as np
 
-from starnav.errors import StarnavError
+from starnav.errors import StarnavError, shown
 from starnav.geometry import angle_between, chord_from_angle, triple_product
 from starnav.identify.base import IdentifyOutcome, MatchSettings, screen_stars_only
 from starnav.identify.database import PairDatabase
@@ -114,9 +114,9 @@ class NeighborSum:
         self, *, k: int = DEFAULT_K, feature_tol_scale: float = 1.5, edge_stars: bool = True
     ) -> None:
         if not (isinstance(k, int | np.integer) and k >= 1):
-            raise StarnavError(f"k (neighbours summed) must be an integer >= 1, got {k!r}")
+            raise StarnavError(f"k (neighbours summed) must be an integer >= 1, got {shown(k)}")
         if not (np.isfinite(feature_tol_scale) and feature_tol_scale > 0):
-            raise StarnavError(f"feature_tol_scale must be > 0, got {feature_tol_scale!r}")
+            raise StarnavError(f"feature_tol_scale must be > 0, got {shown(feature_tol_scale)}")
         self.k = int(k)
         self.feature_tol_scale = float(feature_tol_scale)
         self.edge_stars = bool(edge_stars)

@@ -12,7 +12,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from importlib import import_module
 
-from starnav.errors import StarnavError
+from starnav.errors import StarnavError, shown
 from starnav.identify import ALGORITHMS
 
 _KINDS = {int: "a whole number", float: "a number", str: "text"}
@@ -32,7 +32,7 @@ def _check_value(algorithm: str, name: str, allowed: tuple | type, value: object
         if value not in allowed:
             raise StarnavError(
                 f"algorithm option {name} of {algorithm} must be one of "
-                f"{', '.join(map(str, allowed))}, got {value!r}"
+                f"{', '.join(map(str, allowed))}, got {shown(value)}"
             )
         return
     fits = isinstance(value, allowed) and not isinstance(value, bool)
@@ -40,7 +40,9 @@ def _check_value(algorithm: str, name: str, allowed: tuple | type, value: object
         fits = isinstance(value, int | float) and not isinstance(value, bool)
     if not fits:
         kind = _KINDS.get(allowed, allowed.__name__)
-        raise StarnavError(f"algorithm option {name} of {algorithm} must be {kind}, got {value!r}")
+        raise StarnavError(
+            f"algorithm option {name} of {algorithm} must be {kind}, got {shown(value)}"
+        )
 
 
 def check_algorithm_options(

@@ -32,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-from starnav.errors import CatalogError, StarnavError
+from starnav.errors import CatalogError, StarnavError, shown
 from starnav.geometry import angle_between, chord_from_angle, triple_product
 from starnav.identify.base import IdentifyOutcome, MatchSettings, screen_stars_only
 from starnav.identify.database import PairDatabase, load_cached, save_cached
@@ -659,7 +659,7 @@ class Pattern4:
         )
         for name, value, ok in checks:
             if not ok:
-                raise StarnavError(f"{name}={value!r} is out of range")
+                raise StarnavError(f"{name}={shown(value)} is out of range")
         self.pattern_stars = pattern_stars
         self.table_options = {
             "stars_per_field": stars_per_field,

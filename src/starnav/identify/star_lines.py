@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from starnav.errors import StarnavError
+from starnav.errors import StarnavError, shown
 from starnav.geometry import angle_between, chord_from_angle
 from starnav.identify.base import IdentifyOutcome, MatchSettings, screen_stars_only
 from starnav.identify.database import PairDatabase
@@ -67,9 +67,11 @@ class StarLines:
     def __init__(self, *, neighbors: int = 5, tests_per_star: int = 2) -> None:
         for label, value in (("neighbors", neighbors), ("tests_per_star", tests_per_star)):
             if not (isinstance(value, int | np.integer) and value >= 1):
-                raise StarnavError(f"{label} must be an integer >= 1, got {value!r}")
+                raise StarnavError(f"{label} must be an integer >= 1, got {shown(value)}")
         if neighbors < 2:
-            raise StarnavError(f"neighbors must be >= 2 (an arc and a vote), got {neighbors!r}")
+            raise StarnavError(
+                f"neighbors must be >= 2 (an arc and a vote), got {shown(neighbors)}"
+            )
         self.neighbors = int(neighbors)
         self.tests_per_star = int(tests_per_star)
 

@@ -28,7 +28,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from starnav.errors import StarnavError
+from starnav.errors import StarnavError, shown
 from starnav.identify.base import IdentifyOutcome, MatchSettings, screen_stars_only
 from starnav.identify.database import PairDatabase
 from starnav.identify.pyramid import match_triangles
@@ -170,11 +170,11 @@ class Triangle:
             or max_triangles < 1
         ):
             raise StarnavError(
-                f"max_triangles must be a positive integer or None, got {max_triangles!r}"
+                f"max_triangles must be a positive integer or None, got {shown(max_triangles)}"
             )
         for label, value in (("min_side_px", min_side_px), ("min_height_px", min_height_px)):
             if not (np.isfinite(value) and value >= 0):
-                raise StarnavError(f"{label} must be >= 0 pixels, got {value!r}")
+                raise StarnavError(f"{label} must be >= 0 pixels, got {shown(value)}")
         self.selection = selection
         self.max_triangles = max_triangles
         self.min_side_px = float(min_side_px)

@@ -31,7 +31,7 @@ from astropy.time import Time, TimeDelta
 
 from starnav.camera import CameraModel, camera_from_dict, load_camera
 from starnav.detect.header import ImageTime, image_time
-from starnav.errors import StarnavError
+from starnav.errors import StarnavError, shown
 from starnav.navigation.frames import parse_utc
 from starnav.navigation.images import image_stars
 
@@ -100,9 +100,9 @@ def mount_from_azimuth_elevation(azimuth_deg: float, elevation_deg: float) -> np
 
 def _number(value, what: str, *, low: float | None = None, high: float | None = None) -> float:
     if isinstance(value, bool) or not isinstance(value, int | float) or not np.isfinite(value):
-        raise ObservationError(f"{what} must be a number, got {value!r}")
+        raise ObservationError(f"{what} must be a number, got {shown(value)}")
     if (low is not None and value < low) or (high is not None and value > high):
-        raise ObservationError(f"{what} must be between {low:g} and {high:g}, got {value!r}")
+        raise ObservationError(f"{what} must be between {low:g} and {high:g}, got {shown(value)}")
     return float(value)
 
 
@@ -110,9 +110,13 @@ def _vector(value, what: str, shape: tuple[int, ...]) -> np.ndarray:
     try:
         array = np.array(value, dtype=float)
     except (TypeError, ValueError):
-        raise ObservationError(f"{what} must be numbers of shape {shape}, got {value!r}") from None
+        raise ObservationError(
+            f"{what} must be numbers of shape {shape}, got {shown(value)}"
+        ) from None
     if array.shape != shape or not np.all(np.isfinite(array)):
-        raise ObservationError(f"{what} must be finite numbers of shape {shape}, got {value!r}")
+        raise ObservationError(
+            f"{what} must be finite numbers of shape {shape}, got {shown(value)}"
+        )
     return array
 
 

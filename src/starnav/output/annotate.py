@@ -24,7 +24,7 @@ from matplotlib.path import Path as MarkerPath
 from starnav.camera import CameraModel
 from starnav.catalog import Catalog
 from starnav.catalog.names import star_names
-from starnav.errors import ImageError, StarnavError
+from starnav.errors import ImageError, StarnavError, shown
 from starnav.geometry import radec_roll_from_attitude
 from starnav.simulate import project_catalog
 
@@ -132,7 +132,7 @@ def annotation_figure(
 ) -> Figure:
     """The annotated image as a matplotlib Figure (see ``annotate_image`` for the arguments)."""
     if not (np.isfinite(residual_scale) and residual_scale > 0):
-        raise StarnavError(f"residual_scale must be a positive number, got {residual_scale!r}")
+        raise StarnavError(f"residual_scale must be a positive number, got {shown(residual_scale)}")
     gray = _gray(image, camera.width, camera.height)
     detected = _xy(detected_xy, "detected_xy")
     match = _matched_rows(matched)

@@ -36,7 +36,7 @@ from astropy.time import Time
 from astropy.wcs import WCS
 
 from starnav.camera import Camera, CameraModel, Equidistant
-from starnav.errors import CameraError, ImageError, StarnavError
+from starnav.errors import CameraError, ImageError, StarnavError, shown
 from starnav.geometry import north_east, unit_to_radec
 
 DEFAULT_SIP_ORDER = 4
@@ -124,7 +124,7 @@ def _fit(
 
 def _check_order(order: int) -> int:
     if isinstance(order, bool) or not isinstance(order, int | np.integer):
-        raise StarnavError(f"sip_order must be an integer, got {order!r}")
+        raise StarnavError(f"sip_order must be an integer, got {shown(order)}")
     if not 2 <= order <= MAX_SIP_ORDER:
         raise StarnavError(f"sip_order must be in 2..{MAX_SIP_ORDER}, got {order}")
     return int(order)
@@ -185,7 +185,7 @@ def fit_sip(camera: CameraModel, *, order: int = DEFAULT_SIP_ORDER) -> SipFit:
     distorted = camera.bearings_to_pixels(bearings)
     gap = float(np.max(np.linalg.norm(distorted - grid, axis=1)))
     if not gap <= _ROUND_TRIP_TOLERANCE_PX:
-        coefficients = ", ".join(f"{k}={getattr(camera, k)!r}" for k in camera.coefficients)
+        coefficients = ", ".join(f"{k}={shown(getattr(camera, k))}" for k in camera.coefficients)
         raise CameraError(
             f"{camera.model} distortion {coefficients} cannot be inverted over the image "
             f"(pixels -> bearings -> pixels misses by {gap:.3g} px): no SIP fit"

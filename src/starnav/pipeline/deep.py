@@ -60,7 +60,7 @@ from pathlib import Path
 import numpy as np
 
 from starnav.catalog import Catalog, load_catalog
-from starnav.errors import StarnavError
+from starnav.errors import StarnavError, shown
 from starnav.identify.database import sky_grid
 from starnav.identify.verify import kernels
 from starnav.results import Solution, StarTable
@@ -89,7 +89,7 @@ def deep_catalog(
     m = deep_mag_limit
     if isinstance(m, bool) or not isinstance(m, int | float) or not -2.0 <= m <= MAX_DEEP_MAG:
         raise StarnavError(
-            f"deep_mag_limit must be a magnitude between -2 and {MAX_DEEP_MAG:g}, got {m!r}"
+            f"deep_mag_limit must be a magnitude between -2 and {MAX_DEEP_MAG:g}, got {shown(m)}"
         )
     return load_catalog(catalog, mag_limit=float(m), epoch_year=epoch_year)
 

@@ -19,7 +19,7 @@ import numpy as np
 
 from starnav.camera import MODELS, Camera, CameraModel, focal_px_from_fov
 from starnav.catalog import Catalog, load_catalog
-from starnav.errors import CatalogError, StarnavError
+from starnav.errors import CatalogError, StarnavError, shown
 from starnav.geometry import radec_to_unit
 from starnav.identify.base import MatchSettings
 from starnav.identify.database import catalog_only
@@ -194,7 +194,7 @@ def check_fov_range(
         lo, hi = (float(v) for v in fov_range_deg)
     except (TypeError, ValueError):
         raise StarnavError(
-            f"fov_range_deg must be two numbers (degrees), got {fov_range_deg!r}"
+            f"fov_range_deg must be two numbers (degrees), got {shown(fov_range_deg)}"
         ) from None
     a, b = limits_deg
     if not (a <= lo < hi <= b):
@@ -216,6 +216,28 @@ def _narrower_why(fov_deg: float, limits_deg: tuple[float, float]) -> str:
     )
 
 
+def fov_limits_deg(lens: str = "pinhole") -> tuple[float, float]:
+    """The horizontal fields of view (degrees) a given or searched FOV may take with the
+    ``lens`` model: ``FOV_LIMITS_DEG`` for the pinhole (its FOV search),
+    ``LENS_FOV_LIMITS_DEG`` for the fisheye models (their focal scan). The one definition
+    ``search_range`` (images, plates, unknown-FOV lists) and the commands that take
+    ``--fov-deg`` / ``--fov-range`` (``solve``, ``identify``, ``calibrate``) check against."""
+    return FOV_LIMITS_DEG if lens == "pinhole" else LENS_FOV_LIMITS_DEG
+
+
+def check_fov_deg(fov_deg: float, lens: str = "pinhole") -> float:
+    """``fov_deg`` (horizontal, degrees) as a float when the ``lens`` model takes it
+    (``fov_limits_deg``), else a one-line error saying the range (and, below the pinhole's
+    3°, why)."""
+    lo, hi = fov_limits_deg(lens)
+    if not (np.isfinite(fov_deg) and lo <= fov_deg <= hi):
+        raise StarnavError(
+            f"fov_deg must be within {lo:g}..{hi:g} degrees for the {lens} lens model, got "
+            f"{shown(fov_deg)}" + _narrower_why(fov_deg, (lo, hi))
+        )
+    return float(fov_deg)
+
+
 def search_range(
     fov_deg: float | None,
     fov_range_deg: tuple[float, float],
@@ -223,20 +245,15 @@ def search_range(
     lens: str = "pinhole",
 ) -> tuple[float, float]:
     """The horizontal FOV range searched (degrees): within 1 % of a calibrated ``camera``,
-    5 % of ``fov_deg``, or ``fov_range_deg`` (up to ``FOV_LIMITS_DEG`` for the pinhole,
-    ``LENS_FOV_LIMITS_DEG`` for the fisheye models); a one-line error for a bad one."""
+    5 % of ``fov_deg``, or ``fov_range_deg``, each within ``fov_limits_deg(lens)``; a
+    one-line error for a bad one."""
     if camera is not None:
         f = camera.fov_deg
         return f * (1 - CAMERA_FOV_TOLERANCE), f * (1 + CAMERA_FOV_TOLERANCE)
-    limits = FOV_LIMITS_DEG if lens == "pinhole" else LENS_FOV_LIMITS_DEG
     if fov_deg is not None:
-        if not (np.isfinite(fov_deg) and limits[0] <= fov_deg <= limits[1]):
-            raise StarnavError(
-                f"fov_deg must be within {limits[0]:g}..{limits[1]:g} degrees, got {fov_deg!r}"
-                + _narrower_why(fov_deg, limits)
-            )
+        check_fov_deg(fov_deg, lens)
         return fov_deg * (1 - GIVEN_FOV_TOLERANCE), fov_deg * (1 + GIVEN_FOV_TOLERANCE)
-    return check_fov_range(fov_range_deg, limits)
+    return check_fov_range(fov_range_deg, fov_limits_deg(lens))
 
 
 def solve_unknown_field(

@@ -29,29 +29,45 @@ from pathlib import Path
 import numpy as np
 
 from starnav.detect.header import fits_hints
-from starnav.detect.read import read_image
+from starnav.detect.read import read_image, readable_suffixes
 from starnav.errors import StarnavError
 from starnav.pipeline.image import solve_image, write_outputs
 from starnav.results import Solution
 from starnav.runtime.pools import dask_client, process_pool, worker_count
 
-IMAGE_SUFFIXES = (".fits", ".fit", ".fts", ".fits.gz", ".fz", ".png", ".jpg", ".jpeg", ".tif",
-                  ".tiff")  # fmt: skip
 
-
-def image_paths(inputs: Sequence[str | Path]) -> list[Path]:
-    """The files of ``inputs`` in order: a directory gives its image files (by suffix,
-    sorted, not recursing); a file is taken as given (even if missing: its record will say
-    so). ``StarnavError`` when there is nothing to solve."""
+def image_paths(inputs: Sequence[str | Path], skipped: list[Path] | None = None) -> list[Path]:
+    """The files of ``inputs`` in order: a directory gives the files ``read_image`` reads (by
+    suffix: ``readable_suffixes``; sorted, not recursing), and its other entries (other files,
+    subdirectories) go to ``skipped`` when a list is given; a file is taken as given (even if
+    missing: its record will say so). ``StarnavError`` when there is nothing to solve."""
+    suffixes = readable_suffixes()
     out: list[Path] = []
+    left: list[Path] = []
     for item in map(Path, inputs):
-        if item.is_dir():
-            out.extend(sorted(p for p in item.iterdir() if p.name.lower().endswith(IMAGE_SUFFIXES)))
-        else:
+        if not item.is_dir():
             out.append(item)
+            continue
+        for entry in sorted(item.iterdir()):
+            read = entry.is_file() and entry.name.lower().endswith(suffixes)
+            (out if read else left).append(entry)
+    if skipped is not None:
+        skipped.extend(left)
     if not out:
-        raise StarnavError(f"no image files in {', '.join(map(str, inputs))}")
+        others = f" ({skipped_line(left)})" if left else ""
+        raise StarnavError(f"no image files in {', '.join(map(str, inputs))}{others}")
     return out
+
+
+def skipped_line(skipped: Sequence[Path], at_most: int = 10) -> str:
+    """The directories' entries that are not image files (``image_paths``), named in one
+    line (the first ``at_most`` of them)."""
+    names = [f"{p}/" if p.is_dir() else str(p) for p in skipped]
+    more = f" and {len(names) - at_most} more" if len(names) > at_most else ""
+    return (
+        f"skipped {len(names)} {'entry' if len(names) == 1 else 'entries'} that are not image "
+        f"files starnav reads: {', '.join(names[:at_most])}{more}"
+    )
 
 
 @dataclass(frozen=True)

@@ -16,7 +16,7 @@ from typing import Any
 
 from starnav.camera import MODELS, CameraModel, load_camera
 from starnav.catalog import Catalog
-from starnav.errors import CameraError, ImageError, StarnavError
+from starnav.errors import CameraError, ImageError, StarnavError, shown
 from starnav.identify import ALGORITHMS, DEFAULT_ALGORITHM
 from starnav.identify.base import SEARCH_SIGMA_PX
 from starnav.runtime.budget import check_budget
@@ -111,27 +111,29 @@ class SolveOptions:
         check_budget(self.time_budget_s, 1.0)
         s = self.sigma_px
         if s is not None and not (_number(s) and math.isfinite(s) and s > 0):
-            raise StarnavError(f"sigma_px must be a positive number of pixels, got {_show(s)}")
+            raise StarnavError(f"sigma_px must be a positive number of pixels, got {shown(s)}")
         if self.parity not in (None, 1, -1):
-            raise StarnavError(f"parity must be +1, -1 or None, got {self.parity!r}")
+            raise StarnavError(f"parity must be +1, -1 or None, got {shown(self.parity)}")
         if not (_number(self.min_matched_fraction) and 0.0 <= self.min_matched_fraction <= 1.0):
-            f = _show(self.min_matched_fraction)
+            f = shown(self.min_matched_fraction)
             raise StarnavError(f"min_matched_fraction must be in [0, 1], got {f}")
         p = self.max_false_match_probability
         if not (_number(p) and 0.0 < p < 1.0):
-            raise StarnavError(f"max_false_match_probability must be in (0, 1), got {_show(p)}")
+            raise StarnavError(f"max_false_match_probability must be in (0, 1), got {shown(p)}")
         d = self.prior_sigma_deg
         if not (_number(d) and math.isfinite(d) and 0.0 < d <= 30.0):
-            raise StarnavError(f"prior_sigma_deg must be in (0, 30] degrees, got {_show(d)}")
+            raise StarnavError(f"prior_sigma_deg must be in (0, 30] degrees, got {shown(d)}")
         r = self.position_radius_deg
         if not (_number(r) and math.isfinite(r) and 0 < r <= 180):
-            raise StarnavError(f"the position hint's radius must be in (0, 180] degrees, got {r}")
+            raise StarnavError(
+                f"the position hint's radius must be in (0, 180] degrees, got {shown(r)}"
+            )
         m = self.max_stars
         if m is not None and not (isinstance(m, int) and not isinstance(m, bool) and m >= 4):
-            raise ImageError(f"max_stars must be an integer >= 4, got {m!r}")
+            raise ImageError(f"max_stars must be an integer >= 4, got {shown(m)}")
         k = self.downsample
         if not (isinstance(k, int) and not isinstance(k, bool) and k >= 1):
-            raise ImageError(f"downsample must be an integer >= 1, got {k!r}")
+            raise ImageError(f"downsample must be an integer >= 1, got {shown(k)}")
 
     @classmethod
     def make(cls, options: SolveOptions | None = None, **overrides: Any) -> SolveOptions:
@@ -170,7 +172,7 @@ class SolveOptions:
         or the lens model's default."""
         if self.fov_range_deg is not None:
             return self.fov_range_deg
-        return DEFAULT_LENS_FOV_RANGE_DEG if self.fisheye else DEFAULT_FOV_RANGE_DEG
+        return default_fov_range_deg(self.lens_model)
 
     @property
     def image_max_stars(self) -> int:
@@ -185,10 +187,12 @@ class SolveOptions:
         return dict(self.algorithm_options)
 
 
+def default_fov_range_deg(lens: str) -> tuple[float, float]:
+    """The horizontal FOV range (degrees) searched for the ``lens`` model when none is given:
+    ``DEFAULT_FOV_RANGE_DEG`` for the pinhole's FOV search, ``DEFAULT_LENS_FOV_RANGE_DEG``
+    for a fisheye model's focal scan."""
+    return DEFAULT_FOV_RANGE_DEG if lens == "pinhole" else DEFAULT_LENS_FOV_RANGE_DEG
+
+
 def _number(value: object) -> bool:
     return isinstance(value, int | float) and not isinstance(value, bool)
-
-
-def _show(value: object) -> str:
-    """A number as the user would write it (``nan``, ``12.5``), anything else as its repr."""
-    return f"{float(value):g}" if _number(value) else repr(value)

@@ -27,7 +27,7 @@ from astropy.wcs import WCS
 
 from starnav.catalog import Catalog
 from starnav.detect.header import ImageHints, fits_hints, is_fits
-from starnav.errors import StarnavError
+from starnav.errors import StarnavError, shown
 from starnav.pipeline.fov import FOV_LIMITS_DEG
 from starnav.pipeline.image import (
     ImageSolveResult,
@@ -145,9 +145,9 @@ def _positive(value, what: str) -> float:
     try:
         v = float(value)
     except (TypeError, ValueError):
-        raise StarnavError(f"{what} must be a number, got {value!r}") from None
+        raise StarnavError(f"{what} must be a number, got {shown(value)}") from None
     if not (math.isfinite(v) and v > 0):
-        raise StarnavError(f"{what} must be a positive number, got {value!r}")
+        raise StarnavError(f"{what} must be a positive number, got {shown(value)}")
     return v
 
 
@@ -268,7 +268,7 @@ def parity_from_nova(value) -> int | None:
     if isinstance(value, str) and value.strip().isdigit():
         value = int(value)
     if isinstance(value, bool) or not isinstance(value, int | str | None) or value not in table:
-        raise StarnavError(f"parity must be 0 (pos), 1 (neg) or 2 (both), got {value!r}")
+        raise StarnavError(f"parity must be 0 (pos), 1 (neg) or 2 (both), got {shown(value)}")
     return table[value]
 
 

@@ -21,7 +21,7 @@ import numpy as np
 
 from starnav.camera import CameraModel
 from starnav.catalog import Catalog
-from starnav.errors import CatalogError, StarnavError
+from starnav.errors import CatalogError, StarnavError, shown
 from starnav.identify import DEFAULT_ALGORITHM, MatchSettings, PairDatabase, make_identifier
 from starnav.identify.base import Identification, Identifier, IdentifyOutcome
 from starnav.identify.database import build_database, database_angle_deg
@@ -69,16 +69,16 @@ class SolveSettings:
     def __post_init__(self) -> None:
         s = self.sigma_px
         if s is not None and not (np.isfinite(s) and s > 0):
-            raise StarnavError(f"sigma_px must be a positive number of pixels, got {s!r}")
+            raise StarnavError(f"sigma_px must be a positive number of pixels, got {shown(s)}")
         if self.parity not in (None, 1, -1):
-            raise StarnavError(f"parity must be +1, -1 or None, got {self.parity!r}")
+            raise StarnavError(f"parity must be +1, -1 or None, got {shown(self.parity)}")
         if not 0.0 <= self.min_matched_fraction <= 1.0:
             raise StarnavError(
-                f"min_matched_fraction must be in [0, 1], got {self.min_matched_fraction!r}"
+                f"min_matched_fraction must be in [0, 1], got {shown(self.min_matched_fraction)}"
             )
         p = self.max_false_match_probability
         if not 0.0 < p < 1.0:
-            raise StarnavError(f"max_false_match_probability must be in (0, 1), got {p!r}")
+            raise StarnavError(f"max_false_match_probability must be in (0, 1), got {shown(p)}")
 
     @classmethod
     def from_options(cls, options: SolveOptions, *, fit_focal: bool | None = None) -> SolveSettings:
@@ -149,7 +149,9 @@ def check_prior(prior: Solution | np.ndarray | None, prior_sigma_deg: float) -> 
     if R.shape != (3, 3) or not np.allclose(R @ R.T, np.eye(3), atol=1e-6):
         raise StarnavError("prior must be a Solution or a 3x3 rotation (R_cam_from_icrs)")
     if not (np.isfinite(prior_sigma_deg) and 0.0 < prior_sigma_deg <= 30.0):
-        raise StarnavError(f"prior_sigma_deg must be in (0, 30] degrees, got {prior_sigma_deg!r}")
+        raise StarnavError(
+            f"prior_sigma_deg must be in (0, 30] degrees, got {shown(prior_sigma_deg)}"
+        )
     return R
 
 

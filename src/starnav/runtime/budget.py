@@ -29,7 +29,7 @@ import threading
 import time
 from dataclasses import dataclass
 
-from starnav.errors import StarnavError
+from starnav.errors import StarnavError, shown
 
 KNOWN_BUDGET_S = 2.0
 WIDE_BUDGET_S = 10.0
@@ -103,7 +103,7 @@ def check_budget(time_budget_s: float | None, default_s: float) -> float:
     ok = isinstance(time_budget_s, int | float) and not isinstance(time_budget_s, bool)
     if not ok or math.isnan(time_budget_s) or time_budget_s <= 0:
         raise StarnavError(
-            f"time_budget_s must be a positive number of seconds, got {time_budget_s!r}"
+            f"time_budget_s must be a positive number of seconds, got {shown(time_budget_s)}"
         )
     return float(time_budget_s)
 

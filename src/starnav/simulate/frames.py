@@ -16,7 +16,7 @@ import numpy as np
 
 from starnav.camera import Camera
 from starnav.catalog import Catalog
-from starnav.errors import StarnavError
+from starnav.errors import StarnavError, shown
 from starnav.geometry import (
     attitude_difference_deg,
     attitude_from_radec_roll,
@@ -144,21 +144,23 @@ def simulate_frame(
     ``R_cam_from_icrs``; missing values of the former are drawn at random (uniform sky)."""
     for name, value in (("noise_px", noise_px), ("mag_noise", mag_noise)):
         if not (np.isfinite(value) and value >= 0):
-            raise StarnavError(f"{name} must be >= 0, got {value!r}")
+            raise StarnavError(f"{name} must be >= 0, got {shown(value)}")
     if not 0.0 <= missing_frac < 1.0:
-        raise StarnavError(f"missing_frac must be in [0, 1), got {missing_frac!r}")
+        raise StarnavError(f"missing_frac must be in [0, 1), got {shown(missing_frac)}")
     if not 0 <= false_stars <= MAX_FALSE_STARS:
-        raise StarnavError(f"false_stars must be in 0..{MAX_FALSE_STARS}, got {false_stars!r}")
+        raise StarnavError(f"false_stars must be in 0..{MAX_FALSE_STARS}, got {shown(false_stars)}")
     if parity not in (1, -1):
-        raise StarnavError(f"parity must be +1 or -1, got {parity!r}")
+        raise StarnavError(f"parity must be +1 or -1, got {shown(parity)}")
     rng = np.random.default_rng(seed)
     if R_cam_from_icrs is None:
         ra_deg, dec_deg, roll_deg = draw_radec_roll(rng, ra_deg, dec_deg, roll_deg)
         if not -90.0 <= dec_deg <= 90.0:
-            raise StarnavError(f"dec_deg must be within ±90, got {dec_deg!r}")
+            raise StarnavError(f"dec_deg must be within ±90, got {shown(dec_deg)}")
         for name, value in (("ra_deg", ra_deg), ("roll_deg", roll_deg)):
             if not -360.0 <= value <= 720.0:
-                raise StarnavError(f"{name} must be an angle in degrees (0..360), got {value!r}")
+                raise StarnavError(
+                    f"{name} must be an angle in degrees (0..360), got {shown(value)}"
+                )
         R_cam_from_icrs = attitude_from_radec_roll(ra_deg, dec_deg, roll_deg, parity)
     R = np.asarray(R_cam_from_icrs, dtype=float)
     if mag_limit is not None:

@@ -39,7 +39,7 @@ from scipy.special import erf
 
 from starnav.camera import Camera, CameraModel
 from starnav.catalog import Catalog
-from starnav.errors import ImageError, StarnavError
+from starnav.errors import ImageError, StarnavError, shown
 from starnav.geometry import radec_roll_from_attitude
 from starnav.runtime.csvrows import write_rows
 from starnav.simulate import project_catalog
@@ -101,36 +101,40 @@ class RenderSettings:
         for f in fields(self):
             value = getattr(self, f.name)
             if f.name in positive + non_negative and not _is_real(value):
-                raise StarnavError(f"{f.name} must be a number, got {value!r}")
+                raise StarnavError(f"{f.name} must be a number, got {shown(value)}")
             if f.name in positive and not (np.isfinite(value) and value > 0):
-                raise StarnavError(f"{f.name} must be positive, got {value!r}")
+                raise StarnavError(f"{f.name} must be positive, got {shown(value)}")
             if f.name in non_negative and not (np.isfinite(value) and value >= 0):
-                raise StarnavError(f"{f.name} must be >= 0, got {value!r}")
+                raise StarnavError(f"{f.name} must be >= 0, got {shown(value)}")
         if not 0.1 <= self.psf_sigma_px <= 50.0:
-            raise StarnavError(f"psf_sigma_px must be in 0.1..50 px, got {self.psf_sigma_px!r}")
+            raise StarnavError(
+                f"psf_sigma_px must be in 0.1..50 px, got {shown(self.psf_sigma_px)}"
+            )
         if self.bit_depth not in (8, 16) or isinstance(self.bit_depth, bool):
-            raise StarnavError(f"bit_depth must be 8 or 16, got {self.bit_depth!r}")
+            raise StarnavError(f"bit_depth must be 8 or 16, got {shown(self.bit_depth)}")
         if not (_is_int(self.hot_pixels) and self.hot_pixels >= 0):
-            raise StarnavError(f"hot_pixels must be an integer >= 0, got {self.hot_pixels!r}")
+            raise StarnavError(f"hot_pixels must be an integer >= 0, got {shown(self.hot_pixels)}")
         if self.hot_pixel_adu is not None and not (
             _is_real(self.hot_pixel_adu) and np.isfinite(self.hot_pixel_adu)
         ):
             raise StarnavError(
-                f"hot_pixel_adu must be a number or None, got {self.hot_pixel_adu!r}"
+                f"hot_pixel_adu must be a number or None, got {shown(self.hot_pixel_adu)}"
             )
         if self.hot_pixel_adu is not None and self.hot_pixel_adu <= 0:
-            raise StarnavError(f"hot_pixel_adu must be positive, got {self.hot_pixel_adu!r}")
+            raise StarnavError(f"hot_pixel_adu must be positive, got {shown(self.hot_pixel_adu)}")
         if self.mag_limit is not None and not (
             _is_real(self.mag_limit) and np.isfinite(self.mag_limit)
         ):
             raise StarnavError(
-                f"mag_limit must be a finite magnitude or None, got {self.mag_limit!r}"
+                f"mag_limit must be a finite magnitude or None, got {shown(self.mag_limit)}"
             )
         if self.seed is not None and not (_is_int(self.seed) and self.seed >= 0):
-            raise StarnavError(f"seed must be an integer >= 0 or None, got {self.seed!r}")
+            raise StarnavError(f"seed must be an integer >= 0 or None, got {shown(self.seed)}")
         power = self.vignetting_power
         if power is not None and not (_is_real(power) and np.isfinite(power) and power >= 0):
-            raise StarnavError(f"vignetting_power must be a number >= 0 or None, got {power!r}")
+            raise StarnavError(
+                f"vignetting_power must be a number >= 0 or None, got {shown(power)}"
+            )
 
     def vignetting_power_for(self, camera: CameraModel) -> float:
         """The vignetting power used with ``camera`` (``vignetting_power``, or its lens's
@@ -165,7 +169,7 @@ def star_snr(flux_e: np.ndarray | float, settings: RenderSettings) -> np.ndarray
 def flux_e_for_snr(snr: float, settings: RenderSettings) -> float:
     """The star flux (electrons) that ``star_snr`` rates at ``snr``."""
     if not (np.isfinite(snr) and snr > 0):
-        raise StarnavError(f"snr must be positive, got {snr!r}")
+        raise StarnavError(f"snr must be positive, got {shown(snr)}")
     noise2 = 4.0 * np.pi * settings.psf_sigma_px**2 * settings.pixel_variance_e2
     # flux² = snr² (flux + noise2): the positive root
     return float(0.5 * (snr**2 + math.sqrt(snr**4 + 4.0 * snr**2 * noise2)))
@@ -424,7 +428,7 @@ def _render(
     ``pixel_illumination``) scales the sky and drops the starlight where it is 0."""
     if not (_is_int(width) and _is_int(height) and width > 0 and height > 0):
         raise StarnavError(
-            f"width and height must be positive integers, got {width!r} x {height!r}"
+            f"width and height must be positive integers, got {shown(width)} x {shown(height)}"
         )
     xy = np.asarray(xy, dtype=float).reshape(-1, 2)
     flux_e = np.asarray(flux_e, dtype=float).reshape(-1)
