@@ -152,7 +152,7 @@ def test_blank_image_is_not_solved(tmp_path, capsys):
 
 
 def test_a_refused_identification_does_not_end_the_fov_search(sky):
-    # benchmarks/images.py frame 436 (seed 2026): a 7-star chance match at FOV 21.1° passed
+    # benchmarks/peers/images.py frame 436 (seed 2026): a 7-star chance match at FOV 21.1° passed
     # the verification, the fit refused it ("only 7 of 22 stars agree"), and the search
     # stopped there; it must go on to the right answer
     import dataclasses

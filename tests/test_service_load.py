@@ -1,5 +1,5 @@
 """A small load on a real ``starnav serve`` process: concurrent clients, every job answered,
-each answer the solution of its own input (benchmarks/service_load.py is the large one)."""
+each answer the solution of its own input (benchmarks/service/service_load.py is the large one)."""
 
 from __future__ import annotations
 

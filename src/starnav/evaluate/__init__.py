@@ -1,4 +1,5 @@
-"""Whole-sky evaluation: sampling of boresights, runners (processes / Dask), metrics, reports."""
+"""Whole-sky evaluation: sampling of boresights, runners (processes / Dask), the scoring rule
+(``score``, which the benchmarks share), metrics, reports."""
 
 from starnav.evaluate.kinds import KINDS, make_frame, parse_kinds
 from starnav.evaluate.runner import (
@@ -13,9 +14,21 @@ from starnav.evaluate.runner import (
     summarize,
 )
 from starnav.evaluate.sampling import Boresights, grid_boresights, uniform_boresights
+from starnav.evaluate.score import (
+    CORRECT_BORESIGHT_DEG,
+    CORRECT_ROLL_DEG,
+    CORRECT_SIGMAS,
+    AttitudeScore,
+    score_attitude,
+    score_solution,
+)
 
 __all__ = [
+    "CORRECT_BORESIGHT_DEG",
+    "CORRECT_ROLL_DEG",
+    "CORRECT_SIGMAS",
     "KINDS",
+    "AttitudeScore",
     "Boresights",
     "EvalConfig",
     "FrameResult",
@@ -27,6 +40,8 @@ __all__ = [
     "make_frame",
     "parse_kinds",
     "run_evaluation",
+    "score_attitude",
+    "score_solution",
     "solve_frame",
     "summarize",
     "uniform_boresights",

@@ -10,12 +10,14 @@ from pathlib import Path
 import numpy as np
 
 from starnav.evaluate.runner import EvalConfig, FrameResult, OutcomeCounts, Summary
+from starnav.evaluate.score import CORRECT_BORESIGHT_DEG, CORRECT_ROLL_DEG
 from starnav.identify.options import describe_options
 from starnav.pipeline import DEFAULT_MAX_FALSE_MATCH_PROBABILITY
 
 TABLE_HEADER = (
     "| algorithm | frames | correct | wrong | none | correct % | correct % (>= 4 stars) "
-    "| of the correct: beyond 0.05°/0.5° | median ms | p95 ms | max ms | database MB |\n"
+    f"| of the correct: beyond {CORRECT_BORESIGHT_DEG:g}°/{CORRECT_ROLL_DEG:g}° "
+    "| median ms | p95 ms | max ms | database MB |\n"
     "|---|---|---|---|---|---|---|---|---|---|---|---|"
 )
 

@@ -24,7 +24,8 @@ from starnav.catalog import load_catalog
 from starnav.errors import StarnavError, shown
 from starnav.evaluate.kinds import KINDS, NO_ANSWER_KINDS, make_frame, parse_kinds
 from starnav.evaluate.sampling import Boresights, frame_rng
-from starnav.geometry import angle_between, attitude_difference_deg
+from starnav.evaluate.score import score_solution
+from starnav.geometry import angle_between
 from starnav.identify import make_identifier
 from starnav.pipeline import (
     DEFAULT_MAX_FALSE_MATCH_PROBABILITY,
@@ -37,9 +38,6 @@ from starnav.runtime.pools import dask_client, process_pool
 from starnav.simulate import FALSE_STAR_ID, SimulatedFrame, simulate_frame
 from starnav.starlist import check_star_list
 
-CORRECT_BORESIGHT_DEG = 0.05  # a solution is correct within this and ...
-CORRECT_ROLL_DEG = 0.5  # ... this of the truth,
-CORRECT_SIGMAS = 5.0  # or within this many of its own reported 1-sigma errors; else wrong
 STAR_COUNT_BINS = ("0-2", "3", "4", "5", "6", ">=7")  # true stars among a frame's points
 STAR_COUNT_KINDS = ("true", "few", "crowded")  # kinds broken down by those bins
 _CHUNK = 40  # frames per task sent to a worker
@@ -249,26 +247,18 @@ def solve_frame(config: EvalConfig, boresights: Boresights, index: int) -> Frame
             beyond_tolerance=False,
             reason=result.reason,
         )
-    boresight_deg, roll_deg = attitude_difference_deg(s.R_cam_from_icrs, frame.R_cam_from_icrs)
+    score = score_solution(s, frame.R_cam_from_icrs)  # the rule of starnav.evaluate.score
     ids = s.star_table.catalog_id
-    within_tolerance = boresight_deg < CORRECT_BORESIGHT_DEG and roll_deg < CORRECT_ROLL_DEG
-    # NaN sigmas (undetermined) never vouch for an answer
-    within_sigmas = (
-        boresight_deg * 3600.0 <= CORRECT_SIGMAS * s.sigma_boresight_arcsec
-        and roll_deg * 3600.0 <= CORRECT_SIGMAS * s.sigma_roll_arcsec
-    )
-    # a mirrored attitude differs from its unmirrored twin by no angle: the parity must agree
-    same_parity = s.parity == (1 if np.linalg.det(frame.R_cam_from_icrs) > 0 else -1)
-    correct = kind not in NO_ANSWER_KINDS and same_parity and (within_tolerance or within_sigmas)
+    correct = kind not in NO_ANSWER_KINDS and score.correct
     return FrameResult(
         **common,
         outcome="correct" if correct else "wrong",
         time_ms=s.time_ms,
         n_identified=int(np.sum(ids != -1)),
         n_wrong_ids=_wrong_ids(ids, frame.true_id, catalog, camera, config.noise_px),
-        boresight_error_arcsec=boresight_deg * 3600.0,
-        roll_error_arcsec=roll_deg * 3600.0,
-        beyond_tolerance=not within_tolerance,
+        boresight_error_arcsec=score.boresight_arcsec,
+        roll_error_arcsec=score.roll_arcsec,
+        beyond_tolerance=not score.within_tolerance,
         reason="",
         false_match_probability=float(s.false_match_probability),
     )

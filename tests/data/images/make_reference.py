@@ -12,20 +12,21 @@ re-encoded losslessly (deflate TIFF or PNG); the decoded pixels are checked to b
 ``reference`` runs two peer solvers on every file of this folder, each from the image with its
 own star extraction, each inside its own virtual environment (``$STARNAV_CACHE_DIR/venvs/<peer>``,
 default ``~/.cache/starnav``: ``pip install cedar-solve==0.5.1`` and ``pip install
-tetra3rs==0.14.0``, as ``benchmarks/peers.py`` makes them). This file is also the worker that
-runs there (``worker cedar|tetra3rs``): it imports numpy, the peer and, for cedar, the parity
-test of ``benchmarks/peer_cedar.py``, and reads the images as ``.npy`` arrays decoded here with
-Pillow.
+tetra3rs==0.14.0``, as ``benchmarks/peers/peers.py`` makes them). This file is also the worker
+that runs there (``worker cedar|tetra3rs``): it imports numpy, the peer and, for cedar, the
+parity test of ``benchmarks/peers/peer_cedar.py``, and reads the images as ``.npy`` arrays
+decoded here with Pillow.
 
 * cedar-solve: ``Tetra3.solve_from_image`` (its ``get_centroids_from_image`` with defaults),
   shipped database (Hipparcos to magnitude 8, 10-30°, proper motion to 2024.0), ``distortion``
   0, FOV unknown (``fov_estimate`` None) and given (the nominal FOV).
 * tetra3rs: ``extract_centroids`` (defaults) then ``solve_from_centroids`` with the nominal FOV
   (it needs an estimate), its out-of-the-box database: Gaia DR3 + Hipparcos bundled with it,
-  10-30°, proper motion to 2025.0, made by ``benchmarks/peer_tetra3rs.py build-stock`` if absent.
+  10-30°, proper motion to 2025.0, made by ``benchmarks/peers/peer_tetra3rs.py build-stock`` if
+  absent.
 
-Conventions (both checked in ``benchmarks/peer_cedar.py`` / ``peer_tetra3rs.py``): pixel origin
-at the top-left corner for both (cedar: (y, x) with (0.5, 0.5) the top-left pixel centre;
+Conventions (both checked in ``benchmarks/peers/peer_cedar.py`` / ``peer_tetra3rs.py``): pixel
+origin at the top-left corner for both (cedar: (y, x) with (0.5, 0.5) the top-left pixel centre;
 tetra3rs: origin at the image centre, checked here on a synthetic star); RA/Dec are those of the
 image centre (W/2, H/2), FOV the horizontal one. Roll is converted to starnav's (position angle
 of image up, -y, from North through East): cedar's ``Roll`` is North counter-clockwise from up,
@@ -116,7 +117,7 @@ def _worker_cedar(files: list[str], fov_deg: float | None) -> None:
     import tetra3
     from PIL import Image
 
-    sys.path.insert(0, str(ROOT / "benchmarks"))  # the cedar adapter's conventions, checked there
+    sys.path.insert(0, str(ROOT / "benchmarks" / "peers"))  # the cedar adapter's conventions
     from peer_cedar import parity_of_matches, quiet
 
     t3 = tetra3.Tetra3(load_database=None)
@@ -356,7 +357,7 @@ def cmd_reference(args) -> None:
     t3rs_py = venvs / "tetra3rs" / "bin" / "python"
     t3rs_db = cache_root() / "peers" / "tetra3rs" / "stock.bin"
     if not t3rs_db.exists():
-        builder = ROOT / "benchmarks" / "peer_tetra3rs.py"
+        builder = ROOT / "benchmarks" / "peers" / "peer_tetra3rs.py"
         cmd = [str(t3rs_py), "-I", str(builder), "build-stock", "--out", str(t3rs_db)]
         subprocess.run(cmd, check=True)
     out: dict = {

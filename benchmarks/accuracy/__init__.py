@@ -1,0 +1,1 @@
+"""What starnav gets right: simulated star lists and frames, scored against the truth."""

@@ -1,0 +1,1 @@
+"""Solving from pixels: rendered and real images, fisheyes, narrow fields, calibration."""

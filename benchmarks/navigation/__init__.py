@@ -1,0 +1,1 @@
+"""The celestial fix (``starnav locate``, zenith-fixer) and three-star pointing."""

@@ -1,0 +1,1 @@
+"""``starnav serve`` under load and through a real nova client."""

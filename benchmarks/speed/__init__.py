@@ -1,0 +1,1 @@
+"""How fast: batches, image files, time budgets, tracking, detection."""
