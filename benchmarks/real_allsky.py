@@ -7,7 +7,7 @@ when it carries another. The zenith at the site and UTC (astropy, AltAz -> ICRS)
 consistency check of the boresight, not an exact reference: the camera is tilted by a degree
 or two, and the boresight is the direction at the assumed principal point (the image centre).
 
-Run: python benchmarks/real_allsky.py   (prints a markdown table; committed as docs/real_allsky.md)
+Run: python benchmarks/real_allsky.py   (prints a markdown table; docs/wide_field.md holds it)
 """
 
 from __future__ import annotations
