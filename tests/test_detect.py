@@ -105,7 +105,7 @@ def test_render_detect_round_trip_on_the_reference_camera():
     frame = render_frame(catalog, camera, R, dataclasses.replace(settings, seed=12, hot_pixels=20))
     found = detect_stars(frame.image)
     which, _ = _match(found.xy, frame.xy, radius=1.0)
-    # stars closer than ~4 px are one star to a star tracker (docs/domain.md): leave them out
+    # stars closer than ~4 px are one star to a star tracker (../shared/docs/domain.md): drop them
     separation = cKDTree(frame.xy).query(frame.xy, k=2)[0][:, 1]
     bright = (frame.mag <= 6.5) & (separation > 5.0)
     assert bright.sum() > 100

@@ -7,8 +7,8 @@ when it carries another. The zenith at the site and UTC (astropy, AltAz -> ICRS)
 consistency check of the boresight, not an exact reference: the camera is tilted by a degree
 or two, and the boresight is the direction at the assumed principal point (the image centre).
 
-Run: python benchmarks/images/real_allsky.py   (prints a markdown table, quoted in
-docs/wide_field.md)
+Run: python benchmarks/images/real_allsky.py   (prints a markdown table; docs/wide_field.md
+holds it)
 """
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """Unit vectors, angles and attitudes. Pure functions; radians inside, degrees where named.
 
-Attitude convention (docs/domain.md): ``R_cam_from_icrs`` has the camera axes in ICRS as rows
+Attitude convention (docs/conventions.md): ``R_cam_from_icrs`` has the camera axes in ICRS as rows
 (x right, y down, z boresight). A mirrored camera (parity -1) has the same rows, which then
 form a left-handed set (determinant -1), so that ``c = R @ s`` and the pinhole projection hold
 for both parities. Roll is the position angle of image "up" (-y) from North through East.

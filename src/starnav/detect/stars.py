@@ -45,7 +45,7 @@ are the brightest, surest catalog stars, and the centroid of a symmetric saturat
 within ~0.1 px, well inside identification tolerances; their flux is only a lower bound, hence
 first place. ``keep_saturated=False`` drops them (a blooming CCD smears them along columns).
 
-Coordinates: sep puts pixel centres at integer coordinates; ours (docs/domain.md) put the
+Coordinates: sep puts pixel centres at integer coordinates; ours (docs/conventions.md) put the
 top-left pixel's centre at (0.5, 0.5), so 0.5 is added to both.
 """
 

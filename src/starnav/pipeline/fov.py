@@ -43,7 +43,7 @@ from starnav.starlist import StarList, brightness_order, check_star_list, point_
 
 # the narrowest horizontal field searched: a 3° field holds about 12 Hipparcos stars to the
 # deepest band catalog (Hp 8.5; ~8 towards the galactic poles), narrower ones too few to
-# identify and verify on (README, "Field range")
+# identify and verify on (docs/images.md, "Field range")
 FOV_LIMITS_DEG = (3.0, 100.0)
 LENS_FOV_LIMITS_DEG = (10.0, 360.0)  # the focal scan of a fisheye model
 SCAN_STARS = 60  # the focal scan identifies the brightest this many stars,

@@ -8,7 +8,7 @@ of the bit depth (saturation; there is no bias level, so values below 0 ADU clip
 whose centre lies up to 5 PSF sigmas outside the image are drawn too (their light spills in),
 but only stars centred inside are listed as the truth.
 
-Pixel convention (docs/domain.md): origin at the top-left corner of the image, x right, y down;
+Pixel convention (docs/conventions.md): origin at the top-left corner of the image, x right, y down;
 the array is ``image[row=y, col=x]``, so a star at (x, y) = (10.5, 20.5) is centred on pixel
 row 20, column 10. Any lens model (``starnav.camera``) places the stars: the directions it sees
 go through its ``bearings_to_pixels`` (pinhole distortion, fisheye projections alike).
@@ -176,7 +176,7 @@ def flux_e_for_snr(snr: float, settings: RenderSettings) -> float:
 
 
 PRESETS: dict[str, tuple[Camera, RenderSettings]] = {
-    # the two reference cameras of docs/domain.md: the triangle evaluation (stars to mag 6)
+    # the two reference cameras of domain.md (../shared/docs): the triangle evaluation (mag 6)
     # and the positioning set-up (stars to mag 7)
     "seed-512": (Camera.from_fov(12.0, 512, 512), RenderSettings(mag_limit=6.0)),
     "seed-1024": (Camera.from_fov(20.0, 1024, 1024), RenderSettings(mag_limit=7.0)),
