@@ -159,7 +159,7 @@ def _say_compiling() -> None:
     if "notice" not in _LOADED:  # once per process
         _LOADED["notice"] = True
         print(
-            "starnav: compiling the solver's machine code (once per installation, ~1-2 min)",
+            "starnav: compiling the solver's machine code (once per installation, about 1-4 min)",
             file=sys.stderr,
             flush=True,
         )

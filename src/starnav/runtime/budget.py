@@ -9,7 +9,7 @@ between trial focal lengths. So a call overruns its budget by at most one such u
 is spent the answer is "not solved" with the reason
 "time budget spent (...)" and what was tried.
 
-Time spent compiling the machine code (once per installation, 1-2 min) is not counted: the
+Time spent compiling the machine code (once per installation, about 1-4 min) is not counted: the
 first solve after installing would otherwise always run out. numba announces compilations as
 "numba:compile" events, listened to from the first deadline on; loading already compiled code
 (~0.2 s, once per process) is counted.
