@@ -13,7 +13,7 @@ from scipy.integrate import quad
 from starnav.identify import kernels as K
 from starnav.identify.base import MatchSettings
 from starnav.identify.verify import Verification
-from starnav.starlist import StarList, point_magnitudes
+from starnav.starlist import StarList
 
 PX = 1.0 / 2435.68  # rad per px of a 12° / 512 px camera
 SIGMA = 0.5 * PX
@@ -147,7 +147,7 @@ def test_side_ratio_has_expectation_at_most_one():
 def test_point_magnitudes_come_from_the_brightness():
     xy = np.zeros((4, 2))
     stars = StarList(xy, ("a", "b", "c", "d"), np.array([1.0, 100.0, 0.0, -3.0]))
-    mags = point_magnitudes(stars)
+    mags = stars.magnitudes
     assert mags[:2] == pytest.approx([0.0, -5.0])
     assert np.isnan(mags[2:]).all()  # no flux: no magnitude
-    assert point_magnitudes(StarList(xy, stars.labels, None)) is None
+    assert StarList(xy, stars.labels, None).magnitudes is None

@@ -201,13 +201,3 @@ def read_known_stars_csv(path: str | Path) -> KnownStars:
         r_px=None if has_xy else values[:, 2],
         labels=labels,
     )
-
-
-def point_magnitudes(stars: StarList) -> np.ndarray | None:
-    """``stars.magnitudes``."""
-    return stars.magnitudes
-
-
-def brightness_order(stars: StarList) -> np.ndarray:
-    """``stars.order``: rows brightest first."""
-    return stars.order

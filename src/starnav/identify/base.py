@@ -41,7 +41,7 @@ class MatchSettings:
     many (the attitude fit then takes in the rest); ``max_hypotheses``: give up after testing
     this many; ``deadline``: give up when it passes (``starnav.runtime.budget``); ``point_mag``: the
     points' magnitudes (rows as the bearings an identifier is given, NaN: not measured;
-    ``starlist.point_magnitudes``), None when their brightness is not known: then the
+    ``StarList.magnitudes``), None when their brightness is not known: then the
     ``order`` an identifier is given is not the brightness order (``ranked``), and the
     false-match probability weighs no brightness.
     """

@@ -17,9 +17,9 @@ from starnav.catalog import Catalog
 from starnav.geometry import radec_roll_from_attitude
 from starnav.identify.base import Identification, MatchSettings
 from starnav.identify.database import PairDatabase
-from starnav.identify.verify import catalog_mags, kernel_point_mags, point_ranks
+from starnav.identify.verify import catalog_mags, kernel_point_mags
 from starnav.results import Solution, StarTable
-from starnav.starlist import StarList, brightness_order, point_magnitudes
+from starnav.starlist import StarList
 
 
 def kernels():
@@ -59,7 +59,7 @@ def conclude(
     least the reported 1-sigmas are at (``attitude.kernels.at_least_sigma``)."""
     k = kernels()
     xy = np.ascontiguousarray(stars.xy, dtype=np.float64)
-    rank = point_ranks(brightness_order(stars), len(xy))
+    rank = stars.rank
     done = k.conclude(
         np.ascontiguousarray(found.obs_index, dtype=np.int64),
         np.ascontiguousarray(found.cat_index, dtype=np.int64),
@@ -76,7 +76,7 @@ def conclude(
         *settings.kernel_args(),
         float(found.log_sides),
         rank,
-        kernel_point_mags(point_magnitudes(stars), len(xy)),
+        kernel_point_mags(stars.magnitudes, len(xy)),
         catalog_mags(database, stars.brightness is not None),
         int(found.bright_drop),
         float(sigma_px),

@@ -39,7 +39,7 @@ from starnav.runtime.budget import (
     expired,
 )
 from starnav.runtime.caches import process_cache
-from starnav.starlist import StarList, brightness_order, check_star_list, point_magnitudes
+from starnav.starlist import StarList, check_star_list
 
 # the narrowest horizontal field searched: a 3° field holds about 12 Hipparcos stars to the
 # deepest band catalog (Hp 8.5; ~8 towards the galactic poles), narrower ones too few to
@@ -405,7 +405,7 @@ def scan_focal(
     half = math.log1p(0.5 * tol_px / (solver.database.max_angle_rad * f_hi))
     n = math.ceil(0.5 * math.log(f_hi / f_lo) / (2.0 * half) - 1e-9)
     focals = [middle.focal_px * math.exp(2.0 * half * k) for k in sorted(range(-n, n + 1), key=abs)]
-    brightest = brightness_order(stars)[:SCAN_STARS]
+    brightest = stars.order[:SCAN_STARS]
     few = StarList(stars.xy[brightest], tuple(stars.labels[i] for i in brightest), None)
     tried = 0
     for focal in focals:
@@ -446,9 +446,9 @@ def _search_and_fit(
     the ``deadline`` passes; with a position hint (``near``: unit vector, radius in rad) the
     catalog near it is searched first, then the whole sky."""
     t0 = time.perf_counter()
-    order = brightness_order(stars)
+    order = stars.order
     xy_sorted = stars.xy[order]
-    point_mag = point_magnitudes(stars)
+    point_mag = stars.magnitudes
     if point_mag is not None:
         point_mag = point_mag[order][: MatchSettings.max_screen_stars]
     if base.distorted:  # take the known distortion out: the search assumes a pinhole

@@ -37,7 +37,7 @@ from starnav.pipeline.options import (
 from starnav.results import Solution, SolveResult
 from starnav.runtime.budget import Deadline, compiled_s, expired
 from starnav.runtime.caches import process_cache
-from starnav.starlist import StarList, brightness_order, point_magnitudes
+from starnav.starlist import StarList
 
 MAX_PAIRS = 3e7  # largest pair database built (about 0.5 GB)
 MAX_PAIR_DEG = 60.0  # wider fields identify on star triangles of sides up to this (degrees)
@@ -258,9 +258,9 @@ class Solver:
         with first_use("solve"):
             t0 = time.perf_counter()
             bearings = self.camera.pixels_to_bearings(stars.xy)
-            order = brightness_order(stars)
+            order = stars.order
             t1 = time.perf_counter()
-            settings = replace(self.match_settings, point_mag=point_magnitudes(stars))
+            settings = replace(self.match_settings, point_mag=stars.magnitudes)
             if deadline is not None:
                 settings = replace(settings, deadline=deadline)
             outcome, algorithm = self._identify(bearings, order, prior, prior_sigma_deg, settings)
