@@ -194,3 +194,40 @@ def algorithm_options(args: argparse.Namespace) -> dict[str, object]:
     the algorithm declares, plus the shorthands' values for the options it declares."""
     defaults = {option: getattr(args, dest) for dest, option in SHORTHANDS.items()}
     return check_algorithm_options(args.algorithm, dict(args.algorithm_option or []), defaults)
+
+
+def add_frame_errors(
+    p: argparse.ArgumentParser,
+    *,
+    noise_px: float,
+    false_stars: int,
+    missing_frac: float,
+    mag_noise: bool = True,
+) -> None:
+    """--noise-px, --false-stars, --missing-frac (and --mag-noise): the errors of a simulated
+    frame, with this command's defaults."""
+    p.add_argument(
+        "--noise-px",
+        type=finite,
+        default=noise_px,
+        help="centroid noise, 1 sigma (px; default %(default)g)",
+    )
+    p.add_argument(
+        "--false-stars",
+        type=count,
+        default=false_stars,
+        help="false stars added (default %(default)s)",
+    )
+    p.add_argument(
+        "--missing-frac",
+        type=finite,
+        default=missing_frac,
+        help="fraction of the stars dropped (default %(default)g)",
+    )
+    if mag_noise:
+        p.add_argument(
+            "--mag-noise",
+            type=finite,
+            default=0.0,
+            help="magnitude noise, 1 sigma (mag; default %(default)g)",
+        )

@@ -13,6 +13,7 @@ from starnav.cli.common import (
     EXIT_NOT_SOLVED,
     EXIT_OK,
     Subparsers,
+    add_frame_errors,
     count,
     finite,
     positive_int,
@@ -38,21 +39,7 @@ def add_parser(subparsers: Subparsers) -> None:
     p.add_argument(
         "--width", type=positive_int, default=512, help="image width (px; default %(default)s)"
     )
-    p.add_argument(
-        "--noise-px",
-        type=finite,
-        default=0.5,
-        help="centroid noise, 1 sigma (px; default %(default)g)",
-    )
-    p.add_argument(
-        "--false-stars", type=count, default=2, help="false stars added (default %(default)s)"
-    )
-    p.add_argument(
-        "--missing-frac",
-        type=finite,
-        default=0.1,
-        help="fraction of the stars dropped (default %(default)g)",
-    )
+    add_frame_errors(p, noise_px=0.5, false_stars=2, missing_frac=0.1, mag_noise=False)
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(run=run)
 

@@ -12,6 +12,7 @@ from starnav.cli.common import (
     Subparsers,
     add_algorithm,
     add_dask,
+    add_frame_errors,
     algorithm_options,
     check_parent_dir,
     count,
@@ -64,27 +65,7 @@ def add_parser(subparsers: Subparsers) -> None:
         default=DEFAULT_MAG_LIMIT,
         help="Hipparcos Hp limit of the stars simulated and identified (default %(default)g)",
     )
-    p.add_argument(
-        "--noise-px",
-        type=finite,
-        default=0.5,
-        help="centroid noise, 1 sigma (px; default %(default)g)",
-    )
-    p.add_argument(
-        "--false-stars", type=count, default=2, help="false stars per frame (default %(default)s)"
-    )
-    p.add_argument(
-        "--missing-frac",
-        type=finite,
-        default=0.1,
-        help="fraction of the stars dropped (default %(default)g)",
-    )
-    p.add_argument(
-        "--mag-noise",
-        type=finite,
-        default=0.0,
-        help="magnitude noise, 1 sigma (mag; default %(default)g)",
-    )
+    add_frame_errors(p, noise_px=0.5, false_stars=2, missing_frac=0.1)
     p.add_argument(
         "--sigma-px",
         type=finite,

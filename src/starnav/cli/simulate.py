@@ -12,8 +12,8 @@ from starnav.cli.common import (
     add_attitude,
     add_camera,
     add_catalog,
+    add_frame_errors,
     count,
-    finite,
 )
 from starnav.cli.output import print_json
 from starnav.simulate import simulate_frame, write_frame_csv
@@ -25,27 +25,7 @@ def add_parser(subparsers: Subparsers) -> None:
     add_attitude(p)
     add_camera(p)
     add_catalog(p)
-    p.add_argument(
-        "--noise-px",
-        type=finite,
-        default=0.0,
-        help="centroid noise, 1 sigma (px; default %(default)g)",
-    )
-    p.add_argument(
-        "--false-stars", type=count, default=0, help="false stars added (default %(default)s)"
-    )
-    p.add_argument(
-        "--missing-frac",
-        type=finite,
-        default=0.0,
-        help="fraction of the stars dropped (default %(default)g)",
-    )
-    p.add_argument(
-        "--mag-noise",
-        type=finite,
-        default=0.0,
-        help="magnitude noise, 1 sigma (mag; default %(default)g)",
-    )
+    add_frame_errors(p, noise_px=0.0, false_stars=0, missing_frac=0.0)
     p.add_argument("--seed", type=count, help="random seed (default: random)")
     p.add_argument("-o", "--output", required=True, help="frame CSV to write")
     p.add_argument("--json", action="store_true", help="print the truth as one JSON object")
