@@ -27,7 +27,8 @@ import numpy as np
 from lost_in_space import machine
 from starnav.evaluate import EvalConfig, uniform_boresights
 from starnav.evaluate.runner import config_frame, solve_frame
-from starnav.identify import kernels as ik
+from starnav.identify.kernels import evidence as ik
+from starnav.identify.kernels import hypothesis as hk
 from starnav.pipeline import kernels as pk
 
 
@@ -64,8 +65,9 @@ def main() -> int:
                         n_cone=n_cone)  # fmt: skip
         return p
 
-    ik.brightness_log_ratio = pk.brightness_log_ratio = brightness
-    ik.field_false_match = pk.field_false_match = verify
+    # the callers' names are rebound: the hypothesis test's and the fit policy's
+    hk.brightness_log_ratio = pk.brightness_log_ratio = brightness
+    hk.field_false_match = pk.field_false_match = verify
 
     rows = []
     for index in range(args.frames):

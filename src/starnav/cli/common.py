@@ -9,7 +9,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any, Protocol
 
-from starnav.camera import MODELS
+from starnav.camera import MODELS, Camera, Fisheye
 from starnav.catalog import DEFAULT_MAG_LIMIT
 from starnav.errors import StarnavError
 from starnav.identify import ALGORITHMS, DEFAULT_ALGORITHM
@@ -140,6 +140,10 @@ def add_attitude(p: argparse.ArgumentParser) -> None:
     p.add_argument("--parity", type=int, choices=(1, -1), default=1)
 
 
+def _span(pair: tuple[float, float], between: str = " ") -> str:
+    return f"{pair[0]:g}{between}{pair[1]:g}"
+
+
 def add_fov_search(
     p: argparse.ArgumentParser, fov_help: str, *, camera_help: str | None = None
 ) -> None:
@@ -153,18 +157,18 @@ def add_fov_search(
         type=finite,
         metavar=("LO", "HI"),
         default=DEFAULT_FOV_RANGE_DEG,
-        help="horizontal FOV range searched when the FOV is unknown (degrees, within 3-100; "
-        "default 5 40)",
+        help="horizontal FOV range searched when the FOV is unknown (degrees, within "
+        f"{_span(Camera.fov_limits_deg, '-')}; default {_span(DEFAULT_FOV_RANGE_DEG)})",
     )
     if camera_help:
         fov.add_argument("--camera", help=camera_help)
         p.add_argument(
             "--lens",
             choices=tuple(MODELS),
-            default="pinhole",
+            default=Camera.model,
             help="the lens model when no camera file is given (default pinhole); without "
             "--fov-deg a fisheye model's focal length is scanned over --fov-range (default "
-            "120 200 for a fisheye)",
+            f"{_span(Fisheye.default_fov_range_deg)} for a fisheye)",
         )
 
 
