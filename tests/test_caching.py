@@ -33,7 +33,7 @@ def test_kernel_cache_folders_follow_the_sources(monkeypatch, tmp_path):
     caching.kernel_sources_hash.cache_clear()
     try:
         assert caching.kernel_cache_dir() == here  # the same sources: the same folder
-        with (copy / "identify/kernels.py").open("a") as fh:
+        with (copy / "identify/kernels/sky.py").open("a") as fh:
             fh.write("\n# a callee changed\n")
         caching.kernel_sources_hash.cache_clear()
         assert caching.kernel_cache_dir() != here
@@ -48,10 +48,10 @@ def test_kernels_are_cached_in_their_folder_and_numba_config_is_restored():
     cache)."""
     import numba
 
-    from starnav.identify import kernels
+    from starnav.identify.kernels import sky
 
     before = numba.config.CACHE_DIR
-    cache = getattr(kernels.chord, "_cache", None)
+    cache = getattr(sky.chord, "_cache", None)
     if cache is None:  # NUMBA_DISABLE_JIT: plain Python, nothing cached
         return
     assert f"kernels-{caching.kernel_sources_hash()}" in cache.cache_path.split("/")

@@ -65,8 +65,8 @@ def _near_directions(v, radius, rng):
 
 
 def test_the_near_star_grid_answers_as_a_search_of_every_star():
-    from starnav.identify import kernels
     from starnav.identify.database import near_grid
+    from starnav.identify.kernels import sky
 
     rng = np.random.default_rng(5)
     cat = _small_catalog(n=600)
@@ -77,10 +77,10 @@ def test_the_near_star_grid_answers_as_a_search_of_every_star():
     allowed[::7] = False  # a star that is not allowed is not near
     for radius_deg in (0.04, 1.0, 8.0, 40.0):  # 40°: one cell per face
         radius = np.radians(radius_deg)
-        chord2 = kernels.chord(radius) ** 2
+        chord2 = sky.chord(radius) ** 2
         near = near_grid(v, radius)  # as the search builds it: for the match radius
         queries = _near_directions(v, radius, rng)
-        got = np.array([kernels.near_cell(q, chord2, near, v, allowed) for q in queries])
+        got = np.array([sky.near_cell(q, chord2, near, v, allowed) for q in queries])
         d2 = np.sum((queries[:, None, :] - v[None, allowed, :]) ** 2, axis=2)
         expected = np.any(d2 <= chord2, axis=1)
         assert got.sum() > len(v)  # many queries are near a star, many are not

@@ -31,7 +31,7 @@ from starnav.geometry import (
 )
 from starnav.identify import ALGORITHMS
 from starnav.identify.base import MatchSettings
-from starnav.identify.kernels import Q_STAR
+from starnav.identify.kernels.evidence import Q_STAR
 from starnav.identify.pyramid import catalog_triangles
 from starnav.identify.verify import Verification, match_catalog
 from starnav.simulate import FALSE_STAR_ID, simulate_frame

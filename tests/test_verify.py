@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 from scipy.integrate import quad
 
-from starnav.identify import kernels as K
 from starnav.identify.base import MatchSettings
+from starnav.identify.kernels import evidence as K
 from starnav.identify.verify import Verification
 from starnav.starlist import StarList
 

@@ -29,7 +29,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[2]))  # the repository: 
 from benchmarks.harness import machine, table_head
 from starnav.evaluate import EvalConfig, uniform_boresights
 from starnav.evaluate.runner import config_frame, solve_frame
-from starnav.identify import kernels as ik
+from starnav.identify.kernels import evidence as ik
+from starnav.identify.kernels import hypothesis as hk
 from starnav.pipeline import kernels as pk
 
 
@@ -66,8 +67,9 @@ def main() -> int:
                         n_cone=n_cone)  # fmt: skip
         return p
 
-    ik.brightness_log_ratio = pk.brightness_log_ratio = brightness
-    ik.field_false_match = pk.field_false_match = verify
+    # the callers' names are rebound: the hypothesis test's and the fit policy's
+    hk.brightness_log_ratio = pk.brightness_log_ratio = brightness
+    hk.field_false_match = pk.field_false_match = verify
 
     rows = []
     for index in range(args.frames):

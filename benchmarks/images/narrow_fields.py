@@ -8,7 +8,7 @@ camera of the given horizontal FOV (and a 1280 x 720 one at 3°: a wide image ha
 narrowest diagonal), rendered with ``simulate.render`` (PSF sigma 1 px, 0.5 s exposure: stars
 are detected to about Hp 9.5-10, as a small telescope's camera sees them) and solved by
 ``starnav.solve_image`` searching ``--fov-range``. The ``--probe`` rows, fields narrower
-than the search allows (``pipeline.fov.FOV_LIMITS_DEG``), are solved with that limit lifted in
+than the search allows (``Camera.fov_limits_deg``), are solved with that limit lifted in
 this process, to show where the embedded catalog stops being enough.
 
 The sky rendered is the whole embedded Hipparcos catalog *and* the stars Hipparcos lacks: the
@@ -200,10 +200,7 @@ def main() -> None:
     for k, (label, camera) in enumerate(cameras + probes):
         searched = fov_range if k < len(cameras) else (min(args.probe), fov_range[1])
         if k >= len(cameras):  # lifted for the probes only, after every counted row
-            starnav.pipeline.fov.FOV_LIMITS_DEG = (
-                min(args.probe),
-                starnav.pipeline.fov.FOV_LIMITS_DEG[1],
-            )
+            Camera.fov_limits_deg = (min(args.probe), Camera.fov_limits_deg[1])
         pole = 60.0 if "60°" in label else 0.0
         outs = [
             one_frame(hip, camera, args.seed * 1000 + 100 * k + i, searched, pole)

@@ -23,7 +23,7 @@ from scipy.optimize import least_squares
 from scipy.spatial import cKDTree
 
 from starnav.attitude.refine import rotate_by
-from starnav.camera import MODELS, Camera, CameraModel
+from starnav.camera import CameraModel, model_class
 from starnav.catalog import Catalog, load_catalog
 from starnav.errors import StarnavError
 from starnav.pipeline.image import ImageSolveResult, solve_image
@@ -109,8 +109,7 @@ def calibrate(
     ``progress``: optional callable run after each image (e.g. a tqdm ``update``). Other
     keywords go to ``solve_image``.
     """
-    if model not in MODELS:
-        raise StarnavError(f"unknown lens model {model!r}; known: {', '.join(MODELS)}")
+    cls = model_class(model)
     names = [
         str(im) if not isinstance(im, np.ndarray) else f"array {k}" for k, im in enumerate(images)
     ]
@@ -121,7 +120,7 @@ def calibrate(
         names, images, progress, lens=model, fov_deg=fov_deg, fov_range_deg=fov_range_deg,
         catalog=catalog, **options,
     )  # fmt: skip
-    camera, fit = _joint_fit(solved, cat, MODELS[model])
+    camera, fit = _joint_fit(solved, cat, cls)
     camera.check_monotonic("the calibrated camera")
     res = fit.fun
     r = res.reshape(-1, 2)
@@ -155,11 +154,12 @@ def _solve_each(names, images, progress, *, lens, **options):
     """Each image solved with the focal length searched (the pinhole's distortion fitted;
     a fisheye's coefficients left at zero: one image's k1..k4 are a poor start): the solved
     ones of the first solved image's size (name, result) and the others (name, reason)."""
+    pinhole = model_class(lens).kind == "pinhole"
     solved: list[tuple[str, ImageSolveResult]] = []
     failed = []
     shape = None
     for name, image in zip(names, images, strict=True):
-        res = solve_image(image, lens=lens, fit_distortion=lens == Camera.model, **options)
+        res = solve_image(image, lens=lens, fit_distortion=pinhole, **options)
         if progress is not None:
             progress()
         size = (res.detections.width, res.detections.height)

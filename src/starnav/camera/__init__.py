@@ -8,7 +8,15 @@ from starnav.camera.fisheye import (
     Orthographic,
     Stereographic,
 )
-from starnav.camera.model import MODELS, CameraModel, camera_from_dict, load_camera, save_camera
+from starnav.camera.model import (
+    MODELS,
+    CameraModel,
+    camera_from_dict,
+    load_camera,
+    model_class,
+    register_model,
+    save_camera,
+)
 from starnav.camera.pinhole import Camera, focal_px_from_fov
 
 __all__ = [
@@ -24,5 +32,7 @@ __all__ = [
     "camera_from_dict",
     "focal_px_from_fov",
     "load_camera",
+    "model_class",
+    "register_model",
     "save_camera",
 ]

@@ -39,6 +39,14 @@ class Fisheye(Lens):
     cy: float | None = None
     image_circle_deg: float | None = None
 
+    kind = "fisheye"
+    scans_focal = True  # an unknown focal length: the focal scan
+    default_fov_range_deg = (120.0, 200.0)
+    fov_limits_deg = (10.0, 360.0)
+    # a fisheye's distortion over up to 95° from the axis needs more terms than a pinhole's
+    # over its narrower field: choose_sip_order may go to the highest order for it
+    sip_max_order = 9
+
     def __post_init__(self) -> None:
         check_size(self.width, self.height, self.focal_px)
         for name in self.coefficients:
@@ -109,6 +117,7 @@ class Equidistant(Fisheye):
 
     model = "equidistant"
     model_code = 1  # camera.kernels.EQUIDISTANT
+    fits_projection = "ARC"
 
 
 class Equisolid(Fisheye):
@@ -116,6 +125,7 @@ class Equisolid(Fisheye):
 
     model = "equisolid"
     model_code = 2  # camera.kernels.EQUISOLID
+    fits_projection = "ZEA"
 
 
 class Stereographic(Fisheye):
@@ -123,6 +133,7 @@ class Stereographic(Fisheye):
 
     model = "stereographic"
     model_code = 3  # camera.kernels.STEREOGRAPHIC
+    fits_projection = "STG"
 
 
 class Orthographic(Fisheye):
@@ -130,6 +141,7 @@ class Orthographic(Fisheye):
 
     model = "orthographic"
     model_code = 4  # camera.kernels.ORTHOGRAPHIC
+    fits_projection = "SIN"
 
 
 @dataclass(frozen=True)
@@ -144,3 +156,4 @@ class KannalaBrandt(Fisheye):
     model = "kannala-brandt"
     model_code = 5  # camera.kernels.KANNALA_BRANDT
     coefficients = ("k1", "k2", "k3", "k4")
+    fits_projection = "ARC"  # that of its coefficients at zero (equidistant), ARC-SIP with them

@@ -2,8 +2,10 @@
 
 A model class is a frozen dataclass with the fields ``width``, ``height`` (px),
 ``focal_px``, ``cx``, ``cy`` (px), then its coefficients (named in ``coefficients``), and
-the class attributes ``model`` (its name in camera files) and ``model_code`` (its branch of
-``camera.kernels``). ``Lens`` gives it the projection both ways, the field it covers, the
+the class attributes of its facts (``Lens``: its name in camera files, its branch of
+``camera.kernels``, its kind, how an unknown focal length is found, its field-of-view range
+and limits, its FITS projection and SIP order), which the rest of starnav asks instead of
+comparing model names. ``Lens`` gives it the projection both ways, the field it covers, the
 angular scale the tolerances use, the parameter vector of the kernels and the camera file.
 """
 
@@ -12,6 +14,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import math
+from typing import ClassVar
 
 import numpy as np
 
@@ -37,18 +40,43 @@ def check_size(width: float, height: float, focal_px: float) -> None:
         raise CameraError(f"focal_px must be positive, got {shown(focal_px)}")
 
 
+KINDS = ("pinhole", "fisheye")  # the values of ``Lens.kind``
+
+
 class Lens:
-    """Methods every lens model has (mixed into its frozen dataclass)."""
+    """Methods every lens model has (mixed into its frozen dataclass), and the facts each
+    model class declares (``camera.model.register_model`` checks them):
+
+    - ``model``: its name in camera files (the key of ``camera.MODELS``);
+    - ``model_code``: its branch of the ``camera.kernels`` projections;
+    - ``coefficients``: the names of its distortion coefficients, in the order of ``params``;
+    - ``kind``: ``"pinhole"`` (a perspective lens: it sees in front of its image plane only
+      and images its whole sensor) or ``"fisheye"`` (θ from the axis may pass 90°, an image
+      circle may lie on the sensor: detection looks inside it, the renderer vignettes);
+    - ``scans_focal``: whether an unknown focal length is scanned (``pipeline.fov``'s focal
+      scan) rather than searched with 4-star patterns matched up to a scale (the FOV search);
+    - ``default_fov_range_deg``: the horizontal field (degrees) searched when none is given;
+    - ``fov_limits_deg``: the horizontal fields (degrees) a search or a given field may take;
+    - ``fits_projection``: the FITS zenithal projection (CTYPE suffix) whose radius is the
+      model's with its coefficients at zero (``undistorted``); SIP polynomials take the rest;
+    - ``sip_max_order``: the highest SIP order ``output.wcs.choose_sip_order`` goes to.
+    """
 
     width: int
     height: int
     focal_px: float
     cx: float
     cy: float
-    model: str = ""
-    model_code: int = -1
-    coefficients: tuple[str, ...] = ()
     params: np.ndarray
+    model: ClassVar[str] = ""
+    model_code: ClassVar[int] = -1
+    coefficients: ClassVar[tuple[str, ...]] = ()
+    kind: ClassVar[str] = ""
+    scans_focal: ClassVar[bool] = False
+    default_fov_range_deg: ClassVar[tuple[float, float]] = (0.0, 0.0)
+    fov_limits_deg: ClassVar[tuple[float, float]] = (0.0, 0.0)
+    fits_projection: ClassVar[str] = ""
+    sip_max_order: ClassVar[int] = 0
 
     def _centre_and_params(self, params: list[float]) -> None:
         """Fill in the default principal point (the image centre) and ``params``."""
@@ -110,6 +138,11 @@ class Lens:
     def with_focal(self, focal_px: float):
         """The same camera with another focal length."""
         return dataclasses.replace(self, focal_px=focal_px)
+
+    def undistorted(self):
+        """The same camera with its coefficients at zero: the model's own radius r(θ), which
+        its ``fits_projection`` describes exactly (SIP polynomials map the distortion to it)."""
+        return dataclasses.replace(self, **dict.fromkeys(self.coefficients, 0.0))
 
     def pixels_to_bearings(self, xy: np.ndarray) -> np.ndarray:
         """Unit bearing vectors (n, 3) in the camera frame for pixel positions (n, 2)."""

@@ -43,6 +43,15 @@ class Camera(Lens):
     model = "pinhole"
     model_code = 0  # camera.kernels.PINHOLE
     coefficients = ("k1", "k2")  # the model's coefficients, in the order of ``params``
+    kind = "pinhole"
+    scans_focal = False  # an unknown field of view: the FOV search (4-star patterns)
+    default_fov_range_deg = (5.0, 40.0)
+    # the narrowest horizontal field searched: a 3° field holds about 12 Hipparcos stars to the
+    # deepest band catalog (Hp 8.5; ~8 towards the galactic poles), narrower ones too few to
+    # identify and verify on (README, "Field range")
+    fov_limits_deg = (3.0, 100.0)
+    fits_projection = "TAN"  # TAN-SIP with distortion
+    sip_max_order = 7
 
     def __post_init__(self) -> None:
         check_size(self.width, self.height, self.focal_px)

@@ -16,6 +16,7 @@ from starnav.api import (
     SolveOptions,
     solve_stars,
 )
+from starnav.camera import model_class
 from starnav.cli.common import (
     EXIT_BAD_INPUT,
     EXIT_NOT_SOLVED,
@@ -145,8 +146,8 @@ def _check_fov_search(args: argparse.Namespace, prior: np.ndarray | None) -> Non
         "without it the FOV search picks the catalog depth of each FOV band and fits the "
         "focal length"
     )
-    wide = args.lens != "pinhole"  # the focal scan of a fisheye model takes a catalog depth
-    if prior is not None or args.algorithm != DEFAULT_ALGORITHM or (args.mag_limit and not wide):
+    scanned = model_class(args.lens).scans_focal  # the focal scan takes a catalog depth
+    if prior is not None or args.algorithm != DEFAULT_ALGORITHM or (args.mag_limit and not scanned):
         raise StarnavError(f"--prior-*, --algorithm and --mag-limit need --fov-deg ({why})")
     if args.algorithm_option:
         raise StarnavError(f"--algorithm-option needs --fov-deg ({why})")

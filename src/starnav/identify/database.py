@@ -106,10 +106,10 @@ class PairDatabase:
 
     def cone(self, axis: np.ndarray, radius_rad: float) -> np.ndarray:
         """Catalog row indices within ``radius_rad`` of the unit vector ``axis``."""
-        from starnav.identify import kernels  # numba: loaded on first use
+        from starnav.identify.kernels.sky import cone  # numba: loaded on first use
 
         work = np.empty(len(self.catalog), dtype=np.int64)
-        n = kernels.cone(
+        n = cone(
             np.ascontiguousarray(axis, dtype=np.float64),
             chord_from_angle(radius_rad) ** 2,
             self.sky,

@@ -8,7 +8,7 @@ whole field: the hypothesis's attitude reprojects the catalog, the agreeing star
 and the answer is accepted only when the chance of a wrong hypothesis agreeing as well is below
 the threshold. Parity comes from the orientation of the triangle (the sign of the triple
 product) and is tested both ways when the triangle is too flat to tell. The loop is the kernel
-``identify.kernels.triangle_search``, shared with Liebe's triangle method and tracking, which
+``identify.kernels.search.triangle_search``, shared with Liebe's triangle method and tracking, which
 differ only in the triangles they give it (and tracking in the catalog stars it allows).
 """
 
@@ -27,7 +27,7 @@ from starnav.identify.base import (
     screen_stars_only,
 )
 from starnav.identify.database import PairDatabase
-from starnav.identify.verify import HypothesisTester, Tally, kernels
+from starnav.identify.verify import HypothesisTester, Tally
 
 # with the points in brightness order and a field up to NARROW_DEG across, Pyramid gives up
 # after this many hypotheses: the early triangles are the likely ones (at the default options
@@ -75,24 +75,22 @@ def catalog_triangles(
 ) -> np.ndarray:
     """Catalog index triples (a, b, c), shape (m, 3), whose sides ab, ac, bc agree with the
     measured sides ij, ik, jk within ``tol_rad``."""
+    from starnav.identify.kernels import triangles
+
     n = len(database.catalog)
-    return (
-        kernels()
-        .catalog_triangles(
-            database.pair_a,
-            database.pair_b,
-            database.pair_angle_rad,
-            database.catalog.vectors,
-            database.everything,
-            side_ij,
-            side_ik,
-            side_jk,
-            tol_rad,
-            np.full(n, -1, dtype=np.int64),
-            np.zeros(n, dtype=np.bool_),
-        )
-        .astype(np.intp)
-    )
+    return triangles.catalog_triangles(
+        database.pair_a,
+        database.pair_b,
+        database.pair_angle_rad,
+        database.catalog.vectors,
+        database.everything,
+        side_ij,
+        side_ik,
+        side_jk,
+        tol_rad,
+        np.full(n, -1, dtype=np.int64),
+        np.zeros(n, dtype=np.bool_),
+    ).astype(np.intp)
 
 
 def match_triangles(
@@ -108,13 +106,16 @@ def match_triangles(
     catalog triangles of each, screen them all at once, verify the best until one is accepted
     or the hypothesis budget is spent. ``allowed``: a mask of the catalog rows the search may
     use (default all); ``order``: the rows best-first (``HypothesisTester``)."""
+    from starnav.identify.kernels.hypothesis import NOT_FOUND, OUT_OF_TIME
+    from starnav.identify.kernels.search import triangle_search
+
     bearings = np.ascontiguousarray(bearings, dtype=np.float64)
     triangles = np.ascontiguousarray(triangles, dtype=np.int64).reshape(-1, 3)
     tester = HypothesisTester(bearings, database, settings, Tally(), allowed, order=order)
     # catalog triangles of a pair table of the whole catalog are made of any stars: their
     # brightness is evidence; of the brightest stars only (wide fields), it is not
     bright_drop = 0 if database.pair_stars in (0, len(database.catalog)) else 3
-    search = kernels().triangle_search
+    search = triangle_search
     radius_rad, sigmas_rad = settings.kernel_args()
     args = (
         bearings,
@@ -147,10 +148,10 @@ def match_triangles(
     r = search(*args, math.inf if deadline is None else deadline.end_time)
     tester.tally.hypotheses, tester.tally.proposed = int(r.hypotheses), int(r.proposed)
     tester.tally.best_p = float(r.best_p)
-    if r.status == kernels().OUT_OF_TIME:
+    if r.status == OUT_OF_TIME:
         tried = f"{r.hypotheses} hypotheses, {r.proposed} verified"
         return IdentifyOutcome(None, deadline.reason(tried), int(r.hypotheses))
-    if r.status == kernels().NOT_FOUND:
+    if r.status == NOT_FOUND:
         return tester.outcome(NO_TRIANGLE)
     outcome = tester.tested(
         r.status, r.obs, r.cat, r.R, int(r.parity), float(r.p), float(r.log_sides), bright_drop

@@ -17,7 +17,6 @@ import numpy as np
 from starnav.identify.base import IdentifyOutcome, MatchSettings, screen_stars_only
 from starnav.identify.database import PairDatabase
 from starnav.identify.pyramid import FEWER_THAN_3, match_triangles, triangle_order
-from starnav.identify.verify import kernels
 
 
 class Tracking:
@@ -47,8 +46,10 @@ class Tracking:
         order = np.asarray(order)[: settings.max_stars]
         if len(order) < 3:
             return IdentifyOutcome(None, FEWER_THAN_3, 0)
+        from starnav.identify.kernels.sky import prior_mask
+
         bearings = np.ascontiguousarray(bearings, dtype=np.float64)
-        allowed = kernels().prior_mask(
+        allowed = prior_mask(
             bearings, self.R_prior, settings.match_radius_rad, self.sigma_rad, database.sky
         )
         return match_triangles(

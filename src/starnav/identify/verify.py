@@ -13,8 +13,9 @@ near it lowers the odds. With no sigma told, the best of a few sigmas is taken (
 multiplies p). Derivation and calibration: docs/verification.md.
 
 The arithmetic and the accept / mirror decision are the kernels of ``identify.kernels``
-(``pair_catalog``, ``false_match``, ``test_hypothesis``); this module is their Python face
-for the algorithms that propose hypotheses one at a time.
+(``pairing.pair_catalog``, ``evidence.false_match``, ``hypothesis.test_hypothesis``),
+imported on first use (numba takes ~0.2 s to load); this module is their Python face for the
+algorithms that propose hypotheses one at a time.
 """
 
 from __future__ import annotations
@@ -30,13 +31,6 @@ from starnav.runtime.budget import expired
 AMBIGUOUS_PARITY = (
     "parity ambiguous: the identified stars are nearly collinear (give the parity to solve)"
 )
-
-
-def kernels():
-    """The identification kernels (imported on first use: numba takes ~0.2 s to load)."""
-    from starnav.identify import kernels
-
-    return kernels
 
 
 @dataclass(frozen=True)
@@ -61,10 +55,12 @@ class Verification:
     ) -> float:
         """False-match probability of these pairs among ``n_stars`` points, ``n_used`` of
         which built the hypothesis, ``hypotheses`` tried, with other evidence of natural-log
-        likelihood ratio ``log_other`` (``identify.kernels.false_match``)."""
+        likelihood ratio ``log_other`` (``identify.kernels.evidence.false_match``)."""
+        from starnav.identify.kernels.evidence import false_match
+
         radius, sigmas = settings.kernel_args()
         return float(
-            kernels().false_match(
+            false_match(
                 self.distance_rad,
                 self.n_cone,
                 self.field_area,
@@ -81,7 +77,9 @@ class Verification:
 def field_radius_rad(bearings: np.ndarray, radius_rad: float) -> float:
     """Half-angle (radians) of the cone about the boresight holding every bearing, grown by
     the match radius: the field the chance of agreement is reckoned over."""
-    return float(kernels().field_radius(np.ascontiguousarray(bearings, dtype=float), radius_rad))
+    from starnav.identify.kernels.sky import field_radius
+
+    return float(field_radius(np.ascontiguousarray(bearings, dtype=float), radius_rad))
 
 
 def match_catalog(
@@ -100,10 +98,11 @@ def match_catalog(
     its predicted position error, so that a star far from the ones that made a poorly fixed
     attitude (e.g. all in one corner) can still be found.
     """
-    k = kernels()
+    from starnav.identify.kernels.pairing import pair_catalog
+
     gate = rotation_cov_rad2 is not None
     cov = np.zeros((3, 3)) if rotation_cov_rad2 is None else rotation_cov_rad2
-    v = k.pair_catalog(
+    v = pair_catalog(
         np.ascontiguousarray(bearings, dtype=np.float64),
         np.ascontiguousarray(R_cam_from_icrs, dtype=np.float64),
         database.sky,
@@ -156,12 +155,13 @@ def best_case_probability(
     holding a single catalog star, with the brightness at its best on any field and no point
     scored but the agreeing ones (no field scores better): a screen bound; a hypothesis that
     cannot beat the threshold even so is not verified."""
-    k = kernels()
+    from starnav.identify.kernels.evidence import best_case_false_match, brightness_log_bound
+
     radius, sigmas = settings.kernel_args()
     area = 1.0 - np.cos(field_rad)
-    bright = k.brightness_log_bound(n_agree, 3, 1e9, settings.ranked)
+    bright = brightness_log_bound(n_agree, 3, 1e9, settings.ranked)
     n = min(n_agree, n_stars)
-    return float(k.best_case_false_match(n, n, 3, 1, area, hypotheses, sigmas, radius, bright))
+    return float(best_case_false_match(n, n, 3, 1, area, hypotheses, sigmas, radius, bright))
 
 
 @dataclass
@@ -178,7 +178,7 @@ class HypothesisTester:
     """The verification step every identification algorithm shares.
 
     An algorithm proposes hypotheses (measured rows paired with catalog rows, and a parity);
-    ``test`` runs the one hypothesis test (``identify.kernels.test_hypothesis``): the
+    ``test`` runs the one hypothesis test (``identify.kernels.hypothesis``): the
     attitude (Wahba), the whole field reprojected, accepted when its false-match probability,
     corrected for every hypothesis counted so far, is below the threshold and its mirror image
     does not verify too. ``outcome`` gives the reason when nothing was accepted. Count
@@ -231,12 +231,13 @@ class HypothesisTester:
         self, obs_rows: np.ndarray, cat_rows: np.ndarray, parity: int
     ) -> IdentifyOutcome | None:
         """Verify one hypothesis; an outcome when it is accepted or found ambiguous."""
-        k = kernels()
+        from starnav.identify.kernels.hypothesis import test_hypothesis
+
         self.tally.proposed += 1
         s = self.settings
         if self._work is None:
             self._work = np.empty(len(self.database.catalog), dtype=np.int64)
-        r = k.test_hypothesis(
+        r = test_hypothesis(
             self.bearings,
             np.ascontiguousarray(obs_rows, dtype=np.int64),
             np.ascontiguousarray(cat_rows, dtype=np.int64),
@@ -270,11 +271,12 @@ class HypothesisTester:
         bright_drop: int = 4,
     ) -> IdentifyOutcome | None:
         """The outcome of a kernel's test (None when rejected), the tally updated."""
-        k = kernels()
+        from starnav.identify.kernels.hypothesis import AMBIGUOUS, REJECTED
+
         self.tally.best_p = min(self.tally.best_p, p)
-        if status == k.REJECTED:
+        if status == REJECTED:
             return None
-        if status == k.AMBIGUOUS:
+        if status == AMBIGUOUS:
             return IdentifyOutcome(None, AMBIGUOUS_PARITY, self.tally.hypotheses)
         found = Identification(
             obs.astype(np.intp),

@@ -7,19 +7,21 @@ centre, so ``fits = ours + 0.5`` on both axes and astropy's 0-based pixel coordi
 array as it is (a viewer that puts FITS y = 1 at the bottom shows it upside down compared with
 a PNG of the same array, and the sky on it correctly).
 
-Each lens model gets the zenithal projection whose radius is its own (``PROJECTIONS``):
-pinhole TAN, equidistant ARC, stereographic STG, equisolid ZEA, orthographic SIN, and
-Kannala-Brandt ARC with SIP polynomials. The reference point (CRVAL) is the camera's z axis,
-the principal point is CRPIX, and the CD matrix maps pixel offsets to intermediate world
-coordinates (x toward East, y toward North, degrees): a direction θ from the axis lies at
-image radius f g(θ) and at R = (180/π) g(θ) degrees in its projection (TAN: g = tan θ, ARC:
-θ, STG: 2 tan(θ/2), ZEA: 2 sin(θ/2), SIN: sin θ), so one CD matrix, (180/π)/f deg/px times the
-camera's rotation on the sky, serves them all. A mirrored attitude (determinant -1) simply
-gives a CD matrix of the other sign of determinant. A model with distortion (the pinhole's
-``k1``, ``k2``; Kannala-Brandt's ``k1``..``k4``) gets SIP polynomials fitted by least squares
-over the image (within its image circle): A/B from measured pixel offsets to those of the same
-projection without distortion (TAN-SIP, ARC-SIP), AP/BP back (``fit_sip`` tells the fit error
-in pixels).
+Each lens model gets the zenithal projection whose radius is its own (its class's
+``fits_projection``): pinhole TAN, equidistant ARC, stereographic STG, equisolid ZEA,
+orthographic SIN, and Kannala-Brandt ARC with SIP polynomials. The reference point (CRVAL) is
+the camera's z axis, the principal point is CRPIX, and the CD matrix maps pixel offsets to
+intermediate world coordinates (x toward East, y toward North, degrees): a direction θ from
+the axis lies at image radius f g(θ) and at R = (180/π) g(θ) degrees in its projection (TAN:
+g = tan θ, ARC: θ, STG: 2 tan(θ/2), ZEA: 2 sin(θ/2), SIN: sin θ), so one CD matrix, (180/π)/f
+deg/px times the camera's rotation on the sky, serves them all. A mirrored attitude
+(determinant -1) simply gives a CD matrix of the other sign of determinant. A model with
+distortion (the pinhole's ``k1``, ``k2``; Kannala-Brandt's ``k1``..``k4``) gets SIP
+polynomials fitted by least squares over the image (within its image circle): A/B from
+measured pixel offsets to those of the same camera with its coefficients at zero
+(``undistorted``: TAN-SIP, ARC-SIP), AP/BP back (``fit_sip`` tells the fit error in pixels),
+of at most its class's ``sip_max_order`` when ``choose_sip_order`` picks it. A new lens model
+needs no entry here: its class declares both facts.
 """
 
 from __future__ import annotations
@@ -35,31 +37,15 @@ from astropy.io import fits
 from astropy.time import Time
 from astropy.wcs import WCS
 
-from starnav.camera import Camera, CameraModel, Equidistant
+from starnav.camera import CameraModel
 from starnav.errors import CameraError, ImageError, StarnavError, shown
 from starnav.geometry import north_east, unit_to_radec
 
 DEFAULT_SIP_ORDER = 4
 MAX_SIP_ORDER = 9
-SIP_AUTO_MAX_ORDER = 7  # highest order choose_sip_order goes to for a pinhole (TAN-SIP)
 SIP_GOOD_ENOUGH_PX = 0.01  # fit error choose_sip_order asks for
 SIP_GRID_POINTS = 41  # per image axis: the grid the polynomials are fitted and checked on
 _ROUND_TRIP_TOLERANCE_PX = 1e-3
-# FITS projection code of each lens model (camera-file name): the one whose radius is the
-# model's, or, for a model with distortion, that of the model it reduces to without it
-PROJECTIONS = {
-    "pinhole": "TAN",
-    "equidistant": "ARC",
-    "equisolid": "ZEA",
-    "stereographic": "STG",
-    "orthographic": "SIN",
-    "kannala-brandt": "ARC",
-}
-# the undistorted camera the SIP polynomials of a distorted model map to
-_UNDISTORTED = {"pinhole": Camera, "kannala-brandt": Equidistant}
-# a fisheye's distortion over up to 95° from the axis needs more terms than a pinhole's over
-# its narrower field: choose_sip_order may go to the highest order for it
-_AUTO_MAX_ORDER = {"pinhole": SIP_AUTO_MAX_ORDER, "kannala-brandt": MAX_SIP_ORDER}
 
 
 @dataclass(frozen=True, eq=False)
@@ -132,18 +118,18 @@ def _check_order(order: int) -> int:
 
 def projection(camera: CameraModel) -> str:
     """The FITS projection code (``TAN``, ``ARC``, ``STG``, ``ZEA``, ``SIN``) of the camera's
-    lens model; SIP polynomials are added when it has distortion (``camera.distorted``)."""
-    if camera.model not in PROJECTIONS:
+    lens model (its ``fits_projection``); SIP polynomials are added when it has distortion
+    (``camera.distorted``)."""
+    code = getattr(camera, "fits_projection", "")
+    if not code:
         raise CameraError(f"no FITS projection for the {camera.model!r} lens model")
-    return PROJECTIONS[camera.model]
+    return code
 
 
 def _undistorted(camera: CameraModel) -> CameraModel:
-    if camera.model not in _UNDISTORTED:
+    if not camera.coefficients:
         raise CameraError(f"the {camera.model} model has no distortion to fit SIP polynomials to")
-    return _UNDISTORTED[camera.model](
-        camera.width, camera.height, camera.focal_px, camera.cx, camera.cy
-    )
+    return camera.undistorted()
 
 
 def _fit_points(camera: CameraModel) -> np.ndarray:
@@ -173,7 +159,8 @@ def fit_sip(camera: CameraModel, *, order: int = DEFAULT_SIP_ORDER) -> SipFit:
     ``k2``: TAN-SIP) or Kannala-Brandt camera (``k1``..``k4``: ARC-SIP).
 
     They map the camera's pixel offsets from the principal point to those of the same camera
-    without distortion (pinhole: ``r = f tan θ``, Kannala-Brandt: ``r = f θ``). Fitted on the
+    without distortion (``camera.undistorted()``, its coefficients at zero; pinhole:
+    ``r = f tan θ``, Kannala-Brandt: ``r = f θ``). Fitted on the
     pixels of ``_fit_points`` (a grid over the image, within its image circle). A radial model
     has odd terms only, so an even order fits as well as the odd order below it; the pinhole's
     inverse AP/BP is exact once order >= 3 (k1 only) or 5 (with k2).
@@ -217,10 +204,10 @@ def choose_sip_order(
 ) -> int:
     """The lowest SIP order from ``DEFAULT_SIP_ORDER`` up whose fit of the camera's
     distortion is good to ``max_error_px`` over the image (wide fields need more), at most
-    ``highest`` (None: ``SIP_AUTO_MAX_ORDER`` for a pinhole, ``MAX_SIP_ORDER`` for
+    ``highest`` (None: its model's ``sip_max_order``, 7 for a pinhole, 9 for
     Kannala-Brandt); ``DEFAULT_SIP_ORDER`` for a camera without distortion."""
     if highest is None:
-        highest = _AUTO_MAX_ORDER.get(camera.model, SIP_AUTO_MAX_ORDER)
+        highest = camera.sip_max_order
     order = DEFAULT_SIP_ORDER
     while camera.distorted and order < highest:
         if fit_sip(camera, order=order).max_error_px <= max_error_px:

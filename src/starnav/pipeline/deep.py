@@ -4,7 +4,7 @@ A pair table of a catalog to Hp 12 is too large for a 6° field (``solver.MAX_PA
 solve identifies on a bright catalog and this stage, run after the fit, pairs the points
 the bright identification left without an id with the deep catalog stars near them: a
 cone search on the deep catalog's sky grid and the one-to-one least-squares pairing of
-``identify.kernels.pair_catalog`` (no pair table of the deep catalog is ever built).
+``identify.kernels.pairing.pair_catalog`` (no pair table of the deep catalog is ever built).
 
 The rules (``deep_match``):
 
@@ -62,7 +62,6 @@ import numpy as np
 from starnav.catalog import Catalog, load_catalog
 from starnav.errors import StarnavError, shown
 from starnav.identify.database import sky_grid
-from starnav.identify.verify import kernels
 from starnav.results import Solution, StarTable
 from starnav.starlist import StarList
 
@@ -127,7 +126,9 @@ def deep_match(solution: Solution, stars: StarList, deep: Catalog, *, sigma_px: 
     ``residual_px`` of the newly matched points, ``match_probability`` and ``double`` of
     every point, and ``n_matched``. The attitude, its sigmas and ``false_match_probability``
     (of the bright identification) are unchanged. ``sigma_px``: the told centroid 1-sigma."""
-    k = kernels()
+    from starnav.identify.kernels.pairing import pair_catalog
+    from starnav.identify.kernels.sky import chord, cone
+
     camera, R = solution.camera, np.ascontiguousarray(solution.R_cam_from_icrs)
     table = solution.star_table
     xy = np.asarray(stars.xy, dtype=float)
@@ -150,7 +151,7 @@ def deep_match(solution: Solution, stars: StarList, deep: Catalog, *, sigma_px: 
     free = np.flatnonzero(table.catalog_id < 0)
     if len(free):
         allowed = owner < 0
-        pairs = k.pair_catalog(
+        pairs = pair_catalog(
             np.ascontiguousarray(bearings[free]),
             R,
             sky,
@@ -165,12 +166,12 @@ def deep_match(solution: Solution, stars: StarList, deep: Catalog, *, sigma_px: 
 
     # contested groups (a point with two or more stars in its circle, or a star in two
     # circles) decided again, by likelihood: the most pairs, then position and brightness
-    chord2 = k.chord(radius_rad) ** 2
+    chord2 = chord(radius_rad) ** 2
     sky_dir = bearings @ R  # rows: R^T b, the points' directions in ICRS
     takes_part = (table.catalog_id < 0) | (row_of >= 0)  # not a bright id the deep lacks
     edges = []
     for p in np.flatnonzero(takes_part):
-        m = k.cone(np.ascontiguousarray(sky_dir[p]), chord2, sky, everything, work)
+        m = cone(np.ascontiguousarray(sky_dir[p]), chord2, sky, everything, work)
         edges.extend((p, int(r)) for r in work[:m])
     edges.extend((int(p), int(row_of[p])) for p in held)  # even beyond the circle
     mag_sigma, zero_point = _magnitude_model(stars, row_of, deep)
@@ -208,7 +209,7 @@ def deep_match(solution: Solution, stars: StarList, deep: Catalog, *, sigma_px: 
     )
     # chance neighbours: deep stars over the field, false points over the image
     half = camera.half_diagonal_rad
-    n_field = k.cone(np.ascontiguousarray(R[2]), k.chord(half) ** 2, sky, everything, work)
+    n_field = cone(np.ascontiguousarray(R[2]), chord(half) ** 2, sky, everything, work)
     stars_per_px2 = n_field / (2.0 * math.pi * (1.0 - math.cos(half))) / scale**2
     false_per_px2 = max(n - len(matched), 1) / (camera.width * camera.height)
     chance = stars_per_px2 + false_per_px2 + companions

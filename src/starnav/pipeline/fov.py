@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from starnav.camera import MODELS, Camera, CameraModel, focal_px_from_fov
+from starnav.camera import Camera, CameraModel, Fisheye, focal_px_from_fov, model_class
 from starnav.catalog import Catalog, load_catalog
 from starnav.errors import CatalogError, StarnavError, shown
 from starnav.geometry import radec_to_unit
@@ -44,8 +44,8 @@ from starnav.starlist import StarList, check_star_list
 # the narrowest horizontal field searched: a 3° field holds about 12 Hipparcos stars to the
 # deepest band catalog (Hp 8.5; ~8 towards the galactic poles), narrower ones too few to
 # identify and verify on (docs/images.md, "Field range")
-FOV_LIMITS_DEG = (3.0, 100.0)
-LENS_FOV_LIMITS_DEG = (10.0, 360.0)  # the focal scan of a fisheye model
+FOV_LIMITS_DEG = Camera.fov_limits_deg  # (the lens classes hold the limits: these name them)
+LENS_FOV_LIMITS_DEG = Fisheye.fov_limits_deg  # the focal scan of a fisheye model
 SCAN_STARS = 60  # the focal scan identifies the brightest this many stars,
 SCAN_HYPOTHESES = 2000  # testing at most this many hypotheses per trial focal length
 GIVEN_FOV_TOLERANCE = 0.05  # a given FOV is searched within +-5 %
@@ -222,7 +222,7 @@ def fov_limits_deg(lens: str = "pinhole") -> tuple[float, float]:
     ``LENS_FOV_LIMITS_DEG`` for the fisheye models (their focal scan). The one definition
     ``search_range`` (images, plates, unknown-FOV lists) and the commands that take
     ``--fov-deg`` / ``--fov-range`` (``solve``, ``identify``, ``calibrate``) check against."""
-    return FOV_LIMITS_DEG if lens == "pinhole" else LENS_FOV_LIMITS_DEG
+    return tuple(model_class(lens).fov_limits_deg)
 
 
 def check_fov_deg(fov_deg: float, lens: str = "pinhole") -> float:
@@ -288,12 +288,12 @@ def solve_unknown_field(
     height = width if height is None else height
     if camera is not None:
         base = camera
-    elif not options.fisheye:
+    elif not options.scans_focal:
         base = Camera.from_fov(0.5 * (lo + hi), width, height)
     else:  # the scan sets the focal length
-        base = MODELS[lens](int(width), int(height), 1.0)
+        base = options.lens_class(int(width), int(height), 1.0)
     default_s = default_budget_s(
-        known=options.field_known, scan=options.fisheye, field_deg=base.diagonal_deg
+        known=options.field_known, scan=options.scans_focal, field_deg=base.diagonal_deg
     )
     budget_s = check_budget(options.time_budget_s, default_s)
     stars = check_star_list(
@@ -309,7 +309,7 @@ def solve_unknown_field(
         return solver.solve(
             stars, prior=prior, prior_sigma_deg=options.prior_sigma_deg, deadline=deadline
         )
-    if options.fisheye:
+    if options.scans_focal:
         cat = load_catalog(catalog, mag_limit=mag_limit, epoch_year=epoch_year)
         focal_range = lens_focal_range(base, camera, (lo, hi))
         solver = Solver(
@@ -351,7 +351,7 @@ def tracking_solver(
     cat_key = catalog.fingerprint if isinstance(catalog, Catalog) else str(catalog)
     key = (camera, cat_key, epoch_year, mag_limit, settings)
     if key not in _TRACKING:
-        if camera.model == "pinhole" and mag_limit is None:
+        if not camera.scans_focal and mag_limit is None:
             full = search_catalog(catalog, epoch_year)
             cat = full.brighter_than(band_mag_limit(camera.diagonal_deg, np.sort(full.mag)))
         else:

@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from starnav.camera import CameraModel
+from starnav.camera import CameraModel, model_class
 from starnav.catalog import Catalog
 from starnav.detect.circle import find_image_circle
 from starnav.detect.header import ImageHints, fits_hints, is_fits
@@ -145,7 +145,7 @@ def solve_image(
         return ImageSolveResult(None, reason, found, None, read_ms, detect_ms, 0.0, hints=hints)
     if options.epoch_year is None and hints.epoch_year is not None:
         options = replace(options, epoch_year=hints.epoch_year)
-    searched = not options.field_known and not options.fisheye
+    searched = not options.field_known and not options.scans_focal
     result = _solve_hinted(
         found.xy,
         (width, height),
@@ -203,7 +203,9 @@ def _default_budget_s(options: SolveOptions, pixels: np.ndarray) -> float:
     else:
         fov = options.fov_deg
         field_deg = diagonal_fov_deg(fov, width, height) if fov else 0.0
-    return default_budget_s(known=options.field_known, scan=options.fisheye, field_deg=field_deg)
+    return default_budget_s(
+        known=options.field_known, scan=options.scans_focal, field_deg=field_deg
+    )
 
 
 def _solve_hinted(xy, size, options: SolveOptions, hints: ImageHints, budget_s, position, prior):
@@ -255,10 +257,11 @@ def detect_image(
     fisheye ``lens`` (any model but the pinhole) only inside the image circle found in the
     image; ``threshold_sigma`` over the background noise, the brightest ``max_stars``
     (default ``DEFAULT_MAX_STARS``, ``FISHEYE_MAX_STARS`` for a fisheye)."""
-    if lens != "pinhole":
+    kind = model_class(lens).kind
+    if kind == "fisheye":
         pixels = _outside_circle_masked(pixels)
     if max_stars is None:
-        max_stars = DEFAULT_MAX_STARS if lens == "pinhole" else FISHEYE_MAX_STARS
+        max_stars = DEFAULT_MAX_STARS if kind == "pinhole" else FISHEYE_MAX_STARS
     return detect_stars(pixels, threshold_sigma=threshold_sigma, max_stars=max_stars)
 
 

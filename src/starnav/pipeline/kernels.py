@@ -29,13 +29,9 @@ from starnav.camera.kernels import (
     project,
     sees,
 )
-from starnav.identify.kernels import (
-    brightness_log_ratio,
-    chord,
-    cone,
-    field_false_match,
-    pair_catalog,
-)
+from starnav.identify.kernels.evidence import brightness_log_ratio, field_false_match
+from starnav.identify.kernels.pairing import pair_catalog
+from starnav.identify.kernels.sky import chord, cone
 from starnav.runtime.caching import njit
 
 MAX_REMATCH = 5  # fit / rematch rounds
@@ -302,7 +298,7 @@ def conclude(obs, cat, R, xy, sky, allowed, model, p0, width, height, fit_focal,
     radius; ``sigmas`` (rad): the centroid sigmas the false-match probability takes the best
     of; ``log_sides``: the identification's triangle-side log ratio; ``rank``: the points'
     places in the brightness order, ``point_mag`` their magnitudes, ``mags`` the catalog's
-    (empty: the brightness is not known; ``identify.kernels.field_false_match`` and
+    (empty: the brightness is not known; ``identify.kernels.evidence.field_false_match`` and
     ``brightness_log_ratio``), ``bright_drop`` of the pairs' brightness
     scores left out; ``sigma_px``: the sigma the outlier and rematch rules use;
     ``known_sigma_px``: the centroid sigma when it is known (0: not), the least the reported

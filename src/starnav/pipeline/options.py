@@ -14,7 +14,7 @@ from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
 
-from starnav.camera import MODELS, CameraModel, load_camera
+from starnav.camera import Camera, CameraModel, Fisheye, load_camera, model_class
 from starnav.catalog import Catalog
 from starnav.errors import CameraError, ImageError, StarnavError, shown
 from starnav.identify import ALGORITHMS, DEFAULT_ALGORITHM
@@ -24,8 +24,9 @@ from starnav.runtime.budget import check_budget
 DEFAULT_SIGMA_PX = SEARCH_SIGMA_PX  # the tolerances' sigma when none is told
 DEFAULT_MAX_FALSE_MATCH_PROBABILITY = 1e-4
 DEFAULT_MIN_MATCHED_FRACTION = 0.5
-DEFAULT_FOV_RANGE_DEG = (5.0, 40.0)  # the pinhole FOV search's range when none is given
-DEFAULT_LENS_FOV_RANGE_DEG = (120.0, 200.0)  # a fisheye focal scan's
+# the ranges searched when none is given: the lens model classes say (``default_fov_range_deg``)
+DEFAULT_FOV_RANGE_DEG = Camera.default_fov_range_deg  # the pinhole FOV search's
+DEFAULT_LENS_FOV_RANGE_DEG = Fisheye.default_fov_range_deg  # a fisheye focal scan's
 DEFAULT_PATTERN_STARS = 15  # the brightest this many stars make the 4-star patterns
 POSITION_HINT_RADIUS_DEG = 10.0  # a position hint's boresight is searched first within this
 DEFAULT_MAX_STARS = 50  # an image's brightest detections solved
@@ -103,8 +104,7 @@ class SolveOptions:
             object.__setattr__(self, "algorithm_options", items)
         if self.fov_range_deg is not None:
             object.__setattr__(self, "fov_range_deg", tuple(self.fov_range_deg))
-        if self.lens not in MODELS:
-            raise CameraError(f"unknown lens model {self.lens!r}; known: {', '.join(MODELS)}")
+        model_class(self.lens)  # a one-line error for an unknown model
         if self.algorithm not in ALGORITHMS:
             known = ", ".join(ALGORITHMS)
             raise StarnavError(f"unknown algorithm {self.algorithm!r}; known: {known}")
@@ -156,10 +156,15 @@ class SolveOptions:
         return self.camera.model if self.camera is not None else self.lens
 
     @property
-    def fisheye(self) -> bool:
-        """Whether the lens is one of the fisheye models (its focal length is scanned when not
-        known, not FOV-searched)."""
-        return self.lens_model != "pinhole"
+    def lens_class(self) -> type:
+        """The lens model's class (``starnav.camera.model_class``), which holds its facts."""
+        return model_class(self.lens_model)
+
+    @property
+    def scans_focal(self) -> bool:
+        """Whether the lens model's unknown focal length is scanned (the fisheye models) rather
+        than its field of view searched (the pinhole)."""
+        return self.lens_class.scans_focal
 
     @property
     def field_known(self) -> bool:
@@ -179,7 +184,7 @@ class SolveOptions:
         """The brightest detections of an image solved: ``max_stars`` or the lens's default."""
         if self.max_stars is not None:
             return self.max_stars
-        return FISHEYE_MAX_STARS if self.fisheye else DEFAULT_MAX_STARS
+        return FISHEYE_MAX_STARS if self.lens_class.kind == "fisheye" else DEFAULT_MAX_STARS
 
     @property
     def algorithm_kwargs(self) -> dict[str, Any]:
@@ -189,9 +194,9 @@ class SolveOptions:
 
 def default_fov_range_deg(lens: str) -> tuple[float, float]:
     """The horizontal FOV range (degrees) searched for the ``lens`` model when none is given:
-    ``DEFAULT_FOV_RANGE_DEG`` for the pinhole's FOV search, ``DEFAULT_LENS_FOV_RANGE_DEG``
-    for a fisheye model's focal scan."""
-    return DEFAULT_FOV_RANGE_DEG if lens == "pinhole" else DEFAULT_LENS_FOV_RANGE_DEG
+    its class's ``default_fov_range_deg`` (5-40° for the pinhole's FOV search, 120-200° for a
+    fisheye model's focal scan)."""
+    return tuple(model_class(lens).default_fov_range_deg)
 
 
 def _number(value: object) -> bool:

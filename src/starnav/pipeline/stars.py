@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from starnav.camera import MODELS, CameraModel
+from starnav.camera import CameraModel, model_class
 from starnav.catalog import load_catalog
 from starnav.errors import CameraError, StarnavError
 from starnav.identify import DEFAULT_ALGORITHM
@@ -45,7 +45,7 @@ def make_camera(
         return camera
     if fov_deg is None or width is None:
         raise StarnavError("give the field of view and the image width, or a camera file")
-    return MODELS[lens].from_fov(fov_deg, width, height)
+    return model_class(lens).from_fov(fov_deg, width, height)
 
 
 def known_budget_s(camera: CameraModel) -> float:
@@ -137,7 +137,7 @@ def solve_stars(
             "prior": R_prior is not None,
             "algorithm": options.algorithm != DEFAULT_ALGORITHM,
             "algorithm_options": bool(options.algorithm_options),
-            "mag_limit": options.mag_limit is not None and not options.fisheye,
+            "mag_limit": options.mag_limit is not None and not options.scans_focal,
         }
         if any(needing.values()):
             names = ", ".join(name for name, given in needing.items() if given)

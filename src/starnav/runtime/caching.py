@@ -5,7 +5,7 @@ Both live under ``$STARNAV_CACHE_DIR`` (default ``~/.cache/starnav``). The machi
 ``numba/kernels-<hash>`` there (or under ``$NUMBA_CACHE_DIR`` when that is set), the hash taken
 over the sources of every kernel module together: numba invalidates a cached function when its
 own file changes, not when a function it calls in another file does (``pipeline.kernels``
-calls ``identify.kernels``), so a release that changed only a callee would otherwise run the
+calls ``identify.kernels.pairing``), so a release that changed only a callee would otherwise run the
 old callee's code. numba checks its own version and Python's itself.
 """
 
@@ -23,7 +23,12 @@ KERNEL_SOURCES = (
     "attitude/kernels.py",
     "attitude/rotation.py",
     "camera/kernels.py",
-    "identify/kernels.py",
+    "identify/kernels/evidence.py",
+    "identify/kernels/hypothesis.py",
+    "identify/kernels/pairing.py",
+    "identify/kernels/search.py",
+    "identify/kernels/sky.py",
+    "identify/kernels/triangles.py",
     "pipeline/kernels.py",
 )
 

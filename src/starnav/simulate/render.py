@@ -141,7 +141,7 @@ class RenderSettings:
         default when None)."""
         if self.vignetting_power is not None:
             return float(self.vignetting_power)
-        return 0.0 if isinstance(camera, Camera) else FISHEYE_VIGNETTING_POWER
+        return 0.0 if camera.kind == "pinhole" else FISHEYE_VIGNETTING_POWER
 
     @property
     def full_scale_adu(self) -> int:
@@ -350,7 +350,7 @@ def imaged_directions(camera: CameraModel, c: np.ndarray) -> np.ndarray:
     (inside the image and a fisheye's image circle) projected one to one (the direction's
     pixel unprojects back to it: an orthographic lens folds back past 90° from the axis)."""
     c = np.asarray(c, dtype=float).reshape(-1, 3)
-    if isinstance(camera, Camera):  # one to one in front of it (``sees`` keeps those)
+    if camera.kind == "pinhole":  # one to one in front of it (``sees`` keeps those)
         return np.ones(len(c), dtype=bool)
     back = camera.pixels_to_bearings(camera.bearings_to_pixels(c))
     return (np.sum((back - c) ** 2, axis=1) < _ROUND_TRIP_RAD**2) & camera.sees(c)
@@ -362,13 +362,13 @@ def pixel_illumination(camera: CameraModel, vignetting_power: float) -> np.ndarr
     0 where the lens forms no image (outside its image circle or beyond the radius its model
     reaches), else ``relative_illumination`` of the pixel's direction; None when it is 1
     everywhere (a pinhole without vignetting)."""
-    if isinstance(camera, Camera) and vignetting_power == 0.0:
+    if camera.kind == "pinhole" and vignetting_power == 0.0:
         return None
     cols, rows = np.meshgrid(np.arange(camera.width) + 0.5, np.arange(camera.height) + 0.5)
     xy = np.column_stack([cols.ravel(), rows.ravel()])
     c = camera.pixels_to_bearings(xy)
     values = relative_illumination(c[:, 2], vignetting_power)
-    if not isinstance(camera, Camera):  # a pinhole images its whole sensor
+    if camera.kind != "pinhole":  # a pinhole images its whole sensor
         # pixels past the largest radius of the model unproject to its last angle
         reached = np.sum((camera.bearings_to_pixels(c) - xy) ** 2, axis=1) < _ROUND_TRIP_PX**2
         values[~(reached & camera.sees(c))] = 0.0
