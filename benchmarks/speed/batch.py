@@ -1,4 +1,4 @@
-"""Throughput of solve_batch (many frames, all cores) against one process.
+"""Throughput of solve_stars_batch (many frames, all cores) against one process.
 
     python benchmarks/speed/batch.py --frames 2000
 
@@ -18,7 +18,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))  # the repository: benchmarks.*
 from benchmarks.harness import DOCS, machine, replace_block, table_head, table_row, warm_up
-from starnav.api import solve_batch
+from starnav.api import solve_stars_batch
 from starnav.camera import Camera
 from starnav.catalog import load_catalog
 from starnav.simulate import simulate_frame
@@ -41,7 +41,7 @@ def main() -> None:
     rows = []
     for workers in sorted({1, os.cpu_count() or 1}):
         t0 = time.perf_counter()
-        results = solve_batch(
+        results = solve_stars_batch(
             [f.xy for f in frames],
             brightness=[f.brightness for f in frames],
             workers=workers,
@@ -51,14 +51,14 @@ def main() -> None:
             sigma_px=0.5,
         )
         wall = time.perf_counter() - t0
-        solved = sum(s is not None for s, _, _ in results)
+        solved = sum(r.solution is not None for r in results)
         rows.append(
             table_row(workers, len(frames), solved, f"{wall:.1f}", f"{len(frames) / wall:.0f}")
         )
     text = "\n".join(
         [
             f"{args.frames} frames (12° / 512 px, Hp <= 6, 0.5 px noise, 2 false stars, 10 % "
-            f"missing), `starnav.solve_batch`; {machine()}.",
+            f"missing), `starnav.solve_stars_batch`; {machine()}.",
             "",
             *table_head("processes", "frames", "solved", "wall s", "frames / s"),
             *rows,
