@@ -1,19 +1,23 @@
 """Per-frame answers of the solve paths, for comparing a restructuring against what it replaced.
 
 Runs a fixed set of frames through the public API (lost in space with every algorithm, tracking,
-the focal length fitted, a distorted camera, the FOV search on star lists, random fields, the
-real images) and writes, per frame, whether it was solved, the reason, the catalog id of every
-point and the attitude. ``--compare OLD.json`` prints the frames whose answer changed: a
+the focal length fitted, a distorted camera, the FOV search on star lists, random fields) and,
+with ``--images``, the real photographs of ``../shared/data/images`` and ``../shared/data/real``
+through ``solve_image`` (no time budget, so the machine's load cannot change an answer);
+writes, per frame, whether it was solved, the reason, the catalog id of every point and the
+attitude. ``--compare OLD.json`` prints the frames whose answer changed: a
 different outcome, ids or reason, or an attitude more than ``--tol-arcsec`` apart.
 
     python benchmarks/answers.py -o /tmp/before.json
     python benchmarks/answers.py -o /tmp/after.json --compare /tmp/before.json
+    python benchmarks/answers.py -o /tmp/after.json --images 14   # and 16 real photographs
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 import time
 from pathlib import Path
@@ -21,7 +25,7 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from starnav.api import solve_stars
+from starnav.api import solve_image, solve_stars
 from starnav.camera import Camera
 from starnav.catalog import load_catalog
 from starnav.geometry import attitude_difference_deg
@@ -119,6 +123,18 @@ def cases(catalog, frames: int):
             )
 
 
+def image_cases(limit: int):
+    """(name, thunk) for the shared folder's real photographs (the first ``limit`` of real/)."""
+    shared = ROOT.parent / "shared" / "data"
+    suffixes = (".jpg", ".png", ".bmp", ".fits", ".tif")
+    real = sorted(p for p in (shared / "real").glob("*") if p.suffix.lower() in suffixes)
+    for path in sorted((shared / "images").glob("*.jpg")) + real[:limit]:
+        yield (
+            f"image-{path.parent.name}-{path.name}",
+            lambda path=path: solve_image(path, time_budget_s=math.inf),
+        )
+
+
 def compare(old: dict, new: dict, tol_arcsec: float) -> list[str]:
     out = []
     for key in sorted(set(old) | set(new)):
@@ -145,10 +161,15 @@ def main() -> int:
     parser.add_argument("--frames", type=int, default=40)
     parser.add_argument("--compare")
     parser.add_argument("--tol-arcsec", type=float, default=1e-3)
+    parser.add_argument(
+        "--images", type=int, default=0, metavar="N", help="also the first N real photographs"
+    )
     args = parser.parse_args()
     catalog = load_catalog(None, mag_limit=6.0)
     out, times = {}, {}
     todo = list(cases(catalog, args.frames))
+    if args.images:
+        todo += list(image_cases(args.images))
     for name, thunk in tqdm(todo, file=sys.stderr):
         t0 = time.perf_counter()
         out[name] = answer(thunk())
