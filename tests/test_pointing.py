@@ -224,7 +224,7 @@ def test_best_three_star_from_a_solution(contest_catalog):
     """Best triple of contest map 1's identified stars: boresight within 1 arcmin of the full
     least-squares attitude (the map is exact)."""
     import starnav
-    from conftest import CONTEST
+    from shared_data import CONTEST
     from starnav.starlist import read_star_csv
 
     stars = read_star_csv(CONTEST / "images" / "xingtu01.csv")

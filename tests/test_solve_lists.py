@@ -2,7 +2,7 @@
 
 import pytest
 
-from conftest import CONTEST
+from shared_data import CONTEST
 from starnav.errors import StarnavError
 from starnav.results import SOLVE_KEYS
 from starnav.solve_lists import read_star_files, solve_star_files, solve_star_list
