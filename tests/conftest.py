@@ -4,10 +4,20 @@ catalog, a private table cache, a ``starnav serve`` process. Where the data are:
 
 from __future__ import annotations
 
+import os
+
 import pytest
 
 from shared_data import CONTEST, SHARED, USER_CACHE_DIR, reference_frames, shared_file
 from starnav.catalog import HIPPARCOS_EPOCH_YEAR, load_catalog
+from starnav.runtime.caching import cache_dir
+
+# The kernels' machine code stays where every solve keeps it (the user's cache, which
+# `starnav demo` fills): _private_cache below moves STARNAV_CACHE_DIR before the first kernel
+# module is imported, and the kernels would otherwise be compiled again in every test session
+# (over a minute of the suite on 2 cores). Subprocesses (the CLI, the drop-ins, the server's
+# workers) inherit it. Set before numba is imported: numba reads it once.
+os.environ.setdefault("NUMBA_CACHE_DIR", str(cache_dir() / "numba"))
 
 # the names tests imported from conftest before shared_data.py (import them from there)
 __all__ = ["CONTEST", "SHARED", "USER_CACHE_DIR", "reference_frames"]
