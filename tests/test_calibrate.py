@@ -53,6 +53,7 @@ def fisheye_calibration(frames):
     return calibrate(frames[0], model="kannala-brandt", fov_deg=170.0, max_stars=200)
 
 
+@pytest.mark.slow
 def test_kannala_brandt_recovered_within_its_sigmas(fisheye_calibration):
     cal = fisheye_calibration
     cam = cal.camera

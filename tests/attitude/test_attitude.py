@@ -84,6 +84,7 @@ def test_analytic_jacobian_matches_finite_differences(k1, k2, fit_focal, fit_dis
     assert np.abs(J - numeric).max() <= 1e-7 * np.abs(numeric).max()
 
 
+@pytest.mark.slow
 def test_one_free_focal_step_agrees_with_the_full_fit():
     from starnav.attitude.refine import free_focal_step
     from starnav.catalog import load_catalog

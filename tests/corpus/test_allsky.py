@@ -8,11 +8,14 @@ import csv
 import json
 
 import numpy as np
+import pytest
 
 from shared_data import ALLSKY, DATA, shared_file
 from starnav.catalog.names import star_names
 from starnav.detect.circle import find_image_circle
 from starnav.detect.read import read_image
+
+pytestmark = pytest.mark.corpus
 
 KHO = ALLSKY / "kho_sony_a7s_20201211_200933.jpg"
 STAR_IDS = DATA / "allsky" / "kho_20201211_star_ids.csv"
@@ -31,6 +34,7 @@ def test_full_frame_has_no_image_circle():
     assert find_image_circle(rng.normal(100.0, 5.0, (300, 400))) is None
 
 
+@pytest.mark.slow
 def test_kho_sony_solves_and_agrees_with_the_hand_identified_stars(capsys):
     from starnav.cli import main
 

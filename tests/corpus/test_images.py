@@ -28,6 +28,8 @@ from starnav.geometry import (
     radec_to_unit,
 )
 
+pytestmark = pytest.mark.corpus
+
 NAMES = sorted(REFERENCE)
 
 BORESIGHT_TOL_DEG = 0.05  # the peers agree within 10″ (0.003°)
@@ -111,18 +113,21 @@ def test_references_agree_between_peers():
 # ------------------------------------------------------------------ starnav on them
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", NAMES)
 def test_solve_image_fov_unknown(name):
     result = starnav.solve_image(peer_image(name))
     check_against_reference(result, name)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", NAMES)
 def test_solve_image_fov_given(name):
     result = starnav.solve_image(peer_image(name), fov_deg=REFERENCE[name]["nominal_fov_deg"])
     check_against_reference(result, name)
 
 
+@pytest.mark.slow
 def test_solve_image_from_array_matches_file():
     """A decoded array gives the same answer as its file."""
     name = LYRA
@@ -135,6 +140,7 @@ def test_solve_image_from_array_matches_file():
     assert result.solution.dec_deg == pytest.approx(from_file.dec_deg, abs=1e-9)
 
 
+@pytest.mark.slow
 def test_cli_solve_json(capsys):
     from starnav.cli import main
 

@@ -31,6 +31,8 @@ from shared_data import DATA as OURS
 from shared_data import PEER_REFERENCE, REAL
 from starnav.geometry import angle_between, attitude_difference_deg, attitude_from_radec_roll
 
+pytestmark = pytest.mark.corpus
+
 DATA = OURS / "real"
 
 
@@ -229,6 +231,7 @@ def catalog_check(solution, path: Path) -> dict:
     )
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", _params())
 def test_solve_fov_unknown(name):
     path = _path(name)

@@ -31,6 +31,8 @@ from shared_data import CYGNUS as JPEG
 from shared_data import LYRA, ROOT, peer_image
 from shared_data import PEER_REFERENCE as REFERENCE
 
+pytestmark = pytest.mark.slow  # every test runs the programs as processes: 1-5 s each
+
 CENTRE_TOL_ARCSEC = 60.0
 ANGLE_TOL_DEG = 0.1
 SRC = ROOT / "src"

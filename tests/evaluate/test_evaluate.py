@@ -51,6 +51,7 @@ def test_bad_grid_step_is_refused(bad):
         grid_boresights(bad)
 
 
+@pytest.mark.slow
 def test_frames_are_the_same_wherever_they_are_solved():
     """Serial and two processes give the same outcome and stars for every frame."""
     config = EvalConfig(noise_px=0.5, false_stars=2, missing_frac=0.1, seed=4)
@@ -132,6 +133,7 @@ def test_cli_evaluate_markdown(capsys):
     assert "| pyramid | 8 |" in out and "uniform on the sphere" in out
 
 
+@pytest.mark.slow
 def test_cli_evaluate_on_a_local_dask_cluster(capsys):
     pytest.importorskip("distributed")
     args = ["evaluate", "--sampling", "uniform", "--frames", "20", "--json", "--seed", "5",

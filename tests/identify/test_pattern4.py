@@ -106,6 +106,7 @@ def test_the_quick_test_on_the_rounded_largest_edge_loses_no_match(
     assert truth in {tuple(sorted(c.tolist())) for c in hyp.cat_rows[hyp.pattern == 0]}
 
 
+@pytest.mark.slow
 def test_table_holds_the_brightest_patterns_of_simulated_frames(hip_1991, table):
     """The pattern of the 4 brightest stars of a frame is in the table almost always, and some
     pattern of the brightest 6 always (what identification relies on)."""

@@ -145,6 +145,7 @@ def test_camera_file_and_inline_camera(three_1024, tmp_path):
         parse_observation(data)
 
 
+@pytest.mark.slow
 def test_fov_searched_when_not_given(three_1024):
     """No camera and no fov_deg: the FOV search finds the focal length, and the bearings use
     it."""

@@ -52,6 +52,7 @@ def _solve(frame, deep_mag_limit):
     )
 
 
+@pytest.mark.slow
 def test_deep_stage_identifies_stars_fainter_than_the_bright_catalog(frame):
     bright = _solve(frame, None).solution
     deep = _solve(frame, DEEP_MAG).solution

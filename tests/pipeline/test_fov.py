@@ -95,6 +95,7 @@ def test_out_of_range_fov_is_not_found(sky):
     assert res.solution is None and res.reason
 
 
+@pytest.mark.slow
 def test_random_points_are_not_solved():
     rng = np.random.default_rng(5)
     for _ in range(3):
@@ -158,6 +159,7 @@ def test_bad_fov_range(bad):
         solve_fov(np.zeros((5, 2)) + 10, width=100, fov_range_deg=bad)
 
 
+@pytest.mark.slow
 def test_identify_command_without_fov_matches_the_known_fov_answer(capsys):
     base = [
         "identify",
@@ -233,6 +235,7 @@ def test_narrow_bands_take_fewer_stars_per_field_and_the_default_range_none_of_t
     assert min(top for _, _, top in band_grid(*diag)) == pytest.approx(10.0)
 
 
+@pytest.mark.slow
 def test_a_3_degree_rendered_field_is_solved_with_the_fov_unknown():
     """Issue 15: a 3° field (1024 px, stars detected to about Hp 9.5, fainter than the band
     catalog's Hp 8.5) solved with the FOV searched over 3-3.5° (the 5° grid band)."""

@@ -126,6 +126,7 @@ def test_fits_hints_are_read_and_used(tmp_path):
     assert res.solution.fov_deg == pytest.approx(12.0, rel=1e-3)
 
 
+@pytest.mark.slow
 def test_a_wrong_fov_hint_costs_time_not_the_answer(tmp_path):
     sky = load_catalog(None, mag_limit=7.0)
     R = attitude_from_radec_roll(*PAN[1], 1)
@@ -199,6 +200,7 @@ def test_outputs_of_a_batch_are_named_per_file():
     }
 
 
+@pytest.mark.slow
 def test_a_batch_on_a_local_dask_cluster_tracks_in_runs(sequence):
     pytest.importorskip("distributed")
     folder, truth = sequence

@@ -22,6 +22,8 @@ from starnav.service import nova
 from starnav.service.app import ServiceConfig, create_app
 from starnav.service.store import INTERRUPTED, JobStore
 
+pytestmark = pytest.mark.service
+
 WAIT_S = 180.0  # a fresh worker process loads the catalog and tables first
 
 
@@ -79,6 +81,7 @@ def test_login_and_sessions(server):
     assert _post(server, "/api/upload", {"session": _session(server)})["status"] == "error"
 
 
+@pytest.mark.slow
 def test_image_solved_with_nova_answers(server, lyra_png):
     """A real image: submission, job, calibration, info, annotations and the files, in nova's
     shapes, the centre within 60″ of the peers' reference."""
@@ -214,6 +217,7 @@ def test_serve_refuses_the_network_without_a_key(capsys):
     assert err.count("\n") == 0 and "--api-key" in err
 
 
+@pytest.mark.slow
 def test_jobs_on_a_dask_cluster(tmp_path):
     """--dask: the same jobs on a (local) Dask cluster, bytes in and out."""
     pytest.importorskip("distributed", reason="Dask's distributed is not installed")

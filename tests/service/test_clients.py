@@ -37,7 +37,7 @@ anc = pytest.importorskip(
 )
 from astrometry_net_client.exceptions import UnkownContentError  # noqa: E402
 
-pytestmark = pytest.mark.service
+pytestmark = [pytest.mark.service, pytest.mark.slow]  # a server process, 15 s in all
 
 TOLERANCE_ARCSEC = 60.0
 NOVA = "http://nova.astrometry.net"

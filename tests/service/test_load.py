@@ -3,8 +3,12 @@ each answer the solution of its own input (benchmarks/service_load.py is the lar
 
 from __future__ import annotations
 
+import pytest
+
 from service_helpers import load_jobs, run_load
 from shared_data import LYRA
+
+pytestmark = [pytest.mark.service, pytest.mark.slow]
 
 TOLERANCE_ARCSEC = 60.0
 

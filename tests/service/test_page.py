@@ -51,10 +51,16 @@ ROLL_TOL_DEG = 0.1
 API_KEY = "page-test-key"
 SCREENSHOT_SCALE = 0.75
 
-pytestmark = pytest.mark.skipif(
-    not (CHROMIUM.exists() and CHROMEDRIVER.exists()),
-    reason="chromium and chromium-driver not installed: apt-get install chromium chromium-driver",
-)
+pytestmark = [
+    pytest.mark.browser,
+    pytest.mark.service,
+    pytest.mark.slow,
+    pytest.mark.skipif(
+        not (CHROMIUM.exists() and CHROMEDRIVER.exists()),
+        reason="chromium and chromium-driver not installed: apt-get install chromium "
+        "chromium-driver",
+    ),
+]
 
 
 @dataclass(frozen=True)

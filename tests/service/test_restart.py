@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import time
 
+import pytest
 from astropy.io import fits
 
 from service_helpers import (
@@ -20,6 +21,8 @@ from service_helpers import (
     wait_done,
 )
 from shared_data import CYGNUS, LYRA, USER_CACHE_DIR, peer_image
+
+pytestmark = [pytest.mark.service, pytest.mark.slow]
 
 
 def wait_solving(url: str, job_id: int, timeout_s: float = 60.0) -> None:
