@@ -306,6 +306,7 @@ def test_image_times_that_disagree_or_lack_an_offset(small, tmp_path, capsys):
     assert read_observation(path).utc_source == "file"
 
 
+@pytest.mark.slow
 def test_the_committed_example(capsys):
     """docs/examples/locate_images (made by its make_images.py) works from the CLI, from any
     working directory: its utc from the FITS and JPEG headers, one camera's FOV searched."""

@@ -63,8 +63,13 @@ def _starnav_px(wcs, sky):
     [
         (Camera.from_fov(20.0, 1024, 768), 1e-6),
         (Camera(640, 480, 900.0, 300.25, 250.5), 1e-6),  # off-centre principal point
-        (_distorted(20.0, 1024, 1024, -0.05), 0.05),
-        (_distorted(20.0, 1280, 960, -0.05, 0.02, cx=650.0, cy=470.0), 0.05),
+        # the SIP fits of distorted cameras: ~2 s each
+        pytest.param(_distorted(20.0, 1024, 1024, -0.05), 0.05, marks=pytest.mark.slow),
+        pytest.param(
+            _distorted(20.0, 1280, 960, -0.05, 0.02, cx=650.0, cy=470.0),
+            0.05,
+            marks=pytest.mark.slow,
+        ),
     ],
 )
 def test_wcs_puts_catalog_stars_where_starnav_projects_them(catalog, camera, tolerance_px):
@@ -152,6 +157,7 @@ def test_sip_fit_error_is_reported_and_falls_with_order():
         fit_sip(_distorted(90.0, 1000, 1000, -2.0))
 
 
+@pytest.mark.slow
 def test_chosen_sip_order_is_the_lowest_good_to_a_hundredth_of_a_pixel():
     assert choose_sip_order(_distorted(20.0, 1024, 1024, 0.0)) == 4  # nothing to fit
     assert choose_sip_order(_distorted(20.0, 1024, 1024, -0.05)) == 4  # 0.007 px at order 4
@@ -274,6 +280,7 @@ def _radec(catalog, rows):
     return np.column_stack([catalog.ra_deg[rows], catalog.dec_deg[rows]])
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("camera, code, tolerance_px", WIDE_CAMERAS, ids=_IDS)
 def test_each_lens_model_projects_catalog_stars_through_its_wcs(
     catalog, wide_wcs, camera, code, tolerance_px
@@ -297,6 +304,7 @@ def test_each_lens_model_projects_catalog_stars_through_its_wcs(
     assert worst <= tolerance_px, f"{camera.model}: {worst:.3g} px"
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("camera, code, tolerance_px", WIDE_CAMERAS, ids=_IDS)
 def test_each_lens_model_maps_pixels_to_the_camera_model_directions(
     wide_wcs, camera, code, tolerance_px
@@ -317,6 +325,7 @@ def test_each_lens_model_maps_pixels_to_the_camera_model_directions(
     assert worst <= tolerance_px, f"{camera.model}: {worst:.3g} px"
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("camera", [c for c, code, _ in WIDE_CAMERAS if "SIP" in code])
 def test_fisheye_inverse_sip_polynomials_match_the_camera(catalog, wide_wcs, camera):
     """AP/BP (sky -> pixel without iterating, what many viewers use) within 0.1 px."""
@@ -330,6 +339,7 @@ def test_fisheye_inverse_sip_polynomials_match_the_camera(catalog, wide_wcs, cam
     assert worst <= 0.1
 
 
+@pytest.mark.slow
 def test_fisheye_sip_order_is_chosen_like_the_pinhole_s():
     normal = KannalaBrandt.from_fov(90.0, 1200, 900, **_KB_NORMAL)
     order = choose_sip_order(normal)

@@ -205,6 +205,7 @@ def test_bad_deep_mag_limit_is_a_one_line_error():
         api.solve_verbose(xy, width=512, fov_deg=6.0, deep_mag_limit=99.0)
 
 
+@pytest.mark.slow
 def test_cli_deep_mag_limit(capsys, tmp_path, frame):
     path = tmp_path / "stars.csv"
     points = zip(frame.xy, frame.mag, strict=True)

@@ -43,6 +43,7 @@ def test_band_grid_covers_the_range_on_the_fixed_grid():
     assert len(band_grid(19.0, 21.0)) == 2  # 20° is a grid edge
 
 
+@pytest.mark.slow
 def test_the_10_to_30_degree_tables_fit_in_20_mb():
     """Issue 8: what the search holds in memory for a 10-30° range on a 1024 px square image
     (pattern tables, catalogs, KD-trees) is at most 20 MB; ranges sharing grid bands share
@@ -58,6 +59,7 @@ def test_the_10_to_30_degree_tables_fit_in_20_mb():
     assert {(id(band.table), id(band.catalog)) for band in narrower} <= held
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("fov", "width", "seed"), [(8.0, 1024, 1), (20.0, 1024, 2), (33.0, 800, 3)]
 )
@@ -88,6 +90,7 @@ def test_given_fov_a_few_percent_off_is_refined(sky):
     assert res.solution.fov_deg == pytest.approx(15.0, rel=5e-4)
 
 
+@pytest.mark.slow
 def test_out_of_range_fov_is_not_found(sky):
     camera = Camera.from_fov(20.0, 1024)
     frame = simulate_frame(sky, camera, noise_px=0.1, seed=8)
@@ -186,6 +189,7 @@ def test_a_catalog_too_sparse_for_any_pattern_is_a_one_line_error(tmp_path, caps
     assert code == 2 and err.count("\n") == 1 and "no 4-star pattern" in err
 
 
+@pytest.mark.slow
 def test_csv_catalog_sets_its_own_band_depths(capsys):
     # the contest catalog (to mag 6) for a 20° map searched over 15-40°: every band's depth
     # comes from this catalog's own counts

@@ -25,7 +25,10 @@ def _render(sky, camera, ra, dec, roll, seed, **settings):
     return render_frame(sky, camera, R, RenderSettings(seed=seed, **settings))
 
 
-@pytest.mark.parametrize(("fov", "width", "height"), [(20.0, 1024, 1024), (12.0, 640, 480)])
+@pytest.mark.parametrize(
+    ("fov", "width", "height"),
+    [(20.0, 1024, 1024), pytest.param(12.0, 640, 480, marks=pytest.mark.slow)],  # 6 s: tables
+)
 def test_rendered_image_solves_with_the_fov_unknown(sky, fov, width, height):
     camera = Camera.from_fov(fov, width, height)
     frame = _render(sky, camera, 83.8, -5.4, 30.0, seed=1)

@@ -114,6 +114,7 @@ def test_image_solved_with_nova_answers(server, lyra_png):
         assert r.status_code == 200 and r.content.startswith(magic), path
 
 
+@pytest.mark.slow
 def test_source_list_solved(server):
     from starnav.detect.read import read_image
     from starnav.pipeline.image import detect_image
