@@ -1,20 +1,26 @@
-"""Shared fixtures: the data of ../shared, the Hipparcos catalog as the reference frames used it."""
+"""Shared fixtures: the Hipparcos catalog as the reference frames used it, the contest's
+catalog, a private table cache, a ``starnav serve`` process. Where the data are:
+``shared_data`` (``../shared/data`` beside the repository)."""
 
 from __future__ import annotations
 
-import json
 import os
-from pathlib import Path
 
 import pytest
 
+from shared_data import CONTEST, SHARED, USER_CACHE_DIR, reference_frames, shared_file
 from starnav.catalog import HIPPARCOS_EPOCH_YEAR, load_catalog
+from starnav.runtime.caching import cache_dir
 
-ROOT = Path(__file__).resolve().parents[1]
-SHARED = ROOT.parent / "shared" / "data"
-CONTEST = SHARED / "contest2019"
-REFERENCE = SHARED / "reference_frames"
-USER_CACHE_DIR = os.environ.get("STARNAV_CACHE_DIR")  # before _private_cache replaces it
+# The kernels' machine code stays where every solve keeps it (the user's cache, which
+# `starnav demo` fills): _private_cache below moves STARNAV_CACHE_DIR before the first kernel
+# module is imported, and the kernels would otherwise be compiled again in every test session
+# (over a minute of the suite on 2 cores). Subprocesses (the CLI, the drop-ins, the server's
+# workers) inherit it. Set before numba is imported: numba reads it once.
+os.environ.setdefault("NUMBA_CACHE_DIR", str(cache_dir() / "numba"))
+
+# the names tests imported from conftest before shared_data.py (import them from there)
+__all__ = ["CONTEST", "SHARED", "USER_CACHE_DIR", "reference_frames"]
 
 
 @pytest.fixture(autouse=True, scope="session")
@@ -34,12 +40,7 @@ def hip_1991():
 
 @pytest.fixture(scope="session")
 def contest_catalog():
-    return load_catalog(CONTEST / "catalog.csv")
-
-
-def reference_frames(name: str) -> list[dict]:
-    with (REFERENCE / name).open() as fh:
-        return [json.loads(line) for line in fh]
+    return load_catalog(shared_file(CONTEST / "catalog.csv"))
 
 
 @pytest.fixture(scope="module")

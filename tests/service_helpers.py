@@ -22,10 +22,10 @@ from astropy.coordinates import SkyCoord
 from astropy.io import fits
 from astropy.wcs import WCS, FITSFixedWarning
 
+from shared_data import PEER_REFERENCE as REFERENCE
+from shared_data import peer_image
 from starnav.service.app import wait_ready
 
-IMAGES = Path(__file__).resolve().parent / "data" / "images"
-REFERENCE = json.loads((IMAGES / "reference.json").read_text())["images"]
 START_TIMEOUT_S = 60.0  # imports of a cold process on a shared machine
 SOLVE_TIMEOUT_S = 120.0  # the first solve of a fresh server loads (or builds) the tables
 
@@ -127,7 +127,7 @@ def fetch(url: str, timeout_s: float = 30.0) -> bytes:
 def centre_offset_arcsec(header: fits.Header, name: str, shift_px=(0.0, 0.0)) -> float:
     """How far the sky at the image centre (0-based pixel ((W-1)/2, (H-1)/2), moved by
     ``shift_px`` for a source list moved so) under the WCS ``header`` is from the peers'
-    reference for image ``name`` (tests/data/images)."""
+    reference for image ``name`` (tests/data/images/reference.json)."""
     ref = REFERENCE[name]
     x = (ref["file"]["width"] - 1) / 2.0 + shift_px[0]
     y = (ref["file"]["height"] - 1) / 2.0 + shift_px[1]
@@ -165,14 +165,15 @@ def source_list(name: str, max_stars: int = 40) -> tuple[list[float], list[float
     """The brightest stars starnav detects in image ``name``, FITS pixels (1-based)."""
     from starnav.detect import detect_stars, read_image
 
-    xy = detect_stars(read_image(IMAGES / name), max_stars=max_stars).xy + 0.5
+    xy = detect_stars(read_image(peer_image(name)), max_stars=max_stars).xy + 0.5
     return [float(v) for v in xy[:, 0]], [float(v) for v in xy[:, 1]]
 
 
 @dataclass(frozen=True)
 class LoadJob:
-    """One job of a load test: image ``image`` of tests/data/images uploaded as a file
-    (``x`` None), or its source list ``x``, ``y`` (FITS pixels) moved by ``shift_px``."""
+    """One job of a load test: reference image ``image`` (``shared_data.PEER_FILES``)
+    uploaded as a file (``x`` None), or its source list ``x``, ``y`` (FITS pixels) moved by
+    ``shift_px``."""
 
     image: str
     x: tuple[float, ...] | None = None
@@ -233,7 +234,7 @@ def run_load(url: str, jobs: list[LoadJob], clients: int, *, poll_s: float = 0.2
     import threading
 
     local = threading.local()
-    files = {name: (IMAGES / name).read_bytes() for name in {j.image for j in jobs}}
+    files = {name: peer_image(name).read_bytes() for name in {j.image for j in jobs}}
 
     def one(job: LoadJob) -> LoadOutcome:
         job_id = None

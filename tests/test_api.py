@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 
 import starnav
-from conftest import CONTEST
+from shared_data import CONTEST
 from starnav import StarListError, StarnavError
 from starnav.results import SOLVE_KEYS
 

@@ -53,6 +53,7 @@ def fisheye_calibration(frames):
     return calibrate(frames[0], model="kannala-brandt", fov_deg=170.0, max_stars=200)
 
 
+@pytest.mark.slow
 def test_kannala_brandt_recovered_within_its_sigmas(fisheye_calibration):
     cal = fisheye_calibration
     cam = cal.camera
@@ -72,6 +73,7 @@ def test_kannala_brandt_recovered_within_its_sigmas(fisheye_calibration):
     assert np.max(np.hypot(*moved.T)) < 0.2
 
 
+@pytest.mark.slow
 def test_calibrated_fisheye_file_solves_an_image(fisheye_calibration, frames, tmp_path):
     path = tmp_path / "fisheye.json"
     save_camera(path, fisheye_calibration.camera)
@@ -83,6 +85,7 @@ def test_calibrated_fisheye_file_solves_an_image(fisheye_calibration, frames, tm
     assert bore * 3600 < 30 and roll < 0.02
 
 
+@pytest.mark.slow
 def test_cli_calibrates_a_fisheye_then_solves_with_its_file(frames, tmp_path, capsys):
     paths = []
     for k, image in enumerate(frames[0][:3]):

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 import starnav
-from conftest import CONTEST
+from shared_data import CONTEST
 from starnav.starlist import read_star_csv
 
 CAMERAS = {n: (512, 12.0) if n <= 6 else (1024, 20.0) for n in range(1, 9)}

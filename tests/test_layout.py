@@ -1,15 +1,25 @@
 """The boundaries of the source tree (the layers themselves: import-linter, pyproject.toml):
 no function over 100 lines, no private name imported from another module, no import cycle
-between modules, no user-facing text naming an issue number."""
+between modules, no user-facing text naming an issue number; and of the tests: their folders
+mirror the packages, and no file fetched from another repository is committed under tests/."""
 
 from __future__ import annotations
 
 import ast
 import re
+import shutil
+import subprocess
 from pathlib import Path
 
-SRC = Path(__file__).resolve().parents[1] / "src" / "starnav"
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+SRC = ROOT / "src" / "starnav"
+TESTS = ROOT / "tests"
 MAX_FUNCTION_LINES = 100
+# test folders that are no package: our own data, and the tests over real photographs
+TEST_FOLDERS_OF_THEIR_OWN = {"data", "corpus"}
+IMAGE_SUFFIXES = {".jpg", ".jpeg", ".png", ".tif", ".tiff", ".bmp", ".fits", ".fit", ".gif"}
 
 
 def _modules() -> dict[str, ast.Module]:
@@ -102,3 +112,20 @@ def test_importing_starnav_does_not_load_numba():
     code = "import sys, starnav, starnav.cli; print('numba' in sys.modules)"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "False"
+
+
+def test_test_folders_mirror_the_packages():
+    folders = {p.name for p in TESTS.iterdir() if p.is_dir() and not p.name.startswith((".", "_"))}
+    packages = {p.parent.name for p in SRC.glob("*/__init__.py")}
+    assert folders - TEST_FOLDERS_OF_THEIR_OWN <= packages, "a test folder that is no package"
+
+
+def test_no_fetched_file_is_committed_under_tests():
+    """Images and code from other repositories live in ../shared/data, never in tests/."""
+    if shutil.which("git") is None or not (ROOT / ".git").exists():
+        pytest.skip("not a git checkout: the committed files cannot be listed")
+    listed = subprocess.run(["git", "ls-files", "tests"], cwd=ROOT, capture_output=True,
+                            text=True, check=True).stdout.split()  # fmt: skip
+    images = [p for p in listed if any(p.lower().endswith(s) for s in IMAGE_SUFFIXES)]
+    assert not images, f"image files committed under tests/: {images}"
+    assert not [p for p in listed if p.startswith("tests/vendor/")]

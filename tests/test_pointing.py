@@ -224,7 +224,7 @@ def test_best_three_star_from_a_solution(contest_catalog):
     """Best triple of contest map 1's identified stars: boresight within 1 arcmin of the full
     least-squares attitude (the map is exact)."""
     import starnav
-    from conftest import CONTEST
+    from shared_data import CONTEST
     from starnav.starlist import read_star_csv
 
     stars = read_star_csv(CONTEST / "images" / "xingtu01.csv")
@@ -237,6 +237,7 @@ def test_best_three_star_from_a_solution(contest_catalog):
     assert pointing.roll_deg == pytest.approx(s.roll_deg, abs=0.05)
 
 
+@pytest.mark.slow
 def test_cli_pointing_study(capsys, tmp_path):
     code = main(["pointing-study", "--trials", "500", "--out-dir", str(tmp_path), "--json"])
     out = json.loads(capsys.readouterr().out)
@@ -252,6 +253,7 @@ def test_cli_pointing_study(capsys, tmp_path):
     )
 
 
+@pytest.mark.slow
 def test_unknown_focal_error_propagation_matches_monte_carlo():
     """With f solved from the same distances, the analytic 1σ of f and of the boresight
     (which then includes f's error) agree with a Monte Carlo within 10 %."""

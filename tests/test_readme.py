@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from conftest import CONTEST
+from shared_data import CONTEST
 from starnav.cli import main
 
 ROOT = Path(__file__).resolve().parents[1]

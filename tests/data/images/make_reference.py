@@ -1,15 +1,16 @@
-"""Vendor the real star images of this folder and make their reference answers (reference.json).
+"""The reference answers (reference.json) of four real star images, from two peer solvers.
 
 Run from the repository root with the system Python (numpy and Pillow)::
 
-    python tests/data/images/make_reference.py vendor --upstream DIR   # DIR: the upstream files
     python tests/data/images/make_reference.py reference
 
-``vendor`` turns the upstream files (named as upstream, see ``IMAGES``; their git blob ids are
-checked) into the files of this folder: the JPEGs are copied byte for byte, the 16-bit TIFFs are
-re-encoded losslessly (deflate TIFF or PNG); the decoded pixels are checked to be identical.
+The images are not in this repository: they are upstream's files in ../shared/data beside it
+(``SHARED_FILES``: the two GranaSAT JPEGs in ``images/``, the two tetra3 TIFFs in ``real/``).
+Their names here (the keys of ``IMAGES`` and of reference.json) are those of the copies once
+kept in this folder: the JPEGs byte for byte, the 16-bit TIFFs re-encoded losslessly (a deflate
+TIFF and a 16-bit PNG) with the same decoded pixels as upstream's TIFFs.
 
-``reference`` runs two peer solvers on every file of this folder, each from the image with its
+``reference`` runs two peer solvers on every image, each from the image with its
 own star extraction, each inside its own virtual environment (``$STARNAV_CACHE_DIR/venvs/<peer>``,
 default ``~/.cache/starnav``: ``pip install cedar-solve==0.5.1`` and ``pip install
 tetra3rs==0.14.0``, as ``benchmarks/peers/peers.py`` makes them). This file is also the worker
@@ -43,7 +44,6 @@ import argparse
 import hashlib
 import json
 import os
-import shutil
 import subprocess
 import sys
 import tempfile
@@ -53,6 +53,16 @@ import numpy as np
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parents[2]
+SHARED = ROOT.parent / "shared" / "data"
+# name -> upstream's file in ../shared/data (for the tetra3 frames: the TIFF whose pixels the
+# copy once kept here re-encoded)
+TETRA3 = "tetra3_2019-07-29T204726_"
+SHARED_FILES = {
+    f"{TETRA3}Alt40_Azi-135_Try1.tif": SHARED / "real" / "tetra3_Alt40_Azi-135_Try1.tiff",
+    f"{TETRA3}Alt60_Azi135_Try1.png": SHARED / "real" / "tetra3_Alt60_Azi135_Try1.tiff",
+    "granasat_cisne_02sec.jpg": SHARED / "images" / "granasat_cisne_02sec.jpg",
+    "granasat_polar_05sec.jpg": SHARED / "images" / "granasat_polar_05sec.jpg",
+}
 REFERENCE = HERE / "reference.json"
 
 ESA = {
@@ -74,7 +84,7 @@ GRANASAT = {
     "nominal_fov_source": "lens undocumented: the peers' solved FOV (27.03-27.09°), rounded",
 }
 
-# file in this folder -> where it comes from and how it was vendored
+# name (of the copy once kept here) -> where it comes from and how it was kept
 IMAGES = {
     "tetra3_2019-07-29T204726_Alt40_Azi-135_Try1.tif": {
         **ESA,
@@ -192,11 +202,6 @@ def sha256_file(path: Path) -> str:
     return hashlib.sha256(path.read_bytes()).hexdigest()
 
 
-def git_blob_id(path: Path) -> str:
-    data = path.read_bytes()
-    return hashlib.sha1(b"blob %d\0" % len(data) + data).hexdigest()
-
-
 def decode(path: Path) -> np.ndarray:
     """The pixels as Pillow decodes them: a 2-D uint8 or uint16 array."""
     from PIL import Image
@@ -211,27 +216,6 @@ def decode(path: Path) -> np.ndarray:
 def pixel_sha256(pixels: np.ndarray) -> str:
     """SHA-256 of the pixel values as little-endian integers, row by row."""
     return hashlib.sha256(pixels.astype(pixels.dtype.newbyteorder("<")).tobytes()).hexdigest()
-
-
-def cmd_vendor(args) -> None:
-    from PIL import Image
-
-    for name, info in IMAGES.items():
-        src = Path(args.upstream) / Path(info["path"]).name
-        if git_blob_id(src) != info["git_blob"]:
-            raise SystemExit(f"{src}: git blob id {git_blob_id(src)}, expected {info['git_blob']}")
-        dst = HERE / name
-        if src.suffix == dst.suffix:
-            shutil.copyfile(src, dst)
-        else:
-            pixels = decode(src)
-            if dst.suffix == ".tif":
-                Image.fromarray(pixels).save(dst, compression="tiff_adobe_deflate")
-            else:
-                Image.fromarray(pixels).save(dst, optimize=True)
-            if not np.array_equal(decode(dst), pixels) or decode(dst).dtype != pixels.dtype:
-                raise SystemExit(f"{dst.name}: pixels differ from {src.name}")
-        print(f"{name}: {dst.stat().st_size} bytes", flush=True)
 
 
 def cache_root() -> Path:
@@ -362,7 +346,7 @@ def cmd_reference(args) -> None:
         subprocess.run(cmd, check=True)
     out: dict = {
         "about": (
-            "Reference answers for the images of this folder, in starnav's conventions (pixel"
+            "Reference answers for four images of ../shared/data, in starnav's conventions (pixel"
             " origin at the top-left corner, boresight = image centre W/2, H/2, roll = position"
             " angle of image up (-y) from North through East, fov_deg horizontal). Reference ="
             " mean of cedar-solve (FOV unknown) and tetra3rs (nominal FOV given), each solving"
@@ -373,7 +357,7 @@ def cmd_reference(args) -> None:
     }
     with tempfile.TemporaryDirectory() as tmp:
         for name, info in IMAGES.items():
-            path = HERE / name
+            path = SHARED_FILES[name]
             pixels = decode(path)
             npy = Path(tmp) / (name + ".npy")
             np.save(npy, pixels)
@@ -416,7 +400,7 @@ def cmd_reference(args) -> None:
                     "height": int(pixels.shape[0]),
                     "dtype": str(pixels.dtype),
                     "pixel_sha256": pixel_sha256(pixels),
-                    "identical_to_upstream": "bytes" if path.suffix == ".jpg" else "pixels",
+                    "identical_to_upstream": "bytes",  # the shared files are upstream's
                 },
                 "provenance": {k: v for k, v in info.items() if k != "nominal_fov_deg"},
                 "agreement": agreement,
@@ -429,8 +413,6 @@ def cmd_reference(args) -> None:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="cmd", required=True)
-    p = sub.add_parser("vendor", help="make this folder's files from the upstream ones")
-    p.add_argument("--upstream", required=True, help="folder with the upstream files")
     sub.add_parser("reference", help="run the peers, write reference.json")
     p = sub.add_parser("worker", help="(inside a peer's venv) solve .npy images")
     p.add_argument("peer", choices=["cedar", "tetra3rs"])
@@ -438,9 +420,7 @@ def main() -> None:
     p.add_argument("--db")
     p.add_argument("files", nargs="+")
     args = parser.parse_args()
-    if args.cmd == "vendor":
-        cmd_vendor(args)
-    elif args.cmd == "reference":
+    if args.cmd == "reference":
         cmd_reference(args)
     elif args.peer == "cedar":
         _worker_cedar(args.files, args.fov_deg)

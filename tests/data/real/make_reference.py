@@ -1,6 +1,8 @@
 """Reference answers for the real-image corpus (reference.json), from astrometry.net.
 
-Run from the repository root, with starnav importable and the files present (``fetch.py``)::
+Run from the repository root, with starnav importable and the files present: in
+``$STARNAV_REAL_CORPUS`` when set, else in ``../shared/data/real`` beside the repository (28 of
+the 50; sources.json says where each comes from, by repository, commit, path and SHA-256)::
 
     python tests/data/real/make_reference.py solve      # astrometry.net on every file
     python tests/data/real/make_reference.py reference  # its WCS -> starnav's conventions
@@ -71,6 +73,7 @@ import numpy as np
 HERE = Path(__file__).resolve().parent
 SOURCES = HERE / "sources.json"
 REFERENCE = HERE / "reference.json"
+SHARED_DIR = HERE.parents[2].parent / "shared" / "data" / "real"
 WORK = Path(os.environ.get("STARNAV_CORPUS_WORK", "/work/corpus/astrometry"))
 CPU_LIMIT_S = 40
 SCALE_DEG = (0.5, 100.0)  # loose width hint (degrees)
@@ -86,13 +89,11 @@ def sources() -> list[dict]:
 
 
 def corpus_dir() -> Path:
-    """Where the image files are (see fetch.py)."""
-    sys.path.insert(0, str(HERE))
-    from fetch import find_corpus_dir
-
-    found = find_corpus_dir()
-    if found is None:
-        raise SystemExit("no corpus folder with the files: run tests/data/real/fetch.py first")
+    """Where the image files are: ``$STARNAV_REAL_CORPUS``, else ``../shared/data/real``
+    beside the repository. Never inside the repository: they are other projects' files."""
+    found = Path(os.environ.get("STARNAV_REAL_CORPUS") or SHARED_DIR)
+    if not found.is_dir():
+        raise SystemExit(f"no corpus folder {found}: set STARNAV_REAL_CORPUS")
     return found
 
 
