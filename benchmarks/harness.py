@@ -67,6 +67,7 @@ __all__ = [
 
 ROOT = Path(__file__).resolve().parents[1]  # the repository
 DOCS = ROOT / "docs"
+SHARED = ROOT.parent / "shared" / "data"  # the test data beside the repository
 LOAD_AT_START = os.getloadavg()[0]  # when the benchmark's process imported this module
 
 # ----------------------------------------------------------------------------------------------

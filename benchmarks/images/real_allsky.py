@@ -1,4 +1,5 @@
-"""Solve every committed real all-sky image and compare it with its independent reference.
+"""Solve every real all-sky image of ../shared/data/allsky and compare it with its independent
+reference.
 
 References: the KHO Sony frame has 19 stars identified by hand (tests/data/allsky/
 kho_20201211_star_ids.csv); a listed star agrees when the solved star within 5 px of its
@@ -22,11 +23,12 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))  # the repository: benchmarks.*
 import starnav
-from benchmarks.harness import ROOT, table_head
+from benchmarks.harness import ROOT, SHARED, table_head
 from starnav.catalog.names import star_names
 from starnav.geometry import angle_between, radec_to_unit
 
-DATA = ROOT / "tests" / "data" / "allsky"
+DATA = ROOT / "tests" / "data" / "allsky"  # our identifications of its stars
+PHOTOS = SHARED / "allsky"  # the photographs (their licences beside them)
 MATCH_PX = 5.0
 
 # file, solve options (as the CLI takes them), star-id table, its x and y columns, site, UTC
@@ -86,7 +88,7 @@ def main() -> None:
     print("\n".join(head))
     for name, options, table, columns, site, utc in IMAGES:
         t0 = time.perf_counter()
-        res = starnav.solve_image(DATA / name, **options)
+        res = starnav.solve_image(PHOTOS / name, **options)
         seconds = time.perf_counter() - t0
         s = res.solution
         opts = " ".join(

@@ -2,8 +2,8 @@
 
     python benchmarks/peers/real_images.py [--out docs/images.md | -]
 
-The files are the corpus's (``tests/data/real/fetch.py`` brings them; absent ones are listed
-as such), the answers are scored against the astrometry.net references of
+The files are the corpus's (``../shared/data/real``, or ``$STARNAV_REAL_CORPUS``; absent ones
+are listed as such), the answers are scored against the astrometry.net references of
 ``tests/data/real/reference.json`` (``make_reference.py``: starnav's conventions, boresight at
 the image centre, roll about the boresight from the attitude matrices).
 
@@ -27,7 +27,7 @@ none: there it is shown as "answer, no reference"), boresight error (″), roll 
 FOV error (% of the reference's horizontal FOV) and the time from the decoded array to the
 attitude (ms). A peer's answer also counts as right when within ``WRONG_DEG``
 (``harness.verdict``: not wrong); the test
-(tests/test_real_corpus.py) holds starnav to tighter tolerances.
+(tests/corpus/test_real.py) holds starnav to tighter tolerances.
 """
 
 from __future__ import annotations
@@ -72,8 +72,9 @@ DOC = DOCS / "images.md"
 GIVEN_FOV_DEG = 20.0  # tetra3rs's FOV estimate for an image without a reference
 
 
-def load_fetch():
-    spec = importlib.util.spec_from_file_location("fetch", DATA / "fetch.py")
+def load_corpus():
+    """``tests/data/real/make_reference.py`` as a module: the corpus table and its folder."""
+    spec = importlib.util.spec_from_file_location("make_reference", DATA / "make_reference.py")
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module
@@ -157,10 +158,10 @@ def main() -> None:
     parser.add_argument("only", nargs="*", help="only these files (a trial run)")
     args = parser.parse_args()
     t_start = time.time()
-    fetch = load_fetch()
-    folder = fetch.find_corpus_dir()
+    corpus = load_corpus()
+    folder = corpus.corpus_dir()
     references = json.loads((DATA / "reference.json").read_text())["images"]
-    names = [e["name"] for e in fetch.sources() if not args.only or e["name"] in args.only]
+    names = [e["name"] for e in corpus.sources() if not args.only or e["name"] in args.only]
     present = [n for n in names if folder is not None and (folder / n).exists()]
     runs, installs = solvers(cache_dir())
     results: dict[str, dict[str, dict]] = {s.label: {} for s in runs}

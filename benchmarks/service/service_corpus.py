@@ -1,8 +1,8 @@
 """The real-image corpus through a real nova client: astroquery's ``AstrometryNet`` against
 ``starnav serve``, each WCS compared with astrometry.net's own solve of the same file.
 
-Starts the server (2 workers, a fresh data dir), uploads every file of tests/data/real that is
-here (``python tests/data/real/fetch.py`` brings them) with astroquery's
+Starts the server (2 workers, a fresh data dir), uploads every file of the corpus
+(tests/data/real/reference.json) that is in ../shared/data/real with astroquery's
 ``solve_from_image(force_image_upload=True)``, no hints, two clients at once, and compares the
 sky at the image centre, FITS ((W+1)/2, (H+1)/2), of the WCS astroquery returns with that of
 astrometry.net's (solve-field 0.93 with --crpix-center, Tycho-2 index: its CRVAL,
@@ -28,13 +28,14 @@ from astropy.utils.exceptions import AstropyDeprecationWarning
 from astropy.wcs import WCS, FITSFixedWarning
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))  # the repository: benchmarks.*
-from benchmarks.harness import DOCS, ROOT, machine, replace_block, table_head
+from benchmarks.harness import DOCS, ROOT, SHARED, machine, replace_block, table_head
 
 sys.path.insert(0, str(ROOT / "tests"))
 from service_helpers import Server
 
 DOC = DOCS / "service.md"
-CORPUS = ROOT / "tests" / "data" / "real"
+CORPUS = ROOT / "tests" / "data" / "real"  # sources.json, reference.json
+FILES = SHARED / "real"  # the photographs
 TOLERANCE_ARCSEC = 60.0
 TOLERANCE_PX = 2.0  # the wide fields (77″/px) differ from astrometry.net's TAN-SIP by ~1 px
 SOLVE_TIMEOUT_S = 300.0
@@ -69,15 +70,15 @@ def main() -> None:
     ap.add_argument("--no-doc", action="store_true", help="print only")
     args = ap.parse_args()
     reference = json.loads((CORPUS / "reference.json").read_text())["images"]
-    names = [n for n in sorted(reference) if (CORPUS / "files" / n).is_file()]
+    names = [n for n in sorted(reference) if (FILES / n).is_file()]
     if not names:
-        sys.exit("the corpus files are not here: run python tests/data/real/fetch.py")
+        sys.exit(f"the corpus files are not here: {FILES}")
     t0 = time.perf_counter()
     with tempfile.TemporaryDirectory() as tmp:
         server = Server(Path(tmp) / "data", workers=2).start()
         try:
             with ThreadPoolExecutor(args.clients) as pool:
-                answers = list(pool.map(lambda n: solve(server.url, CORPUS / "files" / n), names))
+                answers = list(pool.map(lambda n: solve(server.url, FILES / n), names))
         finally:
             server.stop()
     rows, counts = (
@@ -111,7 +112,7 @@ def main() -> None:
         )
     n_an = sum(r["solved_by_reference"] for n, r in reference.items() if n in names)
     text = "\n".join([
-        f"{len(names)} real photographs of tests/data/real uploaded by astroquery "
+        f"{len(names)} real photographs of ../shared/data/real uploaded by astroquery "
         f"(`AstrometryNet.solve_from_image`, force_image_upload, no hints) to `starnav serve "
         f"--workers 2`, {args.clients} clients at once; offset: the sky at the image centre of "
         f"the WCS astroquery got, from astrometry.net's solve of the same file.",

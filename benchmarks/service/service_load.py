@@ -2,7 +2,8 @@
 
 Starts the server (``--workers`` worker processes, a fresh data dir), answers as many jobs
 at once first (the workers load their tables), then ``--clients`` client threads submit
-``--jobs`` jobs in all: the real images of tests/data/images uploaded as files, and source
+``--jobs`` jobs in all: the real images of the peers' reference
+(tests/data/images/reference.json, the files in ``../shared/data``) uploaded as files, and source
 lists of the stars starnav detects in them, each list moved by a random shift of up to 20 px
 so that no two are alike. Each client polls its job (every 0.25 s) until it is answered,
 then checks the answer against its input (the WCS at the input's centre within 60″ of the
@@ -139,7 +140,7 @@ def main() -> None:
         [
             f"{args.jobs} jobs from {args.clients} concurrent clients (threads) to "
             f"`starnav serve --workers {args.workers}` on 127.0.0.1: the {len(images)} images "
-            "of tests/data/images uploaded as files and their detected stars (40) as source "
+            "of the peers' reference uploaded as files and their detected stars (40) as source "
             "lists moved by up to 20 px at random, in turn; each client polls its job every "
             "0.25 s. Latency: from the start of the upload to the poll that saw the answer; "
             "queued: the server's time from the upload to the start of the solve. "

@@ -5,7 +5,7 @@ Two measurements, on the real solve paths (``starnav.runtime.budget``):
 1. Solvable frames, each solved twice, with the default budget and with none
    (``time_budget_s=inf``): star lists with the FOV known (pinhole 20°, wide 120° equidistant),
    star lists and rendered images with the FOV searched (5-40°), fisheye 185° star lists with
-   the focal length scanned, and the real images of tests/data. Reported: frames solved each
+   the focal length scanned, and the real images of ../shared/data. Reported: frames solved each
    way (they must agree: a default that cut a solve would show here), the identical answers,
    and the slowest solve as a fraction of its default budget.
 2. Fields with nothing to find (random points, a frame of noise), solved with budgets from
@@ -27,7 +27,7 @@ import numpy as np
 from tqdm import tqdm
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))  # the repository: benchmarks.*
-from benchmarks.harness import DOCS, ROOT, machine, replace_block, table_head
+from benchmarks.harness import DOCS, SHARED, machine, replace_block, table_head
 from starnav.api import solve_stars
 from starnav.camera import Camera, Equidistant
 from starnav.catalog import load_catalog
@@ -95,12 +95,12 @@ def solvable_cases(frames: int, seed: int):
         images.append(lambda b, img=img: _img(solve_image(img, time_budget_s=b)))
     real = [
         (lambda b, p=p: _img(solve_image(p, time_budget_s=b)))
-        for p in sorted((ROOT / "tests" / "data" / "images").glob("*.*"))
+        for p in sorted((SHARED / "images").glob("*.*"))
         if p.suffix.lower() in (".jpg", ".png", ".tif", ".tiff", ".fits")
     ]
     real += [
         (lambda b, p=p: _img(solve_image(p, time_budget_s=b)))
-        for p in sorted((ROOT / "tests" / "data" / "real" / "files").glob("*.*"))
+        for p in sorted((SHARED / "real").glob("*.*"))
         if p.suffix.lower() in (".jpg", ".jpeg", ".png", ".tif", ".tiff", ".fits", ".fit")
     ]
     return [
@@ -116,7 +116,7 @@ def solvable_cases(frames: int, seed: int):
             lists(pin, frames // 2, searched),
         ),
         ("rendered images 8-30°, FOV searched", SEARCH_BUDGET_S, images),
-        ("real images (tests/data/images and the corpus), FOV searched", SEARCH_BUDGET_S, real),
+        ("real images (../shared/data images and real), FOV searched", SEARCH_BUDGET_S, real),
         (
             "star lists, equidistant 185°, focal scanned 120-200°",
             SCAN_BUDGET_S,
