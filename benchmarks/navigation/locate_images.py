@@ -8,8 +8,8 @@ apart at 45° elevation; every camera's image rendered with the stars where the 
 them (``render_views``: pixel-integrated Gaussian PSF of 1 px sigma, sky, photon and read
 noise, 16 bit), written as PNG and read back by ``starnav locate`` from an observation file
 (``fov_deg`` 20, no refraction: the simulation has none). The same as
-tests/navigation/test_locate_images.py's accuracy test, over more headings and noise draws, at 1024 px
-(the reference set-up) and 512 px.
+tests/navigation/test_locate_images.py's accuracy test, over more headings and noise draws, at
+1024 px (the reference set-up) and 512 px.
 """
 
 from __future__ import annotations

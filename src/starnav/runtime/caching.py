@@ -18,7 +18,8 @@ from collections.abc import Callable
 from pathlib import Path
 
 PACKAGE = Path(__file__).resolve().parents[1]
-# every module with numba kernels (tests/runtime/test_caching.py checks the list against the sources)
+# every module with numba kernels (tests/runtime/test_caching.py checks the list against the
+# sources)
 KERNEL_SOURCES = (
     "attitude/kernels.py",
     "attitude/rotation.py",
