@@ -35,7 +35,6 @@ pytest.importorskip("astroquery", reason="astroquery is not installed: pip insta
 anc = pytest.importorskip(
     "astrometry_net_client", reason="astrometry-net-client is not installed: pip install '.[dev]'"
 )
-from astrometry_net_client.exceptions import UnkownContentError  # noqa: E402
 
 pytestmark = [pytest.mark.service, pytest.mark.slow]  # a server process, 15 s in all
 
@@ -154,15 +153,8 @@ def test_astroquery_solves_a_source_list(astroquery_client, name):
 # --- astrometry-net-client ----------------------------------------------------------------
 
 # astrometry-net-client reads an answer as JSON only when its Content-Type is text/plain, as
-# nova serves it (astrometry.net's net/api.py: json_type = 'text/plain'); starnav serve
-# answers application/json, and the client raises UnkownContentError at its first request
-# (the login). The server needs the change (src/starnav/service/app.py), not this test: when
-# it is made, these turn into XPASS failures that ask for the mark to go.
-CONTENT_TYPE = pytest.mark.xfail(
-    strict=True,
-    raises=UnkownContentError,
-    reason="starnav serve answers JSON as application/json; nova (and this client) text/plain",
-)
+# nova serves it (astrometry.net's net/api.py: json_type = 'text/plain'), and so does
+# starnav serve (service.app.NovaJSON).
 
 
 def _anc_objects():
@@ -209,7 +201,6 @@ def anc_solve(upload):
     return job
 
 
-@CONTENT_TYPE
 def test_anc_file_upload_with_hints(anc_local):
     """``FileUpload`` with scale and position settings: the job's WCS, its info (nova's
     calibration, the star names in the field) and the new FITS (the image's pixels with the
@@ -252,7 +243,6 @@ class _QuietHandler(http.server.SimpleHTTPRequestHandler):
         pass
 
 
-@CONTENT_TYPE
 def test_anc_url_upload(anc_local, image_host):
     """``URLUpload``: the server fetches the image from the URL given, then solves it."""
     from astrometry_net_client import Session
@@ -264,7 +254,6 @@ def test_anc_url_upload(anc_local, image_host):
     assert centre_offset_arcsec(job.wcs_file(), CYGNUS) < TOLERANCE_ARCSEC
 
 
-@CONTENT_TYPE
 def test_anc_client_calibrates_an_image(anc_local):
     """The high-level ``Client``: log in, upload, wait (its own polling: from 4 s, doubling),
     the WCS header."""

@@ -170,9 +170,17 @@ def _failed_answer(reason: str) -> dict:
     return {"solved": False, "reason": reason, "calibration": None, "result": None, "files": {}}
 
 
-def error(message: str, status_code: int = 200) -> JSONResponse:
+class NovaJSON(JSONResponse):
+    """A JSON answer as nova sends it: ``text/plain`` (astrometry.net's net/api.py,
+    ``json_type``), which some clients check before they parse (astrometry-net-client
+    refuses anything else)."""
+
+    media_type = "text/plain"
+
+
+def error(message: str, status_code: int = 200) -> NovaJSON:
     """nova's error answer (HTTP 200 like nova's, unless ``status_code`` says otherwise)."""
-    return JSONResponse({"status": "error", "errormessage": message}, status_code=status_code)
+    return NovaJSON({"status": "error", "errormessage": message}, status_code=status_code)
 
 
 class UploadLimit:
@@ -296,12 +304,12 @@ class NovaApi:
             return error('need "apikey"')
         if self.config.api_key is not None and str(key) != self.config.api_key:
             return error("bad apikey")
-        return JSONResponse({"status": "success", "message": "authenticated user: starnav",
+        return NovaJSON({"status": "success", "message": "authenticated user: starnav",
                              "session": self.store.new_session()})  # fmt: skip
 
-    def accepted(self, job_id: int) -> JSONResponse:
+    def accepted(self, job_id: int) -> NovaJSON:
         self.jobs.enqueue(job_id)
-        return JSONResponse({"status": "success", "subid": job_id, "hash": str(job_id)})
+        return NovaJSON({"status": "success", "subid": job_id, "hash": str(job_id)})
 
     async def upload(self, request: Request):
         bad, args, form = await self.parsed(request, session=True)
@@ -315,7 +323,7 @@ class NovaApi:
         data = await upfile.read()
         return self.image_job(data, upfile.filename or "", args)
 
-    def image_job(self, data: bytes, original_filename: str, args: dict) -> JSONResponse:
+    def image_job(self, data: bytes, original_filename: str, args: dict) -> NovaJSON:
         if not data:
             return error("the uploaded file is empty")
         job_id = self.store.add_job("image", Path(original_filename).name, _hints_only(args))
@@ -324,7 +332,7 @@ class NovaApi:
         self.store.set_input(job_id, name)
         return self.accepted(job_id)
 
-    def xy_job(self, args: dict) -> JSONResponse:
+    def xy_job(self, args: dict) -> NovaJSON:
         x, y = args.get("x"), args.get("y")
         if not isinstance(x, list) or not isinstance(y, list):
             return error('Failed to parse JSON "x" and "y" values -- should be lists of floats')
@@ -352,7 +360,7 @@ class NovaApi:
     def job_or_404(self, request: Request):
         job = self.store.get(int(request.path_params["job_id"]))
         if job is None:
-            return None, JSONResponse({"status": "error", "errormessage": "no such job"}, 404)
+            return None, NovaJSON({"status": "error", "errormessage": "no such job"}, 404)
         return job, None
 
     def answer(self, view):
@@ -360,7 +368,7 @@ class NovaApi:
 
         async def endpoint(request: Request):
             job, missing = self.job_or_404(request)
-            return missing or JSONResponse(view(job))
+            return missing or NovaJSON(view(job))
 
         return endpoint
 
@@ -382,10 +390,10 @@ class NovaApi:
 
     async def myjobs(self, request: Request):
         bad, _, _ = await self.parsed(request, session=True)
-        return bad or JSONResponse({"jobs": self.store.job_ids(), "status": "success"})
+        return bad or NovaJSON({"jobs": self.store.job_ids(), "status": "success"})
 
     async def status(self, request: Request):
-        return JSONResponse({"status": "success", "workers": self.config.workers,
+        return NovaJSON({"status": "success", "workers": self.config.workers,
                              "queued_or_running": self.jobs.queued, "running": self.jobs.running,
                              "jobs": len(self.store.job_ids())})  # fmt: skip
 
