@@ -110,9 +110,16 @@
   }
 
   async function readJSON(resp) {
+    // nova's API answers JSON as text/plain (so does starnav's); anything else, or text that
+    // is not JSON (a proxy's error page), is an HTTP error
     const type = resp.headers.get("content-type") || "";
-    if (!type.includes("json")) throw new Error(`${resp.url}: HTTP ${resp.status}`);
-    return resp.json();
+    const fail = new Error(`${resp.url}: HTTP ${resp.status}`);
+    if (!type.includes("json") && !type.includes("text/plain")) throw fail;
+    try {
+      return JSON.parse(await resp.text());
+    } catch {
+      throw fail;
+    }
   }
 
   async function login() {
