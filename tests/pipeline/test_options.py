@@ -150,3 +150,23 @@ def test_fisheye_lens_alone_is_not_refused_for_the_pinhole_range(tmp_path, capsy
     err = capsys.readouterr().err
     assert code == 1, err  # not solved (random points), not bad input
     assert "fov range must satisfy" not in err
+
+
+def test_options_a_searched_field_cannot_take_are_refused_not_ignored():
+    """The FOV search identifies by its own 4-star patterns on its own catalogs: another
+    algorithm or a magnitude limit would be silently unused, so they are refused, for images
+    before any detection."""
+    blank = np.zeros((64, 64), np.float32)
+    for fields in (
+        {"algorithm": "triangle"},
+        {"mag_limit": 7.0},
+        {"fov_deg": 12.0, "algorithm": "voting"},
+    ):
+        with pytest.raises(StarnavError, match="need fov_deg or a camera taken as exact"):
+            starnav.solve_image(blank, **fields)
+    with pytest.raises(StarnavError, match="algorithm need fov_deg"):
+        starnav.solve_stars(
+            np.random.default_rng(0).uniform(0, 500, (9, 2)), width=512, algorithm="triangle"
+        )
+    # taken as exact, an image's field goes through the chosen algorithm
+    assert starnav.solve_image(blank, fov_deg=12.0, fov_exact=True, algorithm="triangle").reason

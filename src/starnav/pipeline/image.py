@@ -33,7 +33,7 @@ from starnav.pipeline.options import (
     FISHEYE_MAX_STARS,
     SolveOptions,
 )
-from starnav.pipeline.stars import solve_stars
+from starnav.pipeline.stars import check_searched, exact_field, solve_stars
 from starnav.results import Solution
 from starnav.runtime.budget import check_budget, default_budget_s
 
@@ -119,6 +119,8 @@ def solve_image(
     options = SolveOptions.make(options, **option_fields)
     camera = options.camera
     search_range(options.fov_deg, options.search_range_deg, camera, options.lens_model)
+    if not exact_field(options, images=True):  # bad options fail before any work
+        check_searched(options, prior=prior is not None)
     t0 = time.perf_counter()
     if isinstance(image, np.ndarray):
         pixels, read_ms = image, 0.0

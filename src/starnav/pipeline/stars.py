@@ -98,6 +98,24 @@ def exact_field(options: SolveOptions, *, images: bool = False) -> bool:
     return options.field_known and exact
 
 
+def check_searched(options: SolveOptions, *, prior: bool = False) -> None:
+    """A one-line error for the options a searched field cannot take: the FOV search and the
+    focal scan identify in their own way, on their own catalogs (another ``algorithm`` or its
+    options, a pinhole ``mag_limit``), and tracking needs a field (a ``prior`` without one).
+    Called before any work on a field that will be searched."""
+    needing = {
+        "prior": prior and not options.field_known,
+        "algorithm": options.algorithm != DEFAULT_ALGORITHM,
+        "algorithm_options": bool(options.algorithm_options),
+        "mag_limit": options.mag_limit is not None and not options.scans_focal,
+    }
+    if any(needing.values()):
+        names = ", ".join(name for name, given in needing.items() if given)
+        raise StarnavError(
+            f"{names} need fov_deg or a camera taken as exact (the FOV search chooses its own)"
+        )
+
+
 def solve_stars(
     xy: np.ndarray | StarList,
     options: SolveOptions,
@@ -115,7 +133,9 @@ def solve_stars(
     ``prior``: the previous attitude (a ``Solution`` or ``R_cam_from_icrs``), good to
     ``options.prior_sigma_deg``; ``position_hint_deg``: (RA, Dec) of the boresight, roughly
     (the FOV search looks near it first); ``images``: whether the list was detected in an
-    image (its given field is then approximate unless ``options.fov_exact``)."""
+    image (its given field is then approximate unless ``options.fov_exact``). Options the
+    FOV search cannot take (another algorithm, a magnitude limit, a prior without a field)
+    are refused, not ignored."""
     if isinstance(xy, StarList):
         xy, brightness, labels = xy.xy, xy.brightness, xy.labels
     R_prior = check_prior(prior, options.prior_sigma_deg)
@@ -132,16 +152,7 @@ def solve_stars(
             prior_sigma_deg=options.prior_sigma_deg,
             deadline=Deadline.after(budget_s),
         )
-    if not images and not options.field_known:
-        needing = {
-            "prior": R_prior is not None,
-            "algorithm": options.algorithm != DEFAULT_ALGORITHM,
-            "algorithm_options": bool(options.algorithm_options),
-            "mag_limit": options.mag_limit is not None and not options.scans_focal,
-        }
-        if any(needing.values()):
-            names = ", ".join(name for name, given in needing.items() if given)
-            raise StarnavError(f"{names} need fov_deg (the FOV search chooses its own)")
+    check_searched(options, prior=R_prior is not None)
     return solve_unknown_field(
         xy,
         options,
