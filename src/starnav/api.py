@@ -27,10 +27,11 @@ from starnav.pipeline.options import (
     DEFAULT_SIGMA_PX,
     SolveOptions,
 )
-from starnav.pipeline.solver import check_prior, get_database
-from starnav.pipeline.stars import make_camera, prepare_solver
+from starnav.pipeline.solver import Solver, check_prior, get_database
+from starnav.pipeline.stars import make_camera
 from starnav.pointing import Pointing, best_triple, three_star
 from starnav.results import FrameResult, Solution, SolveResult, StarMatch
+from starnav.starlist import StarList
 
 __all__ = [
     "DEFAULT_MAX_FALSE_MATCH_PROBABILITY",
@@ -57,7 +58,7 @@ __all__ = [
 
 
 def solve_stars(
-    xy: np.ndarray,
+    xy: np.ndarray | StarList,
     options: SolveOptions | None = None,
     *,
     width: float | None = None,
@@ -96,7 +97,7 @@ def solve_stars(
 
 
 def solve(
-    xy: np.ndarray,
+    xy: np.ndarray | StarList,
     options: SolveOptions | None = None,
     *,
     width: float | None = None,
@@ -109,6 +110,20 @@ def solve(
     return solve_stars(
         xy, options, width=width, height=height, brightness=brightness, **keywords
     ).solution
+
+
+def prepare_solver(
+    options: SolveOptions | None = None,
+    *,
+    width: float | None = None,
+    height: float | None = None,
+    **option_fields: Any,
+) -> Solver:
+    """The prepared ``Solver`` of a known field (``fov_deg`` across ``width`` px, or a
+    ``camera``) and ``options``, kept per process: what ``solve_stars`` uses, for callers
+    that solve many lists themselves (``Solver.solve``)."""
+    opts = SolveOptions.make(options, **option_fields)
+    return _stars.prepare_solver(opts, width=width, height=height)
 
 
 def solve_stars_batch(

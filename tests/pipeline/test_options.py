@@ -66,8 +66,7 @@ def test_the_lens_decides_its_own_search_range():
         100,
         180,
     )
-    assert SolveOptions().image_max_stars == 50
-    assert SolveOptions(lens="equisolid").image_max_stars == 100
+    assert SolveOptions(lens="equisolid").scans_focal and not SolveOptions().scans_focal
 
 
 def test_one_options_object_gives_what_keywords_give(map1):

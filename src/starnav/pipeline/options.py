@@ -180,13 +180,6 @@ class SolveOptions:
         return default_fov_range_deg(self.lens_model)
 
     @property
-    def image_max_stars(self) -> int:
-        """The brightest detections of an image solved: ``max_stars`` or the lens's default."""
-        if self.max_stars is not None:
-            return self.max_stars
-        return FISHEYE_MAX_STARS if self.lens_class.kind == "fisheye" else DEFAULT_MAX_STARS
-
-    @property
     def algorithm_kwargs(self) -> dict[str, Any]:
         """``algorithm_options`` as keyword arguments."""
         return dict(self.algorithm_options)
