@@ -27,7 +27,7 @@ from starnav.pipeline.options import (
     DEFAULT_SIGMA_PX,
     SolveOptions,
 )
-from starnav.pipeline.solver import Solver, check_prior, get_database
+from starnav.pipeline.solver import Solver, get_database
 from starnav.pipeline.stars import make_camera
 from starnav.pointing import Pointing, best_triple, three_star
 from starnav.results import FrameResult, Solution, SolveResult, StarMatch
@@ -150,7 +150,7 @@ def solve_stars_batch(
         width=width,
         height=height,
         brightness=brightness,
-        prior=check_prior(prior, opts.prior_sigma_deg),
+        prior=prior,
         workers=workers,
         progress=progress,
     )

@@ -15,9 +15,9 @@ import numpy as np
 
 from starnav.errors import StarnavError
 from starnav.pipeline.options import SolveOptions
-from starnav.pipeline.solver import Solver
+from starnav.pipeline.solver import Solver, check_prior
 from starnav.pipeline.stars import exact_field, known_budget_s, prepare_solver
-from starnav.results import FrameResult
+from starnav.results import FrameResult, Solution
 from starnav.runtime.budget import Deadline, check_budget
 from starnav.runtime.pools import process_pool, worker_count
 from starnav.starlist import check_star_list
@@ -98,14 +98,16 @@ def solve_frames(
     width: float | None = None,
     height: float | None = None,
     brightness: Sequence[np.ndarray | None] | None = None,
-    prior: np.ndarray | None = None,
+    prior: Solution | np.ndarray | None = None,
     workers: int | None = None,
     progress: Callable[[int], None] | None = None,
 ) -> list[FrameResult]:
     """Many star lists (each (n, 2) px) of one known field (``options.fov_deg`` across
-    ``width`` px, or ``options.camera``) through one prepared solver (``solve_many``)."""
+    ``width`` px, or ``options.camera``) through one prepared solver (``solve_many``);
+    ``prior``: every frame's prior attitude (a ``Solution`` or ``R_cam_from_icrs``)."""
     if not exact_field(options):
         raise StarnavError("a batch of star lists needs fov_deg or a camera")
+    prior = check_prior(prior)
     solver = prepare_solver(options, width=width, height=height)
     budget_s = check_budget(options.time_budget_s, known_budget_s(solver.camera))
     lights = brightness if brightness is not None else [None] * len(frames)

@@ -26,9 +26,7 @@ from starnav.identify.database import catalog_only
 from starnav.identify.pattern4 import FIELD_RADIUS_FRACTION, build_pattern_table
 from starnav.pipeline.conclude import elapsed_ms
 from starnav.pipeline.fov_search import BAND_FACTOR, Band, search_fov
-from starnav.pipeline.options import (
-    SolveOptions,
-)
+from starnav.pipeline.options import SolveOptions
 from starnav.pipeline.solver import Candidate, Solver, SolveSettings, first_use, fit_first
 from starnav.results import SolveResult
 from starnav.runtime.budget import (
@@ -187,7 +185,7 @@ def load_bands(
 
 
 def check_fov_range(
-    fov_range_deg: tuple[float, float], limits_deg: tuple[float, float] = FOV_LIMITS_DEG
+    fov_range_deg: tuple[float, float], limits_deg: tuple[float, float]
 ) -> tuple[float, float]:
     """The range as two floats within ``limits_deg``, or a one-line error."""
     try:
@@ -208,7 +206,7 @@ def check_fov_range(
 def _narrower_why(fov_deg: float, limits_deg: tuple[float, float]) -> str:
     """Why the pinhole search stops at ``FOV_LIMITS_DEG[0]``, for an error about a
     narrower ``fov_deg`` (degrees); empty otherwise."""
-    if limits_deg != FOV_LIMITS_DEG or not fov_deg < limits_deg[0]:
+    if tuple(limits_deg) != tuple(Camera.fov_limits_deg) or not fov_deg < limits_deg[0]:
         return ""
     return (
         f" (a field narrower than {limits_deg[0]:g}° holds too few stars of the embedded "
@@ -316,8 +314,6 @@ def solve_unknown_field(
             base.with_focal(math.sqrt(focal_range[0] * focal_range[1])), cat, settings=settings
         )
         return scan_focal(stars, base, focal_range, solver, Deadline.after(budget_s))
-    if mag_limit is not None:
-        raise StarnavError("mag_limit needs fov_deg (the FOV search chooses its own)")
     bands = load_bands(lo, hi, base.width, base.height, catalog, epoch_year)
     near = _near(position_hint_deg, options.position_radius_deg)
     deadline = Deadline.after(budget_s)

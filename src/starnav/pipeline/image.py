@@ -113,8 +113,7 @@ def solve_image(
     fails with the hinted FOV is tried again without it. ``position_hint_deg``: (RA, Dec)
     of the boresight, roughly (wins over the header's). ``prior``: the previous frame's
     attitude (``R_cam_from_icrs``) of a sequence, with its fitted ``camera``: tracking. The
-    time budget is the solve's
-    (``starnav.runtime.budget``; detection is not counted).
+    time budget is the solve's (``starnav.runtime.budget``; detection is not counted).
     """
     options = SolveOptions.make(options, **option_fields)
     camera = options.camera

@@ -9,6 +9,7 @@ the points, their brightness, a prior attitude, a position hint — is passed wi
 from __future__ import annotations
 
 import math
+import numbers
 from collections.abc import Mapping
 from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
@@ -109,17 +110,12 @@ class SolveOptions:
             known = ", ".join(ALGORITHMS)
             raise StarnavError(f"unknown algorithm {self.algorithm!r}; known: {known}")
         check_budget(self.time_budget_s, 1.0)
-        s = self.sigma_px
-        if s is not None and not (_number(s) and math.isfinite(s) and s > 0):
-            raise StarnavError(f"sigma_px must be a positive number of pixels, got {shown(s)}")
-        if self.parity not in (None, 1, -1):
-            raise StarnavError(f"parity must be +1, -1 or None, got {shown(self.parity)}")
-        if not (_number(self.min_matched_fraction) and 0.0 <= self.min_matched_fraction <= 1.0):
-            f = shown(self.min_matched_fraction)
-            raise StarnavError(f"min_matched_fraction must be in [0, 1], got {f}")
-        p = self.max_false_match_probability
-        if not (_number(p) and 0.0 < p < 1.0):
-            raise StarnavError(f"max_false_match_probability must be in (0, 1), got {shown(p)}")
+        check_settings(
+            self.sigma_px,
+            self.parity,
+            self.max_false_match_probability,
+            self.min_matched_fraction,
+        )
         d = self.prior_sigma_deg
         if not (_number(d) and math.isfinite(d) and 0.0 < d <= 30.0):
             raise StarnavError(f"prior_sigma_deg must be in (0, 30] degrees, got {shown(d)}")
@@ -185,6 +181,27 @@ class SolveOptions:
         return dict(self.algorithm_options)
 
 
+def check_settings(
+    sigma_px: float | None,
+    parity: int | None,
+    max_false_match_probability: float,
+    min_matched_fraction: float,
+) -> None:
+    """A one-line error for a bad setting of the identification and fit, the ones both
+    ``SolveOptions`` and the solver's ``SolveSettings`` hold (checked here once)."""
+    s = sigma_px
+    if s is not None and not (_number(s) and math.isfinite(s) and s > 0):
+        raise StarnavError(f"sigma_px must be a positive number of pixels, got {shown(s)}")
+    if parity not in (None, 1, -1):
+        raise StarnavError(f"parity must be +1, -1 or None, got {shown(parity)}")
+    f = min_matched_fraction
+    if not (_number(f) and 0.0 <= f <= 1.0):
+        raise StarnavError(f"min_matched_fraction must be in [0, 1], got {shown(f)}")
+    p = max_false_match_probability
+    if not (_number(p) and 0.0 < p < 1.0):
+        raise StarnavError(f"max_false_match_probability must be in (0, 1), got {shown(p)}")
+
+
 def default_fov_range_deg(lens: str) -> tuple[float, float]:
     """The horizontal FOV range (degrees) searched for the ``lens`` model when none is given:
     its class's ``default_fov_range_deg`` (5-40° for the pinhole's FOV search, 120-200° for a
@@ -193,4 +210,5 @@ def default_fov_range_deg(lens: str) -> tuple[float, float]:
 
 
 def _number(value: object) -> bool:
-    return isinstance(value, int | float) and not isinstance(value, bool)
+    """A real number (numpy's scalars too), not a bool."""
+    return isinstance(value, numbers.Real) and not isinstance(value, bool)

@@ -21,7 +21,7 @@ import numpy as np
 
 from starnav.camera import CameraModel
 from starnav.catalog import Catalog
-from starnav.errors import CatalogError, StarnavError, shown
+from starnav.errors import CatalogError, StarnavError
 from starnav.identify import DEFAULT_ALGORITHM, MatchSettings, PairDatabase, make_identifier
 from starnav.identify.base import Identification, Identifier, IdentifyOutcome
 from starnav.identify.database import build_database, database_angle_deg
@@ -33,6 +33,7 @@ from starnav.pipeline.options import (
     DEFAULT_MIN_MATCHED_FRACTION,
     DEFAULT_SIGMA_PX,
     SolveOptions,
+    check_settings,
 )
 from starnav.results import Solution, SolveResult
 from starnav.runtime.budget import Deadline, compiled_s, expired
@@ -67,18 +68,12 @@ class SolveSettings:
     deep_catalog: Catalog | None = field(default=None, repr=False)
 
     def __post_init__(self) -> None:
-        s = self.sigma_px
-        if s is not None and not (np.isfinite(s) and s > 0):
-            raise StarnavError(f"sigma_px must be a positive number of pixels, got {shown(s)}")
-        if self.parity not in (None, 1, -1):
-            raise StarnavError(f"parity must be +1, -1 or None, got {shown(self.parity)}")
-        if not 0.0 <= self.min_matched_fraction <= 1.0:
-            raise StarnavError(
-                f"min_matched_fraction must be in [0, 1], got {shown(self.min_matched_fraction)}"
-            )
-        p = self.max_false_match_probability
-        if not 0.0 < p < 1.0:
-            raise StarnavError(f"max_false_match_probability must be in (0, 1), got {shown(p)}")
+        check_settings(
+            self.sigma_px,
+            self.parity,
+            self.max_false_match_probability,
+            self.min_matched_fraction,
+        )
 
     @classmethod
     def from_options(cls, options: SolveOptions, *, fit_focal: bool | None = None) -> SolveSettings:
@@ -140,18 +135,15 @@ def get_database(catalog: Catalog, camera: CameraModel) -> PairDatabase:
     return _DATABASES[key]
 
 
-def check_prior(prior: Solution | np.ndarray | None, prior_sigma_deg: float) -> np.ndarray | None:
+def check_prior(prior: Solution | np.ndarray | None) -> np.ndarray | None:
     """The prior attitude (a ``Solution`` or ``R_cam_from_icrs``) as a 3x3 rotation, None
-    for no prior, or a one-line error."""
+    for no prior, or a one-line error (its 1-sigma is ``SolveOptions.prior_sigma_deg``,
+    checked with the options)."""
     if prior is None:
         return None
     R = np.asarray(prior.R_cam_from_icrs if isinstance(prior, Solution) else prior, dtype=float)
     if R.shape != (3, 3) or not np.allclose(R @ R.T, np.eye(3), atol=1e-6):
         raise StarnavError("prior must be a Solution or a 3x3 rotation (R_cam_from_icrs)")
-    if not (np.isfinite(prior_sigma_deg) and 0.0 < prior_sigma_deg <= 30.0):
-        raise StarnavError(
-            f"prior_sigma_deg must be in (0, 30] degrees, got {shown(prior_sigma_deg)}"
-        )
     return R
 
 

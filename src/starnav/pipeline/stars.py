@@ -138,7 +138,7 @@ def solve_stars(
     are refused, not ignored."""
     if isinstance(xy, StarList):
         xy, brightness, labels = xy.xy, xy.brightness, xy.labels
-    R_prior = check_prior(prior, options.prior_sigma_deg)
+    R_prior = check_prior(prior)
     if exact_field(options, images=images):
         solver = prepare_solver(options, width=width, height=height)
         budget_s = check_budget(options.time_budget_s, known_budget_s(solver.camera))
