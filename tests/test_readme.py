@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from shared_data import CONTEST
+from shared_data import CONTEST, SHARED
 from starnav.cli import main
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -55,3 +55,43 @@ def test_the_star_list_example_gives_the_readme_s_answer(capsys):
     assert code == 0
     for line in answer:
         assert line in out.splitlines(), line
+
+
+@pytest.mark.corpus
+def test_the_photo_example_gives_the_readme_s_answer(capsys):
+    """The README's photograph: its answer line, its star-count line and its first star rows
+    (the time line is the machine's)."""
+    photo = SHARED / "real" / "granasat_pleyades_05sec.jpg"
+    if not photo.exists():
+        pytest.skip(f"the photograph is not here: {photo}")
+    example = next(b for b in _blocks("") if "starnav solve ../shared" in b)
+    answer = [line for line in example.splitlines()[1:] if line[:9].strip().isdigit()]
+    answer += [line for line in example.splitlines() if line.startswith(("solved:", "  26/50"))]
+    assert len(answer) == 6
+    code = main(["solve", str(photo)])
+    out = capsys.readouterr().out
+    assert code == 0
+    for line in answer:
+        assert line in out.splitlines(), line
+
+
+def test_the_python_page_s_first_example_prints_the_line_it_shows():
+    """docs/python.md's SolveOptions example: the one-line SolveResult it quotes in its
+    comment (the time aside, which is the machine's, and the catalog's epoch, this year)."""
+    page = (ROOT / "docs" / "python.md").read_text()
+    code = re.findall(r"```python\n(.*?)```", page, flags=re.S)[0]
+    quoted = " ".join(
+        line.lstrip("# ").strip()
+        for line in code.splitlines()
+        if line.startswith(("# SolveResult", "#   "))
+    )
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out):
+        exec(compile(code, "docs/python.md", "exec"), {})
+    printed = out.getvalue().splitlines()[0]
+
+    def machine_free(line: str) -> str:
+        line = re.sub(r"\), [0-9.]+ ms, ", "), ms, ", line)
+        return re.sub(r"epoch [0-9]{4}", "epoch YYYY", line)
+
+    assert machine_free(printed) == machine_free(quoted)
