@@ -682,3 +682,58 @@ def test_clouds_and_moonlight():
     assert _found(found, xy, 2.0).sum() >= 0.95 * len(found)  # no cloud edge taken for a star
     which = cKDTree(xy).query(found.xy)[0] < 2.0
     assert which[:10].all()
+
+
+@pytest.fixture
+def small_sep_buffers():
+    """sep's pixel stack and sub-object limit set far below its defaults (restored after)."""
+    import sep
+
+    pixstack, sub_objects = sep.get_extract_pixstack(), sep.get_sub_object_limit()
+    sep.set_extract_pixstack(60)
+    sep.set_sub_object_limit(1)
+    yield sep
+    sep.set_extract_pixstack(pixstack)
+    sep.set_sub_object_limit(sub_objects)
+
+
+def _blended_pairs(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """A 256 px frame of 49 pairs of stars 5 px apart: one source each above the threshold,
+    which sep's deblending splits into two."""
+    xy = _grid(7, 256, rng)
+    xy = np.vstack([xy, xy + [5.0, 0.0]])
+    flux = rng.uniform(1e4, 5e4, len(xy))
+    return render_stars(xy, flux, 256, 256, RenderSettings(), rng), xy
+
+
+def test_sep_buffer_limits_are_raised_not_passed_on(small_sep_buffers):
+    """A crowded field that fills sep's buffers (here made small) is detected as with sep's
+    defaults: the limits are raised for the call, and put back after it."""
+    sep = small_sep_buffers
+    image, xy = _blended_pairs(np.random.default_rng(31))
+    with pytest.raises(Exception, match="buffer full|deblending overflow"):
+        sep.extract(image - np.median(image), 50.0, deblend_nthresh=16)
+    found = detect_stars(image)
+    assert (sep.get_extract_pixstack(), sep.get_sub_object_limit()) == (60, 1)
+    sep.set_extract_pixstack(300_000)
+    sep.set_sub_object_limit(1024)
+    assert np.array_equal(found.xy, detect_stars(image).xy)
+    assert (_match(found.xy, xy, 2.0)[0] >= 0).sum() >= 0.9 * len(xy)  # the pairs are split
+
+
+def test_sep_limits_at_their_bound_raise_the_threshold(small_sep_buffers, monkeypatch):
+    """When the buffers may not grow enough for the faint blended pairs of a frame, the
+    threshold climbs (x2, up to three times) above them and its bright stars are still found;
+    no error reaches the caller."""
+    import starnav.detect.stars as stars
+
+    monkeypatch.setattr(stars, "_SEP_MAX_SUB_OBJECTS", 2)  # a pair needs 3
+    rng = np.random.default_rng(32)
+    bright = _grid(7, 256, rng)
+    faint = bright[:20] + [9.0, 9.0]
+    xy = np.vstack([bright, faint, faint + [4.5, 0.0]])
+    flux = np.concatenate([np.full(len(bright), 3e4), np.full(2 * len(faint), 1.5e3)])
+    image = render_stars(xy, flux, 256, 256, RenderSettings(), rng)
+    found = detect_stars(image)
+    assert (_match(found.xy, bright)[0] >= 0).sum() >= len(bright) - 1
+    assert len(found) < len(bright) + len(faint)  # the faint pairs fell under the threshold

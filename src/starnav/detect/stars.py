@@ -79,6 +79,13 @@ _FIRST_PER_STAR, _FIRST_EXTRA = 2, 20  # sources measured first
 _UNIFORM_NOISE = 1.25
 _PLATEAU_PX = 1500  # a source of more filtered pixels is a patch of residual glow
 _WIDEST_FOR_DEFAULT_KERNEL = 2.5  # PSF sigma (px) beyond which its own Gaussian is used
+# sep's buffers (its defaults: 300 000 pixels above the threshold at once, 1024 sub-objects in
+# one source's deblending) are raised x4 up to these when a crowded field fills them, then the
+# threshold is doubled; at most this many extractions (2 + 2 raises, 3 doublings: 5 -> 40 sigma)
+_SEP_MAX_PIXSTACK = 4_800_000  # ~200 MB of sep's pixel lists
+_SEP_MAX_SUB_OBJECTS = 16_384
+_SEP_THRESHOLD_STEP = 2.0
+_SEP_ATTEMPTS = 8
 
 
 @dataclass(frozen=True, eq=False)
@@ -348,26 +355,63 @@ def _extract(
     filtered = float(np.sqrt((kernel**2).sum()) / kernel.sum())  # filtered / pixel noise
     # a noise map within 25 % of uniform (a star tracker's sky): one threshold, 1.4x faster
     uniform = background.rms_map.max() <= _UNIFORM_NOISE * background.rms_map.min()
+    threshold = threshold_sigma * filtered * (background.rms if uniform else 1.0)
+    err = None if uniform else background.full_rms(data.shape)
+    pixstack, sub_objects = sep.get_extract_pixstack(), sep.get_sub_object_limit()
     try:
-        return sep.extract(
-            data,
-            threshold_sigma * filtered * (background.rms if uniform else 1.0),
-            err=None if uniform else background.full_rms(data.shape),
-            mask=mask,
-            minarea=min_area_px,
-            filter_kernel=kernel,
-            filter_type="conv",
-            # half sep's default: 2x faster on 300 stars, and it still splits equal stars
-            # 4.5 px apart and 5:1 pairs 5.5 px apart at PSF sigma 1 (closer ones are one
-            # star to a star tracker anyway)
-            deblend_nthresh=16,
-            segmentation_map=segments,
+        for _ in range(_SEP_ATTEMPTS):
+            try:
+                return sep.extract(
+                    data,
+                    threshold,
+                    err=err,
+                    mask=mask,
+                    minarea=min_area_px,
+                    filter_kernel=kernel,
+                    filter_type="conv",
+                    # half sep's default: 2x faster on 300 stars, and it still splits equal
+                    # stars 4.5 px apart and 5:1 pairs 5.5 px apart at PSF sigma 1 (closer
+                    # ones are one star to a star tracker anyway)
+                    deblend_nthresh=16,
+                    segmentation_map=segments,
+                )
+            except Exception as exc:  # sep raises plain Exception for its buffer limits
+                threshold *= _raise_sep_limit(str(exc), data.size)
+        return _no_sources(segments, data.shape)
+    finally:
+        sep.set_extract_pixstack(pixstack)
+        sep.set_sub_object_limit(sub_objects)
+
+
+def _raise_sep_limit(message: str, n_pixels: int) -> float:
+    """After sep stopped on one of its buffer limits (``message``, its error): raise that limit
+    (x4, up to the image's pixel count for the pixel stack and ``_SEP_MAX_SUB_OBJECTS``
+    sub-objects per source) and return 1, or, when it is at its bound already, return the
+    factor the detection threshold is to be raised by (a Milky Way or a nebula that joins
+    thousands of stars into one source above the threshold splits at a higher one). Anything
+    else sep raises is not a limit: ``ImageError``."""
+    if "pixel buffer full" in message:
+        limit, bound, setter = (
+            sep.get_extract_pixstack(),
+            _SEP_MAX_PIXSTACK,
+            sep.set_extract_pixstack,
         )
-    except Exception as exc:  # sep raises plain Exception for its buffer limits
-        raise ImageError(
-            f"star detection failed ({' '.join(str(exc).split())}); "
-            "raise threshold_sigma or check the image"
-        ) from None
+        bound = min(bound, n_pixels)
+    elif "deblending overflow" in message:
+        limit, bound = sep.get_sub_object_limit(), _SEP_MAX_SUB_OBJECTS
+        setter = sep.set_sub_object_limit
+    else:
+        raise ImageError(f"star detection failed ({' '.join(message.split())})")
+    if limit >= bound:
+        return _SEP_THRESHOLD_STEP
+    setter(min(bound, 4 * limit))
+    return 1.0
+
+
+def _no_sources(segments: bool, shape: tuple[int, int]):
+    """sep's answer for no sources (with an empty segmentation map when asked for)."""
+    objects = sep.extract(np.zeros((8, 8), dtype=np.float32), 1.0)
+    return (objects, np.zeros(shape, dtype=np.int32)) if segments else objects
 
 
 def _saturated(
