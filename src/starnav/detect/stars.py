@@ -81,11 +81,11 @@ _PLATEAU_PX = 1500  # a source of more filtered pixels is a patch of residual gl
 _WIDEST_FOR_DEFAULT_KERNEL = 2.5  # PSF sigma (px) beyond which its own Gaussian is used
 # sep's buffers (its defaults: 300 000 pixels above the threshold at once, 1024 sub-objects in
 # one source's deblending) are raised x4 up to these when a crowded field fills them, then the
-# threshold is doubled; at most this many extractions (2 + 2 raises, 3 doublings: 5 -> 40 sigma)
+# threshold is doubled, up to 3 times (5 -> 40 sigma), then the frame has no sources: from sep's
+# defaults, at most 8 extractions
 _SEP_MAX_PIXSTACK = 4_800_000  # ~200 MB of sep's pixel lists
 _SEP_MAX_SUB_OBJECTS = 16_384
-_SEP_THRESHOLD_STEP = 2.0
-_SEP_ATTEMPTS = 8
+_SEP_THRESHOLD_DOUBLINGS = 3
 
 
 @dataclass(frozen=True, eq=False)
@@ -358,8 +358,9 @@ def _extract(
     threshold = threshold_sigma * filtered * (background.rms if uniform else 1.0)
     err = None if uniform else background.full_rms(data.shape)
     pixstack, sub_objects = sep.get_extract_pixstack(), sep.get_sub_object_limit()
+    doublings = 0
     try:
-        for _ in range(_SEP_ATTEMPTS):
+        while doublings <= _SEP_THRESHOLD_DOUBLINGS:
             try:
                 return sep.extract(
                     data,
@@ -376,36 +377,34 @@ def _extract(
                     segmentation_map=segments,
                 )
             except Exception as exc:  # sep raises plain Exception for its buffer limits
-                threshold *= _raise_sep_limit(str(exc), data.size)
+                if not _raised_sep_limit(str(exc), data.size):
+                    threshold *= 2.0
+                    doublings += 1
         return _no_sources(segments, data.shape)
     finally:
         sep.set_extract_pixstack(pixstack)
         sep.set_sub_object_limit(sub_objects)
 
 
-def _raise_sep_limit(message: str, n_pixels: int) -> float:
+def _raised_sep_limit(message: str, n_pixels: int) -> bool:
     """After sep stopped on one of its buffer limits (``message``, its error): raise that limit
-    (x4, up to the image's pixel count for the pixel stack and ``_SEP_MAX_SUB_OBJECTS``
-    sub-objects per source) and return 1, or, when it is at its bound already, return the
-    factor the detection threshold is to be raised by (a Milky Way or a nebula that joins
-    thousands of stars into one source above the threshold splits at a higher one). Anything
-    else sep raises is not a limit: ``ImageError``."""
+    x4, up to its bound (the image's pixel count or ``_SEP_MAX_PIXSTACK`` for the pixel
+    stack, ``_SEP_MAX_SUB_OBJECTS`` sub-objects per source), and say whether it could be
+    raised; a Milky Way or a nebula that joins thousands of stars into one source above the
+    threshold splits at a higher one, which the caller tries when it could not. Anything else
+    sep raises is not a limit: ``ImageError``."""
     if "pixel buffer full" in message:
-        limit, bound, setter = (
-            sep.get_extract_pixstack(),
-            _SEP_MAX_PIXSTACK,
-            sep.set_extract_pixstack,
-        )
-        bound = min(bound, n_pixels)
+        limit, setter = sep.get_extract_pixstack(), sep.set_extract_pixstack
+        bound = min(_SEP_MAX_PIXSTACK, n_pixels)
     elif "deblending overflow" in message:
-        limit, bound = sep.get_sub_object_limit(), _SEP_MAX_SUB_OBJECTS
-        setter = sep.set_sub_object_limit
+        limit, setter = sep.get_sub_object_limit(), sep.set_sub_object_limit
+        bound = _SEP_MAX_SUB_OBJECTS
     else:
         raise ImageError(f"star detection failed ({' '.join(message.split())})")
     if limit >= bound:
-        return _SEP_THRESHOLD_STEP
+        return False
     setter(min(bound, 4 * limit))
-    return 1.0
+    return True
 
 
 def _no_sources(segments: bool, shape: tuple[int, int]):
