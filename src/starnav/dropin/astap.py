@@ -128,7 +128,7 @@ def build_parser() -> Parser:
     p.add_argument("-fov", type=float, metavar="DEG", help="image height (0: unknown)")
     p.add_argument("-ra", type=float, metavar="HOURS", help="RA of the search centre")
     p.add_argument("-spd", type=float, metavar="DEG", help="Dec + 90 of the search centre")
-    p.add_argument("-z", type=int, metavar="N", help="downsample by N (0: auto, here 1)")
+    p.add_argument("-z", type=int, metavar="N", help="downsample by N (0: auto, to 4.2 MP)")
     p.add_argument("-o", metavar="BASE", help="base path of the .ini, .wcs, .log files")
     p.add_argument("-wcs", action="store_true", help="write .wcs as a FITS header")
     p.add_argument("-update", action="store_true", help="put the solution in the input file")
@@ -250,7 +250,7 @@ def _hints(args, width: int, height: int) -> PlateHints:
         if not -90.0 <= dec <= 90.0:
             raise StarnavError(f"-spd must be within 0-180 (Dec + 90), got {args.spd}")
         position = {"ra_deg": (args.ra * 15.0) % 360.0, "dec_deg": dec, "radius_deg": radius}
-    downsample = max(args.z or 1, 1)
+    downsample = args.z if args.z and args.z >= 1 else None
     return PlateHints(fov_range_deg=fov_range, downsample=downsample, crpix_center=True,
                       **position)  # fmt: skip
 

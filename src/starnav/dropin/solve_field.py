@@ -111,7 +111,7 @@ def build_parser() -> Parser:
     p.add_argument("-3", "--ra", help="RA of the field centre: degrees or HH:MM:SS")
     p.add_argument("-4", "--dec", help="Dec of the field centre: degrees or [+-]DD:MM:SS")
     p.add_argument("-5", "--radius", type=float, help="search within this radius (degrees)")
-    p.add_argument("-z", "--downsample", type=int, default=1, help="bin the image by N first")
+    p.add_argument("-z", "--downsample", type=int, help="bin the image by N (default: to 4.2 MP)")
     p.add_argument(
         "--crpix-center",
         action="store_true",
@@ -188,7 +188,7 @@ def _hints(args) -> dict:
     if args.ra is not None:
         out.update(ra_deg=ra_deg_from_text(args.ra), dec_deg=dec_deg_from_text(args.dec),
                    radius_deg=args.radius)  # fmt: skip
-    if args.downsample < 1:
+    if args.downsample is not None and args.downsample < 1:
         raise StarnavError(f"--downsample must be at least 1, got {args.downsample}")
     out["downsample"] = args.downsample
     out["positional_error_px"] = args.pixel_error

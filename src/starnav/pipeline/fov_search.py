@@ -45,6 +45,7 @@ from starnav.identify.verify import AMBIGUOUS_PARITY, HypothesisTester, Tally
 from starnav.runtime.budget import Deadline, expired, next_chunk
 
 BAND_FACTOR = math.sqrt(2.0)
+BAND_OVERLAP = BAND_FACTOR**0.5  # a band's cells reach this far up into the next wider band
 _LOOKUP_REL_TOL = 0.005  # ratio slack of the loose look-up (projection distortion of a cell)
 _MAX_CELL_HALF_WIDTH = 0.2  # relative focal-length half-width of a cell at most
 MIN_PATTERN_TOLS = 10.0  # a pattern's longest edge spans at least this many pair tolerances
@@ -137,8 +138,11 @@ def fit_pattern_focal(
 def _cells(
     band: Band, width: int, half_diagonal_px: float, focal_range: tuple[float, float]
 ) -> list[tuple[float, float, float]]:
-    """Guessed focal lengths of a band: (focal, half-width, look-up ratio slack) each."""
-    f_lo = max(focal_px_from_fov(band.fov_hi_deg, width), focal_range[0])
+    """Guessed focal lengths of a band: (focal, half-width, look-up ratio slack) each. They
+    reach ``BAND_OVERLAP`` into the next wider band's fields: a field at the bottom of a band
+    holds half the pattern stars of that band's table fields, and this band's deeper table
+    finds it there."""
+    f_lo = max(focal_px_from_fov(band.fov_hi_deg * BAND_OVERLAP, width), focal_range[0])
     f_hi = min(focal_px_from_fov(band.fov_lo_deg, width), focal_range[1])
     if f_hi < f_lo:
         return []

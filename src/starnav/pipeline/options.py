@@ -66,7 +66,8 @@ class SolveOptions:
 
     Images only: ``max_stars`` (the brightest detections solved; None: 50, 100 for a
     fisheye), ``threshold_sigma`` (detection threshold over the background noise),
-    ``downsample`` (detect on the image binned by this factor).
+    ``downsample`` (detect on the image binned by this factor; None: binned to at most
+    4.2 MP, ``pipeline.image.detection_binning``).
     """
 
     fov_deg: float | None = None
@@ -92,7 +93,7 @@ class SolveOptions:
     time_budget_s: float | None = None
     max_stars: int | None = None
     threshold_sigma: float = DEFAULT_THRESHOLD_SIGMA
-    downsample: int = 1
+    downsample: int | None = None
 
     def __post_init__(self) -> None:
         if isinstance(self.camera, str | Path):
@@ -128,8 +129,8 @@ class SolveOptions:
         if m is not None and not (isinstance(m, int) and not isinstance(m, bool) and m >= 4):
             raise ImageError(f"max_stars must be an integer >= 4, got {shown(m)}")
         k = self.downsample
-        if not (isinstance(k, int) and not isinstance(k, bool) and k >= 1):
-            raise ImageError(f"downsample must be an integer >= 1, got {shown(k)}")
+        if k is not None and not (isinstance(k, int) and not isinstance(k, bool) and k >= 1):
+            raise ImageError(f"downsample must be an integer >= 1 or None, got {shown(k)}")
 
     @classmethod
     def make(cls, options: SolveOptions | None = None, **overrides: Any) -> SolveOptions:

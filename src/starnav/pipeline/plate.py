@@ -53,9 +53,10 @@ class PlateHints:
     range); ``ra_deg``, ``dec_deg``, ``radius_deg``: the boresight lies within ``radius_deg``
     of this position (searched first, then the whole sky); ``parity``: starnav's (+1: the sky
     as seen with y down, astrometry.net's "neg"; None: both); ``downsample``: stars detected on
-    the image binned by this factor; ``positional_error_px``: centroid 1-sigma (px; None: 1);
-    ``crpix_center``: the WCS's reference pixel at the image centre (always so: a plate solve
-    has no camera file, so the principal point, CRPIX, is the centre).
+    the image binned by this factor (None: to at most 4.2 MP); ``positional_error_px``:
+    centroid 1-sigma (px; None: 1); ``crpix_center``: the WCS's reference pixel at the image
+    centre (always so: a plate solve has no camera file, so the principal point, CRPIX, is
+    the centre).
     """
 
     fov_range_deg: tuple[float, float] | None = None
@@ -63,7 +64,7 @@ class PlateHints:
     dec_deg: float | None = None
     radius_deg: float | None = None
     parity: int | None = None
-    downsample: int = 1
+    downsample: int | None = None
     positional_error_px: float | None = None
     crpix_center: bool = False
 

@@ -73,8 +73,7 @@ def plate_hints(request: dict, width_px: float) -> PlateHints:
         raise StarnavError("center_ra and center_dec go together")
     radius = _number(request, "radius")
     downsample = _number(request, "downsample_factor", int)
-    downsample = 1 if downsample is None else downsample
-    if downsample < 1:
+    if downsample is not None and downsample < 1:
         raise StarnavError(f"downsample_factor must be >= 1, got {downsample}")
     return PlateHints(
         fov_range_deg=fov_range,

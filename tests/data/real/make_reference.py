@@ -65,6 +65,7 @@ import re
 import subprocess
 import sys
 import tempfile
+import time
 import warnings
 from pathlib import Path
 
@@ -76,7 +77,7 @@ REFERENCE = HERE / "reference.json"
 SHARED_DIR = HERE.parents[2].parent / "shared" / "data" / "real"
 WORK = Path(os.environ.get("STARNAV_CORPUS_WORK", "/work/corpus/astrometry"))
 CPU_LIMIT_S = 40
-SCALE_DEG = (0.5, 100.0)  # loose width hint (degrees)
+SCALE_DEG = (0.3, 100.0)  # loose width hint (degrees)
 CHECK_MAG_LIMIT = 6.5
 CHECK_MAX_DETECTIONS = 1000
 CHECK_VARIANTS = ("roll_plus_180", "mirrored", "rows_flipped")  # wrong on purpose
@@ -141,9 +142,11 @@ def solve_one(entry: dict, folder: Path, cpu_limit_s: int = CPU_LIMIT_S) -> dict
             "--cpulimit",
             str(cpu_limit_s),
         ]
-        if width > 2000:
-            cmd += ["--downsample", "2"]
+        if max(width, height) > 2000:
+            cmd += ["--downsample", str(2 if max(width, height) <= 4000 else 4)]
+        started = time.perf_counter()
         proc = subprocess.run(cmd, capture_output=True, text=True)  # run this script under nice
+        out["seconds"] = round(time.perf_counter() - started, 2)  # wall time, FITS to .wcs
         wcs = Path(tmp) / f"{stem}.wcs"
         out["command"] = " ".join(["solve-field", "FILE.fits", *cmd[2:]]).replace(tmp, "TMP")
         out["solved"] = wcs.exists()
