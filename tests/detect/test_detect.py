@@ -740,3 +740,22 @@ def test_sep_limits_at_their_bound_raise_the_threshold(small_sep_buffers, monkey
     assert len(detect_stars(image, psf_sigma_px=1.0)) == 0
     tried = np.array(thresholds[:-1]) / thresholds[0]  # the last call makes sep's empty answer
     assert np.allclose(tried[-4:], [1, 2, 4, 8]) and tried.max() == 8
+
+
+def test_sky_clipped_at_the_black_level():
+    """An 8-bit star-tracker frame whose sky was cut at the black level (half its pixels 0),
+    with a glow along one edge: its noise is the upper half-width of its values, not the
+    clipped rms (~5x lower), so the glow is not taken for one huge source (which took sep
+    seconds) and the stars are found, the brightest first."""
+    rng = np.random.default_rng(33)
+    cols = np.mgrid[0:SIZE, 0:SIZE][1] + 0.5
+    glow = 40.0 * np.exp(-(SIZE - cols) / 40.0)  # e per px, along the right edge
+    xy, flux = _stars(rng, 40)
+    electrons = 4.0 + glow + star_electrons(xy, flux / 20.0, SIZE, SIZE, 1.0)
+    noisy = rng.poisson(electrons) + rng.normal(0.0, 1.0, electrons.shape)
+    image = np.clip(np.rint(noisy - 5.0), 0, 255).astype(np.uint8)  # the black level cut
+    assert np.mean(image == 0) > 0.4
+    found = detect_stars(image, max_stars=30)
+    assert found.background_rms > 1.0  # (sigma-clipped, the clipped sky says ~0.3 ADU)
+    assert _brightest_found(found, xy, flux, 15).all()
+    assert _found(found, xy, 2.0).sum() >= 0.9 * len(found)

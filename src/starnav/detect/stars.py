@@ -72,6 +72,10 @@ from starnav.errors import ImageError, shown
 _DEFAULT_KERNEL = np.array([[1.0, 2.0, 1.0], [2.0, 4.0, 2.0], [1.0, 2.0, 1.0]], dtype=np.float32)
 _NOISE_FREE_RMS = 1e-3  # rms assumed for a noise-free image, as a fraction of its range
 _MAP_RMS_FLOOR = 0.5  # the noise map is kept above this fraction of the global rms
+_CLIPPED_FRACTION = 0.1  # of the pixels at the lowest value: a sky clipped at the black level
+_ONE_SIGMA_QUANTILE = 0.8413  # of Gaussian noise: its median + 1 rms
+_UPPER_WIDTH_SHARE = 0.8  # the rms is kept above this share of that upper half-width
+_NOISE_SAMPLE = 250_000  # pixels sampled (a regular grid) for those quantiles
 _LOCAL_NOISE_MARGIN = 1.25  # the annulus noise counts when this much above the noise map
 _MIN_SNR_FRACTION = 0.5  # of threshold_sigma: a source fainter than that here is dropped
 _CANDIDATES_PER_STAR, _CANDIDATES_EXTRA = 4, 30  # most sources measured for max_stars
@@ -157,6 +161,7 @@ def detect_stars(
     if saturation is None:
         saturation = _infer_saturation(data, dtype, high)
 
+    clipped = _clipped(data, mask, low)
     background = estimate_background(data, mask)
     subtract_background(data, background)
     correlation = noise_correlation(data, mask)
@@ -164,6 +169,9 @@ def detect_stars(
     level, rms = background.level, background.rms
     if not rms > 0:  # a noise-free image: an rms relative to its range
         rms = _NOISE_FREE_RMS * (high - level)
+        background = background.with_rms_floor(rms)
+    if clipped:  # its clipped noise map raised to the noise its upper half shows
+        rms = max(rms, _rms_floor(data, mask))
         background = background.with_rms_floor(rms)
     background = background.with_rms_floor(_MAP_RMS_FLOOR * rms)
     n_hot = clean_hot_pixels(data, threshold_sigma * rms) if reject_hot_pixels else 0
@@ -309,6 +317,34 @@ def _measured(
     peak = objects["peak"][order].astype(float)
     measured = (xy, phot.flux[order], peak, snr[order], saturated[order])
     return measured, int(len(objects) - len(keep))
+
+
+def _sample(data: np.ndarray, mask: np.ndarray | None) -> np.ndarray:
+    """About ``_NOISE_SAMPLE`` of the image's unmasked pixels, on a regular grid."""
+    step = max(1, int(math.sqrt(data.size / _NOISE_SAMPLE)))
+    sample = data[::step, ::step]
+    return sample.ravel() if mask is None else sample[~mask[::step, ::step]]
+
+
+def _clipped(data: np.ndarray, mask: np.ndarray | None, low: float) -> bool:
+    """Whether the sky is clipped at the black level: ``_CLIPPED_FRACTION`` of the pixels or
+    more at the image's lowest value (8-bit star-tracker and finder frames: 35-80 %)."""
+    sample = _sample(data, mask)
+    return sample.size > 0 and np.count_nonzero(sample == low) >= _CLIPPED_FRACTION * sample.size
+
+
+def _rms_floor(data: np.ndarray, mask: np.ndarray | None) -> float:
+    """The global pixel rms of a clipped sky (``_clipped``), from the background-subtracted
+    ``data``: ``_UPPER_WIDTH_SHARE`` of the width of its upper half (the 84th percentile less
+    the median: 1 rms of Gaussian noise), which the clipping leaves. Its sigma-clipped rms is
+    far below its true noise (0.14 ADU where the values scatter over 0-3); left at that, the
+    threshold falls under the noise, and the glow beside a horizon becomes one source of
+    300 000 pixels, which takes sep seconds and hides the stars in it."""
+    sample = _sample(data, mask)
+    if not sample.size:
+        return 0.0
+    median, upper = np.quantile(sample, [0.5, _ONE_SIGMA_QUANTILE])
+    return _UPPER_WIDTH_SHARE * float(upper - median)
 
 
 def _rms_at_peaks(background: Background, objects: np.ndarray) -> np.ndarray:
