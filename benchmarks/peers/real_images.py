@@ -1,33 +1,42 @@
-"""starnav, cedar-solve and tetra3rs on the real-image corpus (tests/data/real): docs/images.md.
+"""starnav, cedar-solve, tetra3rs and astrometry.net on the real-image corpus, by field width:
+docs/corpus.md.
 
-    python benchmarks/peers/real_images.py [--out docs/images.md | -]
+    python benchmarks/peers/real_images.py [--set development|held_back|all]
+        [--solvers starnav,cedar-solve,tetra3rs] [--rows rows.jsonl] [--before rows.jsonl]
+        [--out docs/corpus.md | -] [FILE ...]
 
-The files are the corpus's (``../shared/data/real``, or ``$STARNAV_REAL_CORPUS``; absent ones
-are listed as such), the answers are scored against the astrometry.net references of
-``tests/data/real/reference.json`` (``make_reference.py``: starnav's conventions, boresight at
-the image centre, roll about the boresight from the attitude matrices).
+The corpus is ``tests/data/real`` (its README: 208 photographs from 47 public repositories,
+each with its repository, commit, path, SHA-256 and licence in sources.json; the files
+themselves in ``$STARNAV_REAL_CORPUS``, else ``../shared/data/real``, absent ones listed as
+such). Its sources are split in two sets (``set`` in sources.json): ``development``, the photos
+starnav was measured and changed on, and ``held_back``, 12 sources drawn at random (by source)
+before any of their photos was solved, run once at the end to measure whether the changes
+generalize.
+
+The reference is astrometry.net's answer (``reference.json``, made offline by
+``tests/data/real/make_reference.py`` with the Tycho-2 index files 4107-4119, no hint beyond a
+0.3-100° width), converted to starnav's conventions; its ``seconds`` are solve-field's wall
+time on that image (FITS to .wcs, run at ``nice`` beside other work: an upper bound). A band is
+the reference's horizontal field of view, or "not solved by astrometry.net" when it found none.
 
 Solvers, each in a process of its own with thread pools of 1, reading the file names as JSON
-lines and timing every step with ``perf_counter`` (the adapters of
-``benchmarks/peers/images.py``):
+lines and timing each step with ``perf_counter`` (the adapters of ``benchmarks/peers/images.py``):
 
 * starnav (``images.py --starnav-worker solve``): ``read_image`` then ``solve_image(array)``
-  with the FOV unknown (its default search range), default options;
-* cedar-solve 0.5.1 (``peer_cedar_image.py``, its environment as ``benchmarks/peers/peers.py``
-  makes it): ``solve_from_image`` with its own centroiding, its shipped database, the FOV
-  unknown (``fov_estimate`` None);
-* tetra3rs 0.14.0 (``peer_tetra3rs_image.py``): its ``extract_centroids`` (standard
-  extractor) and ``solve_from_centroids`` with its stock database; it needs an FOV estimate,
-  and gets the reference FOV (``GIVEN_FOV_DEG`` where astrometry.net found none), so its
-  FOV column is not a blind one.
+  with default options, as ``starnav solve IMG`` runs it;
+* cedar-solve 0.5.1 (``peer_cedar_image.py``): ``solve_from_image``, its own centroiding and
+  shipped database, the FOV unknown;
+* tetra3rs 0.14.0 (``peer_tetra3rs_image.py``): its ``extract_centroids`` and
+  ``solve_from_centroids`` with its stock database and the reference FOV given (it needs an
+  estimate; ``GIVEN_FOV_DEG`` where astrometry.net found none), so its column is not a blind
+  one.
 
-Scores per image: solved (an answer), wrong (an answer 0.5° or more off in boresight or in
-roll about the boresight, or of the wrong parity, or any answer where astrometry.net found
-none: there it is shown as "answer, no reference"), boresight error (″), roll error (°),
-FOV error (% of the reference's horizontal FOV) and the time from the decoded array to the
-attitude (ms). A peer's answer also counts as right when within ``WRONG_DEG``
-(``harness.verdict``: not wrong); the test
-(tests/corpus/test_real.py) holds starnav to tighter tolerances.
+Scores per image (``harness.verdict``): right (within ``WRONG_DEG`` in boresight and in roll
+about the boresight, the reference's parity), wrong, no answer, or "answer, no reference"
+(astrometry.net found none: not scored). starnav's unsolved images are grouped by the
+``failure`` class its result names (``starnav.pipeline.diagnose``). ``--rows`` writes one JSON
+line per image and solver; ``--before`` reads such a file of an earlier run and adds its
+starnav counts beside this one's.
 """
 
 from __future__ import annotations
@@ -46,9 +55,11 @@ import importlib.util
 import json
 import sys
 import time
+from collections import Counter
 from pathlib import Path
 
 import numpy as np
+from tqdm import tqdm
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))  # the repository: benchmarks.*
 import starnav
@@ -57,9 +68,9 @@ from benchmarks.harness import (
     ROOT,
     WRONG_DEG,
     machine,
-    replace_block,
     score_answer,
     table_head,
+    table_row,
     verdict,
 )
 from benchmarks.peers.images import STARNAV, ensure_pillow
@@ -68,8 +79,12 @@ from starnav.geometry import attitude_from_radec_roll
 from starnav.identify import cache_dir
 
 DATA = ROOT / "tests" / "data" / "real"
-DOC = DOCS / "images.md"
+DOC = DOCS / "corpus.md"
 GIVEN_FOV_DEG = 20.0  # tetra3rs's FOV estimate for an image without a reference
+SETS = ("development", "held_back")
+BANDS = ((0.0, 3.0), (3.0, 10.0), (10.0, 20.0), (20.0, 40.0), (40.0, 60.0), (60.0, 400.0))
+NO_REFERENCE = "not solved by astrometry.net"
+STARNAV_LABEL = "starnav"
 
 
 def load_corpus():
@@ -82,7 +97,7 @@ def load_corpus():
 
 @dataclasses.dataclass(frozen=True)
 class Solver:
-    """A column group of the table: a solver, its adapter, interpreter and arguments."""
+    """A column group of the tables: a solver, its adapter, interpreter and arguments."""
 
     label: str
     adapter: object
@@ -91,69 +106,244 @@ class Solver:
     fov_given: bool
 
 
-def solvers(root: Path) -> tuple[list[Solver], dict]:
-    """starnav, cedar-solve and tetra3rs as run here, and the peers' install lines."""
-    out = [
-        Solver(
-            f"starnav {starnav.__version__}",
-            STARNAV,
-            Path(sys.executable),
-            ("--starnav-worker", "solve"),
-            False,
-        )
-    ]
-    installs = {}
+def solvers(root: Path, wanted: list[str]) -> tuple[list[Solver], dict]:
+    """starnav, cedar-solve and tetra3rs as run here (those ``wanted``), and the peers'
+    install lines."""
+    out, installs = [], {}
+    if STARNAV_LABEL in wanted:
+        worker = ("--starnav-worker", "solve")
+        out.append(Solver(STARNAV_LABEL, STARNAV, Path(sys.executable), worker, False))
     for peer in PEERS:
+        if peer.name not in wanted:
+            continue
         python, installs[peer.name] = peer_python(peer, root)
         db_arg, _ = peer_database(python, peer, root, None, Path("-"), "", tag="stock")
         if peer.name == "cedar-solve":
             adapter = dataclasses.replace(peer, adapter="peer_cedar_image.py")
-            args = ("solve", "--db", db_arg)
-            out.append(Solver(f"cedar-solve {peer.version}", adapter, python, args, False))
+            out.append(Solver(peer.name, adapter, python, ("solve", "--db", db_arg), False))
         else:
             installs[peer.name] += f" {ensure_pillow(python)}"
             adapter = dataclasses.replace(peer, adapter="peer_tetra3rs_image.py")
             args = ("solve", "--db", db_arg, "--extractor", "standard")
-            out.append(Solver(f"tetra3rs {peer.version}", adapter, python, args, True))
+            out.append(Solver(peer.name, adapter, python, args, True))
     return out, installs
 
 
-def reference_attitude(ref: dict) -> np.ndarray:
-    return attitude_from_radec_roll(ref["ra_deg"], ref["dec_deg"], ref["roll_deg"], ref["parity"])
+def band_of(ref: dict) -> str:
+    """The field-width band of an image: its reference's horizontal FOV, or none."""
+    if not ref["solved_by_reference"]:
+        return NO_REFERENCE
+    fov = ref["fov_deg"]
+    for lo, hi in BANDS:
+        if lo <= fov < hi:
+            return band_name(lo, hi)
+    return band_name(*BANDS[-1])
+
+
+def band_name(lo: float, hi: float) -> str:
+    if lo == 0.0:
+        return f"< {hi:g}°"
+    return f"{lo:g}-{hi:g}°" if hi < 400 else f"> {lo:g}°"
 
 
 def score(ref: dict, out: dict) -> dict:
     """One solver on one image: outcome and errors (see the module docstring)."""
     answered = out.get("error") is None and ("R" in out or out.get("ra_deg") is not None)
-    row = {"time_ms": out.get("time_ms"), "answered": answered, "error": out.get("error")}
+    row = {
+        "time_ms": out.get("time_ms"),
+        "error": out.get("error"),
+        "failure": out.get("failure"),
+    }
     if not answered:
         return {**row, "outcome": "unsolved"}
     if not ref["solved_by_reference"]:
         return {**row, "outcome": "answer, no reference"}
-    score = score_answer(out, reference_attitude(ref))
-    fov = out.get("fov_deg")
-    row.update(
-        boresight_arcsec=score.boresight_arcsec,
-        roll_deg=score.roll_deg,
-        fov_percent=None if fov is None else 100 * (fov / ref["fov_deg"] - 1),
-    )
-    wrong = verdict(score) == "wrong"
-    return {**row, "outcome": "WRONG" if wrong else "right"}
+    result = score_answer(out, attitude_from_radec_roll(
+        ref["ra_deg"], ref["dec_deg"], ref["roll_deg"], ref["parity"]))  # fmt: skip
+    row.update(boresight_arcsec=result.boresight_arcsec, roll_deg=result.roll_deg)
+    return {**row, "outcome": "WRONG" if verdict(result) == "wrong" else "right"}
 
 
-def cell(r: dict) -> str:
-    if r is None:
-        return "absent |  |  |  | "
-    t = "-" if r["time_ms"] is None else f"{r['time_ms']:.0f}"
-    if r["outcome"] != "right":
-        mark = "no" if r["outcome"] == "unsolved" else r["outcome"]
-        return f"{mark} |  |  |  | {t}"
-    fov = "" if r["fov_percent"] is None else f"{r['fov_percent']:+.2f}"
-    return f"yes | {r['boresight_arcsec']:.1f} | {r['roll_deg']:.3f} | {fov} | {t}"
+def run(corpus, folder: Path, entries: list[dict], runs: list[Solver], references) -> list[dict]:
+    """Every solver on every file present: one row per (image, solver)."""
+    present = [e for e in entries if (folder / e["name"]).is_file()]
+    rows = []
+    for s in runs:
+        items = []
+        for e in present:
+            ref = references[e["name"]]
+            fov = (ref.get("fov_deg") or GIVEN_FOV_DEG) if s.fov_given else None
+            items.append({"path": str(folder / e["name"]), "fov_deg": fov})
+        t0 = time.time()
+        outs = []
+        # in chunks, for the progress bar (one worker process per chunk)
+        chunk = 20
+        for start in tqdm(range(0, len(items), chunk), desc=s.label, unit="x20 images"):
+            part, _ = run_adapter(s.python, s.adapter, list(s.args), items[start : start + chunk])
+            outs.extend(part)
+        for e, out in zip(present, outs, strict=True):
+            rows.append({"name": e["name"], "solver": s.label, **score(references[e["name"]], out)})
+        right = sum(r["outcome"] == "right" for r in rows if r["solver"] == s.label)
+        print(f"{s.label}: {right}/{len(present)} right ({time.time() - t0:.0f} s)", file=sys.stderr)
+    return rows
+
+
+def counts(rows: list[dict]) -> tuple[int, int]:
+    return (sum(r["outcome"] == "right" for r in rows), sum(r["outcome"] == "WRONG" for r in rows))
+
+
+def band_table(entries, references, rows, labels, before) -> list[str]:
+    """Per band: images, astrometry.net's solved, each solver's right / wrong (and starnav's
+    before, when given), starnav's median time."""
+    by = {(r["name"], r["solver"]): r for r in rows}
+    bands = [band_name(lo, hi) for lo, hi in BANDS] + [NO_REFERENCE]
+    head = ["band (astrometry.net's field)", "images", "astrometry.net solved"]
+    if before is not None:
+        head.append("starnav before: right")
+    head += [f"{label}: right / wrong" for label in labels]
+    head += ["starnav median ms (right)", "astrometry.net median s"]
+    lines = table_head(*head)
+    groups = [(b, [e for e in entries if band_of(references[e["name"]]) == b]) for b in bands]
+    in_range = [e for b, g in groups[1:5] for e in g]
+    solved = [e for b, g in groups[:-1] for e in g]
+    groups += [("all astrometry.net solved", solved), ("3-60° (the target band)", in_range)]
+    for band, group in groups:
+        if not group:
+            continue
+        names = [e["name"] for e in group]
+        refs = [references[n] for n in names]
+        ref_solved = sum(r["solved_by_reference"] for r in refs)
+        cells = [band, len(group), ref_solved if band != NO_REFERENCE else 0]
+        if before is not None:
+            old = [before[n] for n in names if n in before]
+            cells.append(sum(r["outcome"] == "right" for r in old))
+        for label in labels:
+            got = [by[(n, label)] for n in names if (n, label) in by]
+            if band == NO_REFERENCE:
+                answers = sum(r["outcome"] == "answer, no reference" for r in got)
+                cells.append(f"({answers} answers)")
+            else:
+                right, wrong = counts(got)
+                cells.append(f"{right} / {wrong}")
+        times = [by[(n, STARNAV_LABEL)]["time_ms"] for n in names if (n, STARNAV_LABEL) in by
+                 and by[(n, STARNAV_LABEL)]["outcome"] == "right"]  # fmt: skip
+        seconds = [r["seconds"] for r in refs if r["solved_by_reference"] and r.get("seconds")]
+        cells.append(f"{np.median(times):.0f}" if times else "-")
+        cells.append(f"{np.median(seconds):.1f}" if seconds else "-")
+        lines.append(table_row(*cells))
+    return lines
+
+
+def failure_table(entries, references, rows) -> list[str]:
+    """starnav's unsolved images per failure class and band (astrometry.net solved them or
+    not)."""
+    mine = {r["name"]: r for r in rows if r["solver"] == STARNAV_LABEL}
+    bands = [band_name(lo, hi) for lo, hi in BANDS] + [NO_REFERENCE]
+    classes = Counter()
+    cells = Counter()
+    for e in entries:
+        r = mine.get(e["name"])
+        if r is None or r["outcome"] != "unsolved":
+            continue
+        cls = r["failure"] or "(none named)"
+        classes[cls] += 1
+        cells[(cls, band_of(references[e["name"]]))] += 1
+    lines = table_head("failure", "images", *bands)
+    for cls, n in classes.most_common():
+        lines.append(table_row(cls, n, *(cells[(cls, b)] or "" for b in bands)))
+    return lines
+
+
+def image_table(entries, references, rows, labels) -> list[str]:
+    by = {(r["name"], r["solver"]): r for r in rows}
+    lines = table_head("image", "source", "kind", "band", "astrometry.net s",
+                       *labels, "starnav ms", "starnav's reason (not solved)")  # fmt: skip
+    for e in entries:
+        name, ref = e["name"], references[e["name"]]
+        cells = []
+        for label in labels:
+            r = by.get((name, label))
+            cells.append("absent" if r is None else {"unsolved": "no"}.get(r["outcome"],
+                                                                            r["outcome"]))
+        mine = by.get((name, STARNAV_LABEL))
+        ms = "" if mine is None or mine["time_ms"] is None else f"{mine['time_ms']:.0f}"
+        why = ""
+        if mine is not None and mine["outcome"] == "unsolved":
+            why = f"{mine['failure'] or ''}: {mine['error'] or ''}".replace("|", "/")[:160]
+        seconds = f"{ref['seconds']:.1f}" if ref.get("seconds") else ""
+        lines.append(table_row(f"`{name}`", e["repository"], e["kind"], band_of(ref), seconds,
+                               *cells, ms, why))  # fmt: skip
+    return lines
+
+
+def source_table(entries, references) -> list[str]:
+    """The corpus by source: its set, kinds, licence, and images per band."""
+    bands = [band_name(lo, hi) for lo, hi in BANDS] + [NO_REFERENCE]
+    lines = table_head("source", "set", "kind", "licence", "images", *bands)
+    repos = sorted({e["repository"] for e in entries}, key=str.lower)
+    for repo in repos:
+        mine = [e for e in entries if e["repository"] == repo]
+        per = Counter(band_of(references[e["name"]]) for e in mine)
+        kinds = ", ".join(sorted({e["kind"] for e in mine}))
+        lines.append(table_row(repo, mine[0]["set"], kinds, mine[0]["licence"], len(mine),
+                               *(per[b] or "" for b in bands)))  # fmt: skip
+    return lines
+
+
+def write_doc(args, entries, references, rows, labels, installs, before, t_start) -> str:
+    parts = [
+        "# starnav on real photographs: the corpus by field width",
+        "",
+        "Generated by `benchmarks/peers/real_images.py` (its docstring says what is measured "
+        "and how) on the corpus of `tests/data/real` (its README: sources, licences, "
+        "references). Peers: "
+        + ("; ".join(f"{k}: `pip install {v}`" for k, v in installs.items()) or "none")
+        + ". starnav and cedar-solve with the field of view unknown, tetra3rs with the "
+        f"reference's given. Right: within {WRONG_DEG:g}° of astrometry.net's answer in "
+        "boresight and roll, its parity.",
+        "",
+    ]
+    for name in SETS:
+        chosen = [e for e in entries if e["set"] == name]
+        if not chosen:
+            continue
+        sources = len({e["repository"] for e in chosen})
+        title = {"development": "Development set", "held_back": "Held-back set"}[name]
+        parts += [
+            f"## {title}: {len(chosen)} photographs from {sources} sources",
+            "",
+            *band_table(chosen, references, rows, labels,
+                        None if before is None else before),  # fmt: skip
+            "",
+            "starnav's unsolved images by the failure it names (all bands):",
+            "",
+            *failure_table(chosen, references, rows),
+            "",
+        ]
+    parts += [
+        "## Every image",
+        "",
+        *image_table(entries, references, rows, labels),
+        "",
+        "## The corpus by source",
+        "",
+        *source_table(entries, references),
+        "",
+        f"{machine()}; `nice python benchmarks/peers/real_images.py {' '.join(sys.argv[1:])}`"
+        f", {time.time() - t_start:.0f} s.",
+    ]
+    text = "\n".join(parts) + "\n"
+    if str(args.out) != "-":
+        Path(args.out).write_text(text)
+    return text
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--set", choices=(*SETS, "all"), default="all")
+    parser.add_argument("--solvers", default="starnav,cedar-solve,tetra3rs")
+    parser.add_argument("--rows", type=Path, help="write one JSON line per image and solver")
+    parser.add_argument("--before", type=Path, help="rows of an earlier run (starnav's)")
     parser.add_argument("--out", type=Path, default=DOC, help="markdown file ('-': none)")
     parser.add_argument("only", nargs="*", help="only these files (a trial run)")
     args = parser.parse_args()
@@ -161,84 +351,21 @@ def main() -> None:
     corpus = load_corpus()
     folder = corpus.corpus_dir()
     references = json.loads((DATA / "reference.json").read_text())["images"]
-    names = [e["name"] for e in corpus.sources() if not args.only or e["name"] in args.only]
-    present = [n for n in names if folder is not None and (folder / n).exists()]
-    runs, installs = solvers(cache_dir())
-    results: dict[str, dict[str, dict]] = {s.label: {} for s in runs}
-    for s in runs:
-        items = []
-        for name in present:
-            ref = references[name]
-            fov = (ref.get("fov_deg") or GIVEN_FOV_DEG) if s.fov_given else None
-            items.append({"path": str(folder / name), "fov_deg": fov})
-        t0 = time.time()
-        outs, _ = run_adapter(s.python, s.adapter, list(s.args), items)
-        for name, out in zip(present, outs, strict=True):
-            results[s.label][name] = score(references[name], out)
-        right = sum(r["outcome"] == "right" for r in results[s.label].values())
-        print(
-            f"{s.label}: {right}/{len(present)} right ({time.time() - t0:.0f} s)", file=sys.stderr
-        )
-    write_doc(args, names, references, runs, results, installs, t_start)
-
-
-def summary_line(label: str, rows: dict, n_reference: int) -> str:
-    right = [r for r in rows.values() if r["outcome"] == "right"]
-    wrong = sum(r["outcome"] == "WRONG" for r in rows.values())
-    unref = sum(r["outcome"] == "answer, no reference" for r in rows.values())
-    bore = [r["boresight_arcsec"] for r in right]
-    times = [r["time_ms"] for r in right]
-    med = f"{np.median(bore):.1f}″" if bore else "-"
-    tmed = f"{np.median(times):.0f} ms" if times else "-"
-    return (
-        f"- {label}: {len(right)} of the {n_reference} images astrometry.net solved right, "
-        f"{wrong} wrong, {unref} answers where astrometry.net found none; boresight error "
-        f"median {med}, time median {tmed} (right answers)"
-    )
-
-
-def write_doc(args, names, references, runs, results, installs, t_start) -> None:
-    n_ref = sum(references[n]["solved_by_reference"] for n in names)
-    per_run = ("solved", "″", "roll °", "FOV %", "ms")
-    lines = table_head(
-        "image",
-        "reference FOV°",
-        *(f"{s.label}: {c}" if c == "solved" else c for s in runs for c in per_run),
-    )
-    for name in names:
-        ref = references[name]
-        fov = f"{ref['fov_deg']:.2f}" if ref["solved_by_reference"] else "not solved"
-        cells = "".join(f" {cell(results[s.label].get(name))} |" for s in runs)
-        lines.append(f"| `{name}` | {fov} |{cells}")
-    text = "\n".join(
-        [
-            f"{len(names)} real images (tests/data/real; {n_ref} solved by astrometry.net, "
-            "whose answers are the reference). Peers: "
-            + "; ".join(f"{k}: `pip install {v}`" for k, v in installs.items())
-            + ". starnav and cedar-solve with the FOV unknown; tetra3rs with the reference FOV "
-            "given (it needs an estimate). Thread pools of 1.",
-            "",
-            *(summary_line(s.label, results[s.label], n_ref) for s in runs),
-            "",
-            *lines,
-            "",
-            f"solved: yes (right: within {WRONG_DEG:g}° in boresight and in roll about the "
-            "boresight, the right parity), no, WRONG, or 'answer, no reference' (astrometry.net "
-            "found none); ″: boresight error; roll °: rotation about the boresight; FOV %: "
-            "relative error of the horizontal FOV; ms: the decoded array to the attitude.",
-            "",
-            f"{machine()}; `nice python benchmarks/peers/real_images.py`, "
-            f"{time.time() - t_start:.0f} s.",
-        ]
-    )
-    print(text)
-    if str(args.out) != "-":
-        missing = (
-            "## Real images\n\nGenerated by `benchmarks/peers/real_images.py` (its docstring"
-            " says what is measured and how) on the corpus of `tests/data/real` (its README:"
-            " sources, licences, references)."
-        )
-        replace_block(args.out, "real_images", text, missing=missing)
+    entries = [
+        e
+        for e in corpus.sources()
+        if (args.set == "all" or e["set"] == args.set) and (not args.only or e["name"] in args.only)
+    ]
+    runs, installs = solvers(cache_dir(), args.solvers.split(","))
+    rows = run(corpus, folder, entries, runs, references)
+    if args.rows:
+        args.rows.write_text("".join(json.dumps(r) + "\n" for r in rows))
+    before = None
+    if args.before:
+        old = [json.loads(line) for line in args.before.read_text().splitlines() if line]
+        before = {r["name"]: r for r in old if r["solver"] == STARNAV_LABEL}
+    labels = [s.label for s in runs]
+    print(write_doc(args, entries, references, rows, labels, installs, before, t_start))
 
 
 if __name__ == "__main__":

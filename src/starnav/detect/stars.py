@@ -105,7 +105,9 @@ class Detections:
     ``background``, ``background_rms``: global level and pixel noise (image units);
     ``psf_sigma_px``: the PSF sigma given or measured; ``n_saturated``: saturated sources
     found; ``n_hot``: hot pixels removed; ``width``, ``height``: image size (px);
-    ``n_rejected``: sources measured and not taken for stars (extended, elongated, or faint
+    ``elongation``: the median ratio of the long to the short axis of the stars (sep's
+    isophotal a / b; 1 for round stars, 3 for stars trailed to 3 times their width, 1 when
+    none); ``n_rejected``: sources measured and not taken for stars (extended, elongated, or faint
     against their surroundings).
     """
 
@@ -122,6 +124,7 @@ class Detections:
     width: int
     height: int
     n_rejected: int = 0
+    elongation: float = 1.0
 
     def __len__(self) -> int:
         return len(self.xy)
@@ -187,7 +190,7 @@ def detect_stars(
         if len(objects) == 0:
             return _empty(width, height, psf_sigma_px, level, rms, n_hot, n_saturated)
     peak_snr = objects["peak"] / _rms_at_peaks(background, objects)
-    stars, n_rejected = _measured_in_batches(
+    stars, n_rejected, elongation = _measured_in_batches(
         data,
         mask,
         objects,
@@ -209,6 +212,7 @@ def detect_stars(
         width,
         height,
         n_rejected,
+        elongation,
     )
 
 
@@ -278,9 +282,9 @@ def _measured_in_batches(
     n = min(limit, _FIRST_PER_STAR * max_stars + _FIRST_EXTRA)
     while True:
         pick = order[:n]
-        stars, n_rejected = _measured(data, mask, objects[pick], saturated[pick], *args)
-        if len(stars[0]) >= max_stars or n >= limit:
-            return stars, n_rejected
+        measured = _measured(data, mask, objects[pick], saturated[pick], *args)
+        if len(measured[0][0]) >= max_stars or n >= limit:
+            return measured
         n = min(limit, 2 * n)
 
 
@@ -294,10 +298,10 @@ def _measured(
     threshold_sigma: float,
     max_stars: int | None,
     correlation: float,
-) -> tuple[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray], int]:
+) -> tuple[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray], int, float]:
     """(centroids (our pixel convention), local flux, peak, SNR and saturation flag of the
     sources taken for stars, saturated first then by SNR, the first ``max_stars`` (None:
-    all); how many sources were not taken for stars)."""
+    all); how many sources were not taken for stars; their median elongation a / b)."""
     x, y = _centroids(data, objects, sigma, mask)
     phot = local_photometry(data, mask, x, y, sigma)
     # the noise of the surroundings where it is clearly above the image's (a tree line, a
@@ -316,7 +320,9 @@ def _measured(
     xy = np.column_stack([x[order], y[order]]) + 0.5
     peak = objects["peak"][order].astype(float)
     measured = (xy, phot.flux[order], peak, snr[order], saturated[order])
-    return measured, int(len(objects) - len(keep))
+    b = np.maximum(objects["b"][order], 1e-3)
+    elongation = float(np.median(objects["a"][order] / b)) if len(order) else 1.0
+    return measured, int(len(objects) - len(keep)), elongation
 
 
 def _sample(data: np.ndarray, mask: np.ndarray | None) -> np.ndarray:

@@ -25,6 +25,7 @@ from starnav.detect.header import ImageHints, fits_hints, is_fits
 from starnav.detect.read import read_image
 from starnav.detect.stars import Detections, detect_stars
 from starnav.errors import CameraError, ImageError
+from starnav.pipeline.diagnose import Failure, diagnose
 from starnav.pipeline.fov import diagonal_fov_deg, search_range
 from starnav.pipeline.options import (
     DEFAULT_FOV_RANGE_DEG,
@@ -60,6 +61,7 @@ class ImageSolveResult:
     solve_ms: float
     catalog: Catalog | None = None
     hints: ImageHints = NO_HINTS
+    failure: str | None = None
 
     @property
     def total_ms(self) -> float:
@@ -69,7 +71,8 @@ class ImageSolveResult:
     def to_dict(self, file: str | None = None) -> dict:
         """The JSON of the solve (``starnav.results.solve_dict``; the stars are the detections,
         brightest first) with the image ``file``, its size, the fitted principal point and
-        distortion (null when unsolved), ``n_detected`` and the times (ms)."""
+        distortion (null when unsolved), ``n_detected``, ``failure`` (the class of an unsolved
+        image's failure, ``pipeline.diagnose``; null when solved) and the times (ms)."""
         from starnav.results import solve_dict
 
         det, cam = self.detections, self.camera
@@ -82,6 +85,7 @@ class ImageSolveResult:
             cy=cam.cy if cam else None,
             **{k: getattr(self.solution, k) if cam else None for k in ("k1", "k2", "k3", "k4")},
             n_detected=len(det.xy),
+            failure=self.failure,
             hints=self.hints.to_dict() if self.hints.sources else None,
             read_ms=self.read_ms,
             detect_ms=self.detect_ms,
@@ -145,7 +149,11 @@ def solve_image(
     detect_ms = (time.perf_counter() - t1) * 1e3
     if len(found.xy) < MIN_DETECTIONS:
         reason = f"{len(found.xy)} stars detected, at least {MIN_DETECTIONS} are needed"
-        return ImageSolveResult(None, reason, found, None, read_ms, detect_ms, 0.0, hints=hints)
+        failure = _diagnose(found, reason, options)
+        return ImageSolveResult(
+            None, failure.explain(reason), found, None, read_ms, detect_ms, 0.0,
+            hints=hints, failure=failure.kind,
+        )  # fmt: skip
     if options.epoch_year is None and hints.epoch_year is not None:
         options = replace(options, epoch_year=hints.epoch_year)
     searched = not options.field_known and not options.scans_focal
@@ -159,9 +167,13 @@ def solve_image(
         prior,
     )
     sol = result.solution
+    reason, failure = result.reason, None
+    if sol is None:
+        why = _diagnose(found, reason, options)
+        reason, failure = why.explain(reason), why.kind
     return ImageSolveResult(
         sol,
-        result.reason,
+        reason,
         found,
         None if sol is None else sol.camera,
         read_ms,
@@ -169,6 +181,20 @@ def solve_image(
         result.time_ms,
         result.catalog,
         hints,
+        failure,
+    )
+
+
+def _diagnose(found: Detections, reason: str, options: SolveOptions) -> Failure:
+    """Why the image was not solved (``pipeline.diagnose``), with the options it was solved
+    with."""
+    searched = None if options.field_known else options.search_range_deg
+    return diagnose(
+        found,
+        reason,
+        fov_range_deg=searched,
+        threshold_sigma=options.threshold_sigma,
+        lens=options.lens_model,
     )
 
 

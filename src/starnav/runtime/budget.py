@@ -43,6 +43,7 @@ DEFAULTS = (
 )
 
 UNIT_SHARE = 0.05  # a search's unit of work lasts about this part of its budget
+CHUNK_GROWTH = 2  # a chunk of work is at most this many times the last one
 
 _COMPILING = threading.local()  # per thread: nesting depth and start of the outermost compile
 _COMPILE_S = [0.0]  # seconds spent compiling in this process
@@ -144,9 +145,13 @@ class Deadline:
 def next_chunk(deadline: Deadline, elapsed_s: float, size: int, most: int) -> int:
     """The items of a search's next chunk of work, for it to last about ``UNIT_SHARE`` of the
     ``deadline``'s budget, from the last chunk's: ``size`` items in ``elapsed_s`` seconds
-    (1 to ``most``)."""
+    (1 to ``most``, and at most ``CHUNK_GROWTH`` times ``size``)."""
     per_item = max(elapsed_s, 1e-6) / size
-    return int(min(max(UNIT_SHARE * deadline.budget_s / per_item, 1.0), most))
+    wanted = UNIT_SHARE * deadline.budget_s / per_item
+    # at most twice the last: items differ in cost (a pattern of short edges draws 100x the
+    # catalog candidates of a long one), and one chunk of 800 after a cheap one of 16 ran
+    # for minutes past a 10 s budget
+    return int(min(max(wanted, 1.0), CHUNK_GROWTH * size, most))
 
 
 def expired(deadline: Deadline | None) -> bool:

@@ -1,0 +1,94 @@
+"""Why an image was not solved, in words a photographer acts on.
+
+``diagnose`` names one class of ``FAILURES`` from what detection measured and why the solve
+ended, first that applies:
+
+* ``FEW_STARS``: fewer than ``FEW_STARS_LIMIT`` stars detected (overcast, twilight, too short
+  an exposure, a threshold too high);
+* ``TRAILED``: the stars are ``TRAILED_ELONGATION`` times longer than wide or more (a long
+  exposure on a fixed tripod, a shaking camera): their centres are the trails' middles;
+* ``DISTORTED``: an attitude fitted part of the stars and not the rest, with the distortion
+  fitted too (a lens beyond the model: a fisheye or a wide-angle lens for the pinhole);
+* ``BUDGET``: the time budget ended the search;
+* ``OUTSIDE``: no pattern of the stars matched the catalog anywhere in the range searched: the
+  field lies outside it, or the brightest points are not stars (noise, a nebula's knots,
+  satellites), or a field too narrow for the catalog.
+
+The advice says what to change (exposure, mount, ``--lens``, ``--fov-range``, the budget).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from starnav.detect.stars import Detections
+
+FEW_STARS = "too few stars"
+TRAILED = "stars trailed"
+DISTORTED = "lens too distorted for the model"
+BUDGET = "time budget spent"
+OUTSIDE = "field outside the range"
+FAILURES = (FEW_STARS, TRAILED, DISTORTED, BUDGET, OUTSIDE)
+
+FEW_STARS_LIMIT = 8  # fewer detected stars than this rarely identify a field and verify it
+TRAILED_ELONGATION = 2.0  # median long / short axis of the stars
+# the solve's own words for an attitude that fits some of the stars only
+_PART_FITS = "stars agree with the best attitude"
+_BUDGET = "time budget spent"
+
+
+@dataclass(frozen=True)
+class Failure:
+    """Why an image was not solved: its ``kind`` (one of ``FAILURES``) and what to change."""
+
+    kind: str
+    advice: str
+
+    def explain(self, reason: str) -> str:
+        """The reason a user reads: the class, the solve's own reason, the advice."""
+        return f"{self.kind}: {reason}; {self.advice}"
+
+
+def diagnose(
+    detections: Detections,
+    reason: str,
+    *,
+    fov_range_deg: tuple[float, float] | None,
+    threshold_sigma: float,
+    lens: str,
+) -> Failure:
+    """The class of an unsolved image's failure (see the module docstring) from its
+    ``detections`` and the solve's ``reason``; ``fov_range_deg``: the horizontal fields
+    searched (degrees; None when the field was given), ``threshold_sigma`` and ``lens`` as
+    solved."""
+    n = len(detections)
+    if n < FEW_STARS_LIMIT:
+        return Failure(
+            FEW_STARS,
+            f"{n} stars detected, {FEW_STARS_LIMIT} or more are needed: a longer exposure, a "
+            f"clearer sky, or a lower detection threshold (--threshold-sigma, now {threshold_sigma:g})",
+        )
+    if detections.elongation >= TRAILED_ELONGATION:
+        return Failure(
+            TRAILED,
+            f"the stars are {detections.elongation:.1f} times longer than wide: a shorter "
+            "exposure, a steadier camera or a tracking mount",
+        )
+    if _PART_FITS in reason:
+        models = "a fisheye model (--lens)" if lens == "pinhole" else "another --lens model"
+        return Failure(
+            DISTORTED,
+            "the best attitude holds the middle of the frame and not its edges, with k1, k2 "
+            f"fitted: try {models}, or calibrate the camera (starnav calibrate)",
+        )
+    if _BUDGET in reason:
+        return Failure(BUDGET, "a longer --time-budget, or the field of view if it is known")
+    where = (
+        f"in {fov_range_deg[0]:g}-{fov_range_deg[1]:g}°" if fov_range_deg else "at the field given"
+    )
+    return Failure(
+        OUTSIDE,
+        f"no pattern of the brightest stars matches the catalog {where}: give the field of "
+        "view (--fov-deg) or a range that holds it (--fov-range, 3-100° for the pinhole lens); "
+        "narrower than 3° is beyond the embedded catalog",
+    )
