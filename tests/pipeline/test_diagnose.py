@@ -31,7 +31,7 @@ def _field(n: int, seed: int, trail_px: float = 0.0) -> np.ndarray:
     if not trail_px:
         return render_stars(xy, flux, SIZE, SIZE, RenderSettings(), rng)
     steps = np.linspace(-trail_px / 2, trail_px / 2, 15)
-    xy_t = np.vstack([xy + [dx, 0.0] for dx in steps])
+    xy_t = np.vstack([xy + np.array([dx, 0.0]) for dx in steps])
     return render_stars(xy_t, np.tile(flux / len(steps), len(steps)), SIZE, SIZE,
                         RenderSettings(), rng)  # fmt: skip
 

@@ -66,7 +66,8 @@ def diagnose(
         return Failure(
             FEW_STARS,
             f"{n} stars detected, {FEW_STARS_LIMIT} or more are needed: a longer exposure, a "
-            f"clearer sky, or a lower detection threshold (--threshold-sigma, now {threshold_sigma:g})",
+            "clearer sky, or a lower detection threshold (--threshold-sigma, now "
+            f"{threshold_sigma:g})",
         )
     if detections.elongation >= TRAILED_ELONGATION:
         return Failure(
