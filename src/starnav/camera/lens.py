@@ -56,6 +56,8 @@ class Lens:
     - ``scans_focal``: whether an unknown focal length is scanned (``pipeline.fov``'s focal
       scan) rather than searched with 4-star patterns matched up to a scale (the FOV search);
     - ``default_fov_range_deg``: the horizontal field (degrees) searched when none is given;
+    - ``extended_fov_ranges_deg``: the ranges searched after that one, in order, while the
+      time budget lasts, when the default found nothing (none: the default only);
     - ``fov_limits_deg``: the horizontal fields (degrees) a search or a given field may take;
     - ``fits_projection``: the FITS zenithal projection (CTYPE suffix) whose radius is the
       model's with its coefficients at zero (``undistorted``); SIP polynomials take the rest;
@@ -74,6 +76,7 @@ class Lens:
     kind: ClassVar[str] = ""
     scans_focal: ClassVar[bool] = False
     default_fov_range_deg: ClassVar[tuple[float, float]] = (0.0, 0.0)
+    extended_fov_ranges_deg: ClassVar[tuple[tuple[float, float], ...]] = ()
     fov_limits_deg: ClassVar[tuple[float, float]] = (0.0, 0.0)
     fits_projection: ClassVar[str] = ""
     sip_max_order: ClassVar[int] = 0

@@ -46,6 +46,10 @@ class Camera(Lens):
     kind = "pinhole"
     scans_focal = False  # an unknown field of view: the FOV search (4-star patterns)
     default_fov_range_deg = (5.0, 40.0)
+    # then a wide-angle or phone photograph's, then a long lens's: a frame of 48° or 4.5° is
+    # solved without a --fov-range, in the time the default range left (searching 3-70° at
+    # once took twice the time on the frames the default holds, and lost one to the budget)
+    extended_fov_ranges_deg = ((40.0, 70.0), (3.0, 5.0))
     # the narrowest horizontal field searched: a 3° field holds about 12 Hipparcos stars to the
     # deepest band catalog (Hp 8.5; ~8 towards the galactic poles), narrower ones too few to
     # identify and verify on (README, "Field range")

@@ -9,7 +9,8 @@ ended, first that applies:
   exposure on a fixed tripod, a shaking camera): their centres are the trails' middles;
 * ``DISTORTED``: an attitude fitted part of the stars and not the rest, with the distortion
   fitted too (a lens beyond the model: a fisheye or a wide-angle lens for the pinhole);
-* ``BUDGET``: the time budget ended the search;
+* ``BUDGET``: the time budget ended the search (of the first range searched: the extended
+  ranges share what the default range left);
 * ``OUTSIDE``: no pattern of the stars matched the catalog anywhere in the range searched: the
   field lies outside it, or the brightest points are not stars (noise, a nebula's knots,
   satellites), or a field too narrow for the catalog.
@@ -82,7 +83,7 @@ def diagnose(
             "the best attitude holds the middle of the frame and not its edges, with k1, k2 "
             f"fitted: try {models}, or calibrate the camera (starnav calibrate)",
         )
-    if _BUDGET in reason:
+    if _BUDGET in reason.split("; ")[0]:  # the default range's search ran out of time
         return Failure(BUDGET, "a longer --time-budget, or the field of view if it is known")
     where = (
         f"in {fov_range_deg[0]:g}-{fov_range_deg[1]:g}°" if fov_range_deg else "at the field given"

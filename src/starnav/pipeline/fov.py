@@ -314,13 +314,42 @@ def solve_unknown_field(
             base.with_focal(math.sqrt(focal_range[0] * focal_range[1])), cat, settings=settings
         )
         return scan_focal(stars, base, focal_range, solver, Deadline.after(budget_s))
-    bands = load_bands(lo, hi, base.width, base.height, catalog, epoch_year)
     near = _near(position_hint_deg, options.position_radius_deg)
-    deadline = Deadline.after(budget_s)
-    with first_use("solve"):
-        return _search_and_fit(
-            stars, base, bands, settings, (lo, hi), options.pattern_stars, deadline, near
-        )
+    ranges = [(lo, hi)]
+    if options.fov_deg is None and camera is None:
+        ranges += [r for r in options.searched_ranges_deg[1:] if r != (lo, hi)]
+    results, left_s = [], budget_s
+    for k, (a, b) in enumerate(ranges):
+        # the budget counts once the range's tables are loaded (built on first use); the
+        # first range takes what it needs, the others share what it left equally
+        bands = load_bands(a, b, base.width, base.height, catalog, epoch_year)
+        deadline = Deadline.after(left_s / max(1, len(ranges) - k) if k else left_s)
+        with first_use("solve"):
+            result = _search_and_fit(
+                stars, base, bands, settings, (a, b), options.pattern_stars, deadline, near
+            )
+        results.append(result)
+        left_s -= result.time_ms / 1e3
+        if result.solution is not None or left_s <= 0:
+            break
+    return _searched(results, ranges)
+
+
+def _searched(results: list[SolveResult], ranges: list[tuple[float, float]]) -> SolveResult:
+    """The outcome of the searches of one or more FOV ranges in turn: the last (solved, or
+    the last tried), its reason naming each range's when more than one was searched, the
+    times and hypotheses added up."""
+    last = results[-1]
+    if len(results) == 1:
+        return last
+    ms = sum(r.time_ms for r in results)
+    hypotheses = sum(r.hypotheses for r in results)
+    if last.solution is not None:
+        return replace(last, time_ms=ms, hypotheses=hypotheses)
+    reason = "; ".join(
+        f"{a:g}-{b:g}°: {r.reason}" for (a, b), r in zip(ranges, results, strict=False)
+    )
+    return replace(last, reason=reason, time_ms=ms, hypotheses=hypotheses)
 
 
 def _near(position_hint_deg, radius_deg: float):

@@ -188,7 +188,8 @@ def solve_image(
 def _diagnose(found: Detections, reason: str, options: SolveOptions) -> Failure:
     """Why the image was not solved (``pipeline.diagnose``), with the options it was solved
     with."""
-    searched = None if options.field_known else options.search_range_deg
+    ranges = options.searched_ranges_deg
+    searched = None if options.field_known else (min(ranges)[0], max(r[1] for r in ranges))
     return diagnose(
         found,
         reason,

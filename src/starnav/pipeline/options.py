@@ -177,6 +177,15 @@ class SolveOptions:
         return default_fov_range_deg(self.lens_model)
 
     @property
+    def searched_ranges_deg(self) -> tuple[tuple[float, float], ...]:
+        """The horizontal FOV ranges searched in turn when the field is not given: the range
+        given, or the lens model's default and then its extended ranges while the time
+        budget lasts (``Lens.extended_fov_ranges_deg``)."""
+        if self.fov_range_deg is not None:
+            return (self.fov_range_deg,)
+        return (self.search_range_deg, *self.lens_class.extended_fov_ranges_deg)
+
+    @property
     def algorithm_kwargs(self) -> dict[str, Any]:
         """``algorithm_options`` as keyword arguments."""
         return dict(self.algorithm_options)

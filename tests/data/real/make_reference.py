@@ -116,6 +116,7 @@ def solve_one(entry: dict, folder: Path, cpu_limit_s: int = CPU_LIMIT_S) -> dict
     from starnav.detect.read import read_image
 
     pixels = read_image(folder / entry["name"])
+    scale_deg = width_hint_deg(entry)
     height, width = pixels.shape
     WORK.mkdir(parents=True, exist_ok=True)
     stem = Path(entry["name"]).stem
@@ -136,9 +137,9 @@ def solve_one(entry: dict, folder: Path, cpu_limit_s: int = CPU_LIMIT_S) -> dict
             "--scale-units",
             "degwidth",
             "--scale-low",
-            str(SCALE_DEG[0]),
+            f"{scale_deg[0]:g}",
             "--scale-high",
-            str(SCALE_DEG[1]),
+            f"{scale_deg[1]:g}",
             "--cpulimit",
             str(cpu_limit_s),
         ]
@@ -165,6 +166,17 @@ def solve_one(entry: dict, folder: Path, cpu_limit_s: int = CPU_LIMIT_S) -> dict
             (WORK / f"{stem}.wcs").write_bytes(wcs.read_bytes())
         (WORK / f"{stem}.log").write_text(log + proc.stderr)
     return out
+
+
+def width_hint_deg(entry: dict) -> tuple[float, float]:
+    """The width range (degrees) solve-field is told: half to twice the field its source
+    states or that was estimated from the lens (``fov_guess_deg`` in sources.json), else
+    ``SCALE_DEG``; within ``SCALE_DEG`` either way."""
+    guess = entry.get("fov_guess_deg")
+    if not guess:
+        return SCALE_DEG
+    lo, hi = max(SCALE_DEG[0], 0.5 * guess), min(SCALE_DEG[1], 2.0 * guess)
+    return (lo, hi) if lo < hi else SCALE_DEG
 
 
 def cmd_solve(args) -> None:
