@@ -1,12 +1,13 @@
 """Reference answers for the real-image corpus (reference.json), from astrometry.net.
 
 Run from the repository root, with starnav importable and the files present: in
-``$STARNAV_REAL_CORPUS`` when set, else in ``../shared/data/real`` beside the repository (28 of
-the 50; sources.json says where each comes from, by repository, commit, path and SHA-256)::
+``$STARNAV_REAL_CORPUS`` when set, else in ``../shared/data/real`` beside the repository (the
+files whose licence allows it; sources.json says where each comes from, by repository,
+commit, path and SHA-256)::
 
     python tests/data/real/make_reference.py solve      # astrometry.net on every file
     python tests/data/real/make_reference.py reference  # its WCS -> starnav's conventions
-    python tests/data/real/make_reference.py check      # catalog stars onto detected stars
+    python tests/data/real/make_reference.py check --missing  # catalog stars onto detections
     python tests/data/real/make_reference.py table      # the table of README.md
 
 ``solve`` decodes each file as starnav reads it (``starnav.detect.read.read_image``: 2-D
@@ -17,15 +18,19 @@ no flip: the one conversion between the two frames, written in ``fits_from_starn
 through FITS rather than handing astrometry.net the JPEG/PNG keeps it from choosing its own
 row order (it reads PNM/JPEG top row first as FITS row 1 too, but 16-bit TIFF and RGBA PNG
 are not all handled by its converters). astrometry.net (Debian package ``astrometry.net``
-0.93, index files ``astrometry-data-tycho2-10-19``: Tycho-2, quads 30′-2000′) runs as::
+0.93, index files ``astrometry-data-tycho2-07`` to ``-10-19``: Tycho-2, quads 22′-2000′;
+the first 50 files were solved with ``-10-19`` only) runs as::
 
     solve-field --crpix-center --no-plots --overwrite --new-fits none ... \
-        --scale-units degwidth --scale-low 0.5 --scale-high 100 --cpulimit 40 \
-        [--downsample 2 when the image is wider than 2000 px]
+        --scale-units degwidth --scale-low LO --scale-high HI --cpulimit 30 \
+        [--downsample 2 when the image is larger than 2000 px, 4 above 4000 px]
 
-(a loose scale hint only: 0.5°-100° wide; ``solve --again --cpulimit 150 FILE...`` retries
-the unsolved ones with more time, as was done here) and its ``.wcs`` header is kept in
-``STARNAV_CORPUS_WORK`` (default ``/work/corpus/astrometry``).
+with a loose width hint: 0.3°-100°, or half to twice ``fov_guess_deg`` where sources.json
+has one (what the source says of its lens, or the lens's focal length and sensor);
+``solve --again --cpulimit 150 FILE...`` retries unsolved ones with more time, and two
+processes can share the work (``--status solve2.json --reverse``). Its wall time per file
+is kept as ``seconds`` and its ``.wcs`` header in ``STARNAV_CORPUS_WORK`` (default
+``/work/corpus/astrometry``).
 
 ``reference`` converts each WCS with astropy.wcs (TAN + SIP as astrometry.net fitted it):
 
@@ -76,7 +81,7 @@ SOURCES = HERE / "sources.json"
 REFERENCE = HERE / "reference.json"
 SHARED_DIR = HERE.parents[2].parent / "shared" / "data" / "real"
 WORK = Path(os.environ.get("STARNAV_CORPUS_WORK", "/work/corpus/astrometry"))
-CPU_LIMIT_S = 40
+CPU_LIMIT_S = 30
 SCALE_DEG = (0.3, 100.0)  # loose width hint (degrees)
 CHECK_MAG_LIMIT = 6.5
 CHECK_MAX_DETECTIONS = 1000
@@ -180,14 +185,17 @@ def width_hint_deg(entry: dict) -> tuple[float, float]:
 
 
 def cmd_solve(args) -> None:
+    """solve-field on each file not solved yet (in any ``WORK/solve*.json``: processes run side
+    by side with ``--status solve2.json``, ``--reverse``), its outcome in ``--status``."""
     folder = corpus_dir()
-    status_file = WORK / "solve.json"
+    status_file = WORK / args.status
     status = json.loads(status_file.read_text()) if status_file.exists() else {}
-    for entry in sources():
+    entries = sources()[:: -1 if args.reverse else 1]
+    for entry in entries:
         name = entry["name"]
         if args.only and name not in args.only:
             continue
-        if name in status and not args.again:
+        if name in solve_status() and not args.again:
             continue
         status[name] = solve_one(entry, folder, args.cpulimit)
         print(name, json.dumps(status[name]), flush=True)
@@ -256,8 +264,17 @@ def raw_wcs(header) -> dict:
     return {k: header[k] for k in keys if k in header}
 
 
+def solve_status() -> dict:
+    """What ``solve`` recorded per file (``WORK/solve*.json``: one file per process that ran
+    it)."""
+    status: dict = {}
+    for path in sorted(WORK.glob("solve*.json")):
+        status.update(json.loads(path.read_text() or "{}"))
+    return status
+
+
 def cmd_reference(args) -> None:
-    status = json.loads((WORK / "solve.json").read_text())
+    status = solve_status()
     out: dict = {
         "about": (
             "Reference answers for the real-image corpus in starnav's conventions (pixel origin"
@@ -268,20 +285,26 @@ def cmd_reference(args) -> None:
         ),
         "astrometry_net": {
             "version": astrometry_version(),
-            "package": "Debian astrometry.net 0.93+dfsg-1+b1, astrometry-data-tycho2-10-19 2-4",
-            "index": "Tycho-2 index-tycho2-10..19 (quad scales 30-2000 arcmin)",
+            "package": "Debian astrometry.net 0.93+dfsg-1+b1, astrometry-data-tycho2-07, -08, -09"
+            " and -10-19 2-4 (little-endian)",
+            "index": "Tycho-2 index-tycho2-07..19 (quad scales 22-2000 arcmin); the first 50"
+            " files were solved with 10..19 only (30-2000 arcmin)",
         },
         "images": {},
     }
     old = json.loads(REFERENCE.read_text())["images"] if REFERENCE.exists() else {}
     for entry in sources():
         name = entry["name"]
+        if name not in status and name in old:  # solved in an earlier run: kept as it was
+            out["images"][name] = old[name]
+            continue
         solved = status.get(name, {})
         record = {
             "file": {k: entry[k] for k in ("bytes", "sha256")},
             "width": solved.get("width"),
             "height": solved.get("height"),
             "solved_by_reference": bool(solved.get("solved")),
+            "seconds": solved.get("seconds"),
         }
         wcs, header = wcs_of(name)
         if wcs is not None:
@@ -392,6 +415,8 @@ def cmd_check(args) -> None:
     for name, ref in data["images"].items():
         if "ra_deg" not in ref or (args.only and name not in args.only):
             continue
+        if args.missing and "check" in ref:
+            continue
         ref["solved_by_reference"] = True
         ref.pop("rejected", None)
         pixels = read_image(folder / name)
@@ -457,10 +482,13 @@ def main() -> None:
     p = sub.add_parser("solve", help="run astrometry.net on every file")
     p.add_argument("--again", action="store_true", help="solve files solved before too")
     p.add_argument("--cpulimit", type=int, default=CPU_LIMIT_S, help="CPU seconds per image")
+    p.add_argument("--status", default="solve.json", help="this process's record (in WORK)")
+    p.add_argument("--reverse", action="store_true", help="from the last file")
     p.add_argument("only", nargs="*", help="only these files")
     p = sub.add_parser("reference", help="convert the WCS files into reference.json")
     p.add_argument("--drop-checks", action="store_true", help="forget the earlier checks")
     p = sub.add_parser("check", help="project catalog stars onto the detections")
+    p.add_argument("--missing", action="store_true", help="only references with no check yet")
     p.add_argument("only", nargs="*", help="only these files")
     sub.add_parser("table", help="write the table of references into README.md")
     args = parser.parse_args()
