@@ -37,6 +37,7 @@ from starnav.geometry import angle_between, chord_from_angle, triple_product
 from starnav.identify.base import IdentifyOutcome, MatchSettings, screen_stars_only
 from starnav.identify.database import PairDatabase, load_cached, save_cached
 from starnav.identify.verify import HypothesisTester
+from starnav.runtime.budget import Deadline, expired
 from starnav.runtime.caches import process_cache
 from starnav.runtime.caching import cache_dir
 
@@ -51,6 +52,7 @@ _EDGE_INDEX = {(int(i), int(j)): e for e, (i, j) in enumerate(_PAIRS)}
 _EDGE_INDEX.update({(j, i): e for (i, j), e in list(_EDGE_INDEX.items())})
 _PERM_EDGES = np.array([[_EDGE_INDEX[(int(p[i]), int(p[j]))] for i, j in _PAIRS] for p in _PERMS])
 _MAX_PROBES = 200_000  # bin look-ups per batch of observed patterns (bounds memory)
+_MAX_CANDIDATES = 500_000  # table rows per batch (a pattern of short edges draws 100 000)
 _BUILD_BLOCK = 4096  # lattice fields expanded at once while building
 _MAX_PATTERN_ROWS = 5e7  # patterns expanded before removing duplicates (about 0.4 GB)
 _EDGE_STEPS = 65535  # the table's largest edge in uint16 steps
@@ -392,29 +394,38 @@ def match_patterns(
     *,
     scale_range: tuple[float, float] | None = None,
     rel_tol: float = 0.0,
+    deadline: Deadline | None = None,
 ) -> PatternMatches:
     """Catalog patterns agreeing with the observed patterns ``obs`` (p, 4, 3), each edge
     within ``tol_rad`` (radians) of the measured one; ``vectors``: catalog unit vectors.
+    Patterns are matched in halves while their table look-ups or candidates are too many
+    (``_MAX_PROBES``, ``_MAX_CANDIDATES``: memory and time), and no further half is matched
+    once ``deadline`` has passed (the caller then drops what was found).
 
     With ``scale_range`` (lo, hi) the observed angles are known only up to a scale: a catalog
     pattern agrees when its largest edge is lo..hi times the observed one and its edges agree
     with the observed ones times that factor, within ``tol_rad`` plus ``rel_tol`` times the
     edge (the field of view is unknown and the bearings were made with a guessed one)."""
     p = len(obs)
+    if expired(deadline):
+        return _no_matches()
     edges = pattern_edges(obs)
     largest = edges.max(axis=1)
     lo, hi, n_prefix = _probe_bins(
         edges, largest, table.bins, tol_rad, max_angle_rad, scale_range, rel_tol
     )
-    if n_prefix.sum() > _MAX_PROBES and p > 1:
+    found = None
+    if n_prefix.sum() <= _MAX_PROBES or p == 1:
+        found = _table_candidates(table, lo, hi, n_prefix, None if p == 1 else _MAX_CANDIDATES)
+    if found is None:  # too many: in halves
         half = p // 2
-        scaled = {"scale_range": scale_range, "rel_tol": rel_tol}
+        more = {"scale_range": scale_range, "rel_tol": rel_tol, "deadline": deadline}
         parts = [
-            match_patterns(obs[sub], table, vectors, tol_rad, max_angle_rad, parity, **scaled)
+            match_patterns(obs[sub], table, vectors, tol_rad, max_angle_rad, parity, **more)
             for sub in (slice(None, half), slice(half, None))
         ]
         return concat_matches(parts, [0, half])
-    cand_pat, cand_row = _table_candidates(table, lo, hi, n_prefix)
+    cand_pat, cand_row = found
     if len(cand_pat) == 0:
         return _no_matches()
     cand_pat, cat_stars, cat_vec, cat_edges, cat_largest = _largest_edge_candidates(
@@ -462,10 +473,15 @@ def _probe_bins(
 
 
 def _table_candidates(
-    table: PatternTable, lo: np.ndarray, hi: np.ndarray, n_prefix: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
+    table: PatternTable,
+    lo: np.ndarray,
+    hi: np.ndarray,
+    n_prefix: np.ndarray,
+    most: int | None = None,
+) -> tuple[np.ndarray, np.ndarray] | None:
     """Every (observed pattern, table row) whose key lies in the pattern's bins: each of its
-    ``n_prefix`` prefixes, then the key range of the fifth ratio's bins."""
+    ``n_prefix`` prefixes, then the key range of the fifth ratio's bins; None when they are
+    more than ``most``."""
     total = int(n_prefix.sum())
     empty = np.empty(0, dtype=np.intp)
     if total == 0:
@@ -486,6 +502,8 @@ def _table_candidates(
     start = np.searchsorted(table.keys, key_lo, side="left")
     count = np.searchsorted(table.keys, key_hi, side="right") - start
     n_cand = int(count.sum())
+    if most is not None and n_cand > most:
+        return None
     if n_cand == 0:
         return empty, empty
     cand_pat = np.repeat(pat, count)

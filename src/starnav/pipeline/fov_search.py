@@ -316,6 +316,7 @@ def _band_hypotheses(xy, rows, band, cells, sigma_px, parity, focal_range_px, pr
                 parity,
                 scale_range=(1.0 / (1.0 + 1.2 * delta), 1.0 / (1.0 - 1.2 * delta)),
                 rel_tol=rel_tol,
+                deadline=deadline,
             )
         )
         offsets.append(start)
