@@ -51,6 +51,7 @@ _MAX_CELL_HALF_WIDTH = 0.2  # relative focal-length half-width of a cell at most
 MIN_PATTERN_TOLS = 10.0  # a pattern's longest edge spans at least this many pair tolerances
 _FIRST_LOOKUP = 16  # observed patterns of a band's first look-up when there is a deadline
 _FOCAL_STEPS = 3  # Gauss-Newton steps of a pattern's focal length
+_FIT_SLICE = 50_000  # pairings whose focal lengths are fitted at once
 
 
 @dataclass(frozen=True, eq=False)
@@ -334,10 +335,17 @@ def _band_hypotheses(xy, rows, band, cells, sigma_px, parity, focal_range_px, pr
     cell, pattern = cell[first], pattern[first]
     obs_local, cat_rows, parities = hyp.obs_local[first], hyp.cat_rows[first], hyp.parity[first]
     obs_rows = rows[pattern[:, None], obs_local]  # (h, 4) rows of xy
-    cat_edges = pattern_edges(band.catalog.vectors[cat_rows])
-    obs_edges = pattern_edges(bearings[cell[:, None], obs_rows])
-    f0 = f_cells[cell] * obs_edges.max(axis=1) / cat_edges.max(axis=1)
-    f_fit, err = fit_pattern_focal(xy[obs_rows], cat_edges, cx, cy, f0)
+    # each pairing's focal length, in slices with the deadline looked at between them (a
+    # dense band's look-up can pair a frame's patterns a million ways)
+    f_fit, err = np.ones(len(first)), np.full(len(first), np.inf)
+    for start in range(0, len(first), _FIT_SLICE):
+        if expired(deadline):
+            break
+        part = slice(start, start + _FIT_SLICE)
+        cat_edges = pattern_edges(band.catalog.vectors[cat_rows[part]])
+        obs_edges = pattern_edges(bearings[cell[part, None], obs_rows[part]])
+        f0 = f_cells[cell[part]] * obs_edges.max(axis=1) / cat_edges.max(axis=1)
+        f_fit[part], err[part] = fit_pattern_focal(xy[obs_rows[part]], cat_edges, cx, cy, f0)
     tol_px = settings.pair_tol_rad * float(f_cells.min())
     good = np.flatnonzero(
         (err * f_fit <= tol_px)
