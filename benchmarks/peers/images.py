@@ -186,7 +186,7 @@ def starnav_solve(image: np.ndarray, fov_deg: float | None, read_ms: float) -> d
     }
     s = res.solution
     if s is None:
-        return {**out, "error": res.reason or "unsolved", "failure": res.failure}
+        return {**out, "error": res.reason or "unsolved", "failure": getattr(res, "failure", None)}
     attitude = {"R": s.R_cam_from_icrs.tolist(), "parity": s.parity, "fov_deg": s.fov_deg}
     return {**out, **attitude, "n_matched": s.n_matched, "error": None}
 

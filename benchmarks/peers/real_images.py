@@ -184,7 +184,9 @@ def run(corpus, folder: Path, entries: list[dict], runs: list[Solver], reference
         for e, out in zip(present, outs, strict=True):
             rows.append({"name": e["name"], "solver": s.label, **score(references[e["name"]], out)})
         right = sum(r["outcome"] == "right" for r in rows if r["solver"] == s.label)
-        print(f"{s.label}: {right}/{len(present)} right ({time.time() - t0:.0f} s)", file=sys.stderr)
+        print(
+            f"{s.label}: {right}/{len(present)} right ({time.time() - t0:.0f} s)", file=sys.stderr
+        )
     return rows
 
 
@@ -263,8 +265,9 @@ def image_table(entries, references, rows, labels) -> list[str]:
         cells = []
         for label in labels:
             r = by.get((name, label))
-            cells.append("absent" if r is None else {"unsolved": "no"}.get(r["outcome"],
-                                                                            r["outcome"]))
+            cells.append(
+                "absent" if r is None else {"unsolved": "no"}.get(r["outcome"], r["outcome"])
+            )
         mine = by.get((name, STARNAV_LABEL))
         ms = "" if mine is None or mine["time_ms"] is None else f"{mine['time_ms']:.0f}"
         why = ""
@@ -312,8 +315,9 @@ def write_doc(args, entries, references, rows, labels, installs, before, t_start
         parts += [
             f"## {title}: {len(chosen)} photographs from {sources} sources",
             "",
-            *band_table(chosen, references, rows, labels,
-                        None if before is None else before),  # fmt: skip
+            *band_table(
+                chosen, references, rows, labels, None if before is None else before
+            ),  # fmt: skip
             "",
             "starnav's unsolved images by the failure it names (all bands):",
             "",
