@@ -62,7 +62,6 @@ import numpy as np
 from tqdm import tqdm
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))  # the repository: benchmarks.*
-import starnav
 from benchmarks.harness import (
     DOCS,
     ROOT,
@@ -315,9 +314,7 @@ def write_doc(args, entries, references, rows, labels, installs, before, t_start
         parts += [
             f"## {title}: {len(chosen)} photographs from {sources} sources",
             "",
-            *band_table(
-                chosen, references, rows, labels, None if before is None else before
-            ),  # fmt: skip
+            *band_table(chosen, references, rows, labels, before),
             "",
             "starnav's unsolved images by the failure it names (all bands):",
             "",
