@@ -336,7 +336,7 @@ def _band_hypotheses(xy, rows, band, cells, sigma_px, parity, focal_range_px, pr
     obs_local, cat_rows, parities = hyp.obs_local[first], hyp.cat_rows[first], hyp.parity[first]
     obs_rows = rows[pattern[:, None], obs_local]  # (h, 4) rows of xy
     # each pairing's focal length, in slices with the deadline looked at between them (a
-    # dense band's look-up can pair a frame's patterns a million ways)
+    # dense band's look-up may pair a frame's patterns hundreds of thousands of ways)
     f_fit, err = np.ones(len(first)), np.full(len(first), np.inf)
     for start in range(0, len(first), _FIT_SLICE):
         if expired(deadline):

@@ -148,9 +148,8 @@ def next_chunk(deadline: Deadline, elapsed_s: float, size: int, most: int) -> in
     (1 to ``most``, and at most ``CHUNK_GROWTH`` times ``size``)."""
     per_item = max(elapsed_s, 1e-6) / size
     wanted = UNIT_SHARE * deadline.budget_s / per_item
-    # at most twice the last: items differ in cost (a pattern of short edges draws 100x the
-    # catalog candidates of a long one), and one chunk of 800 after a cheap one of 16 ran
-    # for minutes past a 10 s budget
+    # at most twice the last: items differ in cost (a pattern of short edges draws many
+    # times the catalog candidates of a long one), so a cheap chunk says little of the next
     return int(min(max(wanted, 1.0), CHUNK_GROWTH * size, most))
 
 
