@@ -164,7 +164,8 @@ def score(ref: dict, out: dict) -> dict:
 
 
 def run(corpus, folder: Path, entries: list[dict], runs: list[Solver], references) -> list[dict]:
-    """Every solver on every file present: one row per (image, solver)."""
+    """Every solver on every file present: one row per (image, solver), its answer as the
+    adapter printed it (scored against the references when the tables are written)."""
     present = [e for e in entries if (folder / e["name"]).is_file()]
     rows = []
     for s in runs:
@@ -181,8 +182,12 @@ def run(corpus, folder: Path, entries: list[dict], runs: list[Solver], reference
             part, _ = run_adapter(s.python, s.adapter, list(s.args), items[start : start + chunk])
             outs.extend(part)
         for e, out in zip(present, outs, strict=True):
-            rows.append({"name": e["name"], "solver": s.label, **score(references[e["name"]], out)})
-        right = sum(r["outcome"] == "right" for r in rows if r["solver"] == s.label)
+            rows.append({"name": e["name"], "solver": s.label, **out})
+        right = sum(
+            score(references[r["name"]], r)["outcome"] == "right"
+            for r in rows
+            if r["solver"] == s.label
+        )
         print(
             f"{s.label}: {right}/{len(present)} right ({time.time() - t0:.0f} s)", file=sys.stderr
         )
@@ -271,7 +276,7 @@ def image_table(entries, references, rows, labels) -> list[str]:
         ms = "" if mine is None or mine["time_ms"] is None else f"{mine['time_ms']:.0f}"
         why = ""
         if mine is not None and mine["outcome"] == "unsolved":
-            why = f"{mine['failure'] or ''}: {mine['error'] or ''}".replace("|", "/")[:160]
+            why = (mine["error"] or "").replace("|", "/")[:200]
         seconds = f"{ref['seconds']:.1f}" if ref.get("seconds") else ""
         lines.append(table_row(f"`{name}`", e["repository"], e["kind"], band_of(ref), seconds,
                                *cells, ms, why))  # fmt: skip
@@ -339,11 +344,16 @@ def write_doc(args, entries, references, rows, labels, installs, before, t_start
     return text
 
 
+def read_rows(path: Path) -> list[dict]:
+    return [json.loads(line) for line in path.read_text().splitlines() if line]
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--set", choices=(*SETS, "all"), default="all")
     parser.add_argument("--solvers", default="starnav,cedar-solve,tetra3rs")
     parser.add_argument("--rows", type=Path, help="write one JSON line per image and solver")
+    parser.add_argument("--from-rows", type=Path, nargs="+", help="tables of saved rows, no run")
     parser.add_argument("--before", type=Path, help="rows of an earlier run (starnav's)")
     parser.add_argument("--out", type=Path, default=DOC, help="markdown file ('-': none)")
     parser.add_argument("only", nargs="*", help="only these files (a trial run)")
@@ -357,15 +367,21 @@ def main() -> None:
         for e in corpus.sources()
         if (args.set == "all" or e["set"] == args.set) and (not args.only or e["name"] in args.only)
     ]
-    runs, installs = solvers(cache_dir(), args.solvers.split(","))
-    rows = run(corpus, folder, entries, runs, references)
+    if args.from_rows:
+        rows = [r for path in args.from_rows for r in read_rows(path)]
+        labels = list(dict.fromkeys(r["solver"] for r in rows))
+        installs = {}
+    else:
+        runs, installs = solvers(cache_dir(), args.solvers.split(","))
+        rows = run(corpus, folder, entries, runs, references)
+        labels = [s.label for s in runs]
     if args.rows:
         args.rows.write_text("".join(json.dumps(r) + "\n" for r in rows))
+    rows = [{**r, **score(references[r["name"]], r)} for r in rows if r["name"] in references]
     before = None
     if args.before:
-        old = [json.loads(line) for line in args.before.read_text().splitlines() if line]
-        before = {r["name"]: r for r in old if r["solver"] == STARNAV_LABEL}
-    labels = [s.label for s in runs]
+        old = [r for r in read_rows(args.before) if r["solver"] == STARNAV_LABEL]
+        before = {r["name"]: score(references[r["name"]], r) for r in old}
     print(write_doc(args, entries, references, rows, labels, installs, before, t_start))
 
 
