@@ -63,6 +63,7 @@ def test_no_match_in_the_range_names_the_range():
         ("only 10 of 22 stars agree with the best attitude (need 50%)", DISTORTED),
         ("time budget spent (10 s): 3553 hypotheses, 3312 verified", BUDGET),
         ("no hypothesis agreed with enough stars to be convincing", OUTSIDE),
+        ("best hypothesis not convincing (false-match probability 0.059 > 0.0001)", FEW_STARS),
     ],
 )
 def test_the_solve_reason_picks_the_class(reason, kind):

@@ -4,7 +4,8 @@
 ended, first that applies:
 
 * ``FEW_STARS``: fewer than ``FEW_STARS_LIMIT`` stars detected (overcast, twilight, too short
-  an exposure, a threshold too high);
+  an exposure, a threshold too high), or the best attitude found is matched by too few of
+  them to be sure of it (``_NOT_CONVINCING``);
 * ``TRAILED``: the stars are ``TRAILED_ELONGATION`` times longer than wide or more (a long
   exposure on a fixed tripod, a shaking camera): their centres are the trails' middles;
 * ``DISTORTED``: an attitude fitted part of the stars and not the rest, with the distortion
@@ -36,6 +37,7 @@ TRAILED_ELONGATION = 2.0  # median long / short axis of the stars
 # the solve's own words for an attitude that fits some of the stars only
 _PART_FITS = "stars agree with the best attitude"
 _BUDGET = "time budget spent"
+_NOT_CONVINCING = "best hypothesis not convincing"
 
 
 @dataclass(frozen=True)
@@ -69,6 +71,12 @@ def diagnose(
             f"{n} stars detected, {FEW_STARS_LIMIT} or more are needed: a longer exposure, a "
             "clearer sky, or a lower detection threshold (--threshold-sigma, now "
             f"{threshold_sigma:g})",
+        )
+    if _NOT_CONVINCING in reason.split("; ")[0] and detections.elongation < TRAILED_ELONGATION:
+        return Failure(
+            FEW_STARS,
+            "the best attitude found is matched by too few stars to be sure of it: a longer "
+            "exposure or a darker sky shows more of them",
         )
     if detections.elongation >= TRAILED_ELONGATION:
         return Failure(
