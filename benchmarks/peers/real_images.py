@@ -83,6 +83,7 @@ GIVEN_FOV_DEG = 20.0  # tetra3rs's FOV estimate for an image without a reference
 SETS = ("development", "held_back")
 BANDS = ((0.0, 3.0), (3.0, 10.0), (10.0, 20.0), (20.0, 40.0), (40.0, 60.0), (60.0, 400.0))
 NO_REFERENCE = "not solved by astrometry.net"
+CHECK_MIN_STARS, CHECK_MIN_FRACTION = 6, 0.7  # an answer without a reference: its catalog check
 STARNAV_LABEL = "starnav"
 
 
@@ -194,6 +195,31 @@ def run(corpus, folder: Path, entries: list[dict], runs: list[Solver], reference
     return rows
 
 
+def check_unreferenced(corpus, folder: Path, rows: list[dict]) -> None:
+    """Each answer on an image astrometry.net did not solve, checked without it, as
+    tests/corpus/test_real.py checks starnav's (``make_reference.star_check``): the 10
+    brightest Hipparcos stars the answer puts in view (pinhole, its field of view) must fall
+    on detections, at least ``CHECK_MIN_FRACTION`` of them and ``CHECK_MIN_STARS`` in view;
+    the outcome becomes "answer, checked" or "WRONG" (in place)."""
+    from starnav.catalog import load_catalog
+    from starnav.detect.read import read_image
+    from starnav.pipeline.image import detect_image
+
+    catalog = load_catalog(None, mag_limit=corpus.CHECK_MAG_LIMIT)
+    for r in rows:
+        if r["outcome"] != "answer, no reference" or "R" not in r or not r.get("fov_deg"):
+            continue
+        pixels = read_image(folder / r["name"])
+        found = detect_image(pixels, max_stars=corpus.CHECK_MAX_DETECTIONS).xy
+        R = np.asarray(r["R"])  # R_cam_from_icrs: a mirrored answer's is improper
+        check = corpus.star_check(R, r["fov_deg"], pixels, found, catalog,
+                                  brightest=corpus.CHECK_BRIGHTEST)  # fmt: skip
+        n_view, n_hit = check["n_catalog"], check["n_matched"]
+        good = n_view >= CHECK_MIN_STARS and n_hit >= CHECK_MIN_FRACTION * n_view
+        r["outcome"] = "answer, checked" if good else "WRONG"
+        r["check"] = f"{n_hit}/{n_view}"
+
+
 def counts(rows: list[dict]) -> tuple[int, int]:
     return (sum(r["outcome"] == "right" for r in rows), sum(r["outcome"] == "WRONG" for r in rows))
 
@@ -226,8 +252,9 @@ def band_table(entries, references, rows, labels, before) -> list[str]:
         for label in labels:
             got = [by[(n, label)] for n in names if (n, label) in by]
             if band == NO_REFERENCE:
-                answers = sum(r["outcome"] == "answer, no reference" for r in got)
-                cells.append(f"({answers} answers)")
+                checked = sum(r["outcome"] == "answer, checked" for r in got)
+                wrong = sum(r["outcome"] == "WRONG" for r in got)
+                cells.append(f"{checked} checked answers / {wrong}")
             else:
                 right, wrong = counts(got)
                 cells.append(f"{right} / {wrong}")
@@ -269,9 +296,11 @@ def image_table(entries, references, rows, labels) -> list[str]:
         cells = []
         for label in labels:
             r = by.get((name, label))
-            cells.append(
-                "absent" if r is None else {"unsolved": "no"}.get(r["outcome"], r["outcome"])
-            )
+            if r is None:
+                cells.append("absent")
+                continue
+            check = f" ({r['check']})" if r.get("check") else ""
+            cells.append({"unsolved": "no"}.get(r["outcome"], r["outcome"]) + check)
         mine = by.get((name, STARNAV_LABEL))
         ms = "" if mine is None or mine["time_ms"] is None else f"{mine['time_ms']:.0f}"
         why = ""
@@ -378,6 +407,7 @@ def main() -> None:
     if args.rows:
         args.rows.write_text("".join(json.dumps(r) + "\n" for r in rows))
     rows = [{**r, **score(references[r["name"]], r)} for r in rows if r["name"] in references]
+    check_unreferenced(corpus, folder, rows)
     before = None
     if args.before:
         old = [r for r in read_rows(args.before) if r["solver"] == STARNAV_LABEL]
