@@ -271,3 +271,40 @@ def test_a_field_below_the_limit_is_a_one_line_error_saying_why(capsys):
     for fov in ({"fov_range_deg": (2.9, 10)}, {"fov_deg": 2.5}):
         with pytest.raises(StarnavError, match="too few stars of the embedded Hipparcos"):
             solve_stars(xy, fov_exact=False, width=100, **fov)
+
+
+def test_a_band_searches_a_quarter_step_into_the_next_wider_one():
+    """A field at the bottom of a band has half the pattern stars of the band's table fields;
+    the next narrower band's deeper table finds it: its focal-length cells reach
+    ``BAND_OVERLAP`` (2^0.25) above its own top (a 6.1° star-tracker frame at Polaris was
+    solved only with --fov-range 3 40 before)."""
+    from starnav.camera import focal_px_from_fov
+    from starnav.pipeline.fov_search import BAND_OVERLAP, _cells
+
+    width, height = 1392, 1040
+    bands = load_bands(*DEFAULT_FOV_RANGE_DEG, width, height, None, None)
+    focal_range = (focal_px_from_fov(40.0, width), focal_px_from_fov(5.0, width))
+    narrowest = bands[-1]
+    cells = _cells(narrowest, width, np.hypot(width, height) / 2, focal_range)
+    f_low_edge = min(f * np.exp(-d) for f, d, _ in cells)
+    assert f_low_edge == pytest.approx(
+        focal_px_from_fov(narrowest.fov_hi_deg * BAND_OVERLAP, width), rel=1e-9
+    )
+    assert narrowest.fov_hi_deg * BAND_OVERLAP > 6.08 > narrowest.fov_hi_deg
+
+
+def test_a_wide_field_outside_the_default_range_is_found_next():
+    """With no range given, 40-70° is searched when 5-40° finds nothing (then 3-5°), in what
+    the budget left; with a range given, only that range is."""
+    sky = load_catalog(None, mag_limit=7.0)
+    camera = Camera.from_fov(50.0, 1024, 768)
+    R = attitude_from_radec_roll(83.8, -5.4, 30.0, 1)
+    frame = render_frame(sky, camera, R, RenderSettings(seed=3))
+    res = solve_image(frame.image)
+    assert res.solution is not None, res.reason
+    assert res.solution.fov_deg == pytest.approx(50.0, rel=2e-3)
+    bore, _ = attitude_difference_deg(res.solution.R_cam_from_icrs, R)
+    assert bore * 3600 < 30
+    given = solve_image(frame.image, fov_range_deg=DEFAULT_FOV_RANGE_DEG)
+    assert given.solution is None and "40-70" not in given.reason
+    assert given.failure is not None

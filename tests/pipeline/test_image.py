@@ -173,3 +173,14 @@ def test_a_refused_identification_does_not_end_the_fov_search(sky):
     assert s is not None
     bore, _ = attitude_difference_deg(s.R_cam_from_icrs, R)
     assert bore * 3600 < 5 and s.fov_deg == pytest.approx(20.0, rel=1e-3)
+
+
+def test_large_images_are_detected_binned():
+    """Detection bins an image to at most 4.2 MP unless told otherwise."""
+    from starnav.pipeline.image import detection_binning
+
+    assert detection_binning(1280, 960) == 1
+    assert detection_binning(2048, 2048) == 1
+    assert detection_binning(4032, 3024) == 2
+    assert detection_binning(4898, 3265) == 2
+    assert detection_binning(6000, 4000) == 3
