@@ -8,8 +8,8 @@ ended, first that applies:
   them to be sure of it (``_NOT_CONVINCING``);
 * ``TRAILED``: the stars are ``TRAILED_ELONGATION`` times longer than wide or more (a long
   exposure on a fixed tripod, a shaking camera): their centres are the trails' middles;
-* ``DISTORTED``: an attitude fitted part of the stars and not the rest, with the distortion
-  fitted too (a lens beyond the model: a fisheye or a wide-angle lens for the pinhole);
+* ``DISTORTED``: an attitude fitted part of the stars and not the rest (a lens beyond the
+  model: a fisheye or a wide-angle lens for the pinhole, or its distortion not fitted);
 * ``BUDGET``: the time budget ended the search (of the first range searched: the extended
   ranges share what the default range left);
 * ``OUTSIDE``: no pattern of the stars matched the catalog anywhere in the range searched: the
@@ -59,11 +59,12 @@ def diagnose(
     fov_range_deg: tuple[float, float] | None,
     threshold_sigma: float,
     lens: str,
+    fit_distortion: bool = False,
 ) -> Failure:
     """The class of an unsolved image's failure (see the module docstring) from its
     ``detections`` and the solve's ``reason``; ``fov_range_deg``: the horizontal fields
-    searched (degrees; None when the field was given), ``threshold_sigma`` and ``lens`` as
-    solved."""
+    searched (degrees; None when the field was given), ``threshold_sigma``, ``lens`` and
+    ``fit_distortion`` as solved."""
     n = len(detections)
     if n < FEW_STARS_LIMIT:
         return Failure(
@@ -86,10 +87,11 @@ def diagnose(
         )
     if _PART_FITS in reason:
         models = "a fisheye model (--lens)" if lens == "pinhole" else "another --lens model"
+        tries = models if fit_distortion else f"--fit-distortion, {models}"
         return Failure(
             DISTORTED,
-            "the best attitude holds the middle of the frame and not its edges, with k1, k2 "
-            f"fitted: try {models}, or calibrate the camera (starnav calibrate)",
+            "the best attitude holds part of the frame and not the rest: if the lens "
+            f"distorts, try {tries}, or calibrate the camera (starnav calibrate)",
         )
     if _BUDGET in reason.split("; ")[0]:  # the default range's search ran out of time
         return Failure(BUDGET, "a longer --time-budget, or the field of view if it is known")

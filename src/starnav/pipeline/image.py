@@ -196,6 +196,7 @@ def _diagnose(found: Detections, reason: str, options: SolveOptions) -> Failure:
         fov_range_deg=searched,
         threshold_sigma=options.threshold_sigma,
         lens=options.lens_model,
+        fit_distortion=options.fit_distortion,
     )
 
 
