@@ -8,7 +8,9 @@ one module per stage:
 
 1. background (``starnav.detect.background``): a 64 px mesh of sigma-clipped medians and
    rms (about a plane per cell), interpolated bilinearly; the sky's noise correlation (1 for
-   a raw frame, ~1.2-1.5 for a JPEG) scales the rms to the pixels' own;
+   a raw frame, ~1.2-1.5 for a JPEG) scales the rms to the pixels' own; a sky clipped at the
+   black level (10 % of the pixels or more at the lowest value) takes its noise from the
+   upper half of its values, which the clipping leaves (``_rms_floor``);
 2. hot pixels (``starnav.detect.hot``): a pixel above the threshold whose four neighbours
    average under a tenth of its excess is replaced by that average (every star of PSF
    sigma >= 0.4 px keeps more than that in its neighbours);
@@ -16,7 +18,9 @@ one module per stage:
    measured wider than 2.5 px), ``threshold_sigma`` counted in the filtered noise of the
    noise map, deblending by sep; where sources of more than 1500 px show that the mesh
    left patches (glow beside a tree line, a cloud's edge), a 24 px mesh is fitted to what
-   is left with the compact sources masked, and sources are found again;
+   is left with the compact sources masked, and sources are found again; sep's buffer
+   limits, which a dense Milky Way or a nebula fills, are raised for the call, then the
+   threshold (``_extract``): never an error;
 4. PSF width (``starnav.detect.psf``): the most common half-light radius of round,
    unsaturated sources not in foreground (the brightest are often lit branches);
 5. windowed centroids (``sep.winpos``, a Gaussian window of sigma sqrt(psf² + 1 px²): the
