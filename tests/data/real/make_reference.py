@@ -25,7 +25,8 @@ the first 50 files were solved with ``-10-19`` only) runs as::
         --scale-units degwidth --scale-low LO --scale-high HI --cpulimit 30 \
         [--downsample 2 when the image is larger than 2000 px, 4 above 4000 px]
 
-with a loose width hint: 0.3°-100°, or half to twice ``fov_guess_deg`` where sources.json
+its process group killed after 60 s of wall time (astrometry-engine looks at the CPU limit
+only between index files), with a loose width hint: 0.3°-100°, or half to twice ``fov_guess_deg`` where sources.json
 has one (what the source says of its lens, or the lens's focal length and sensor);
 ``solve --again --cpulimit 150 FILE...`` retries unsolved ones with more time, and two
 processes can share the work (``--status solve2.json --reverse``). Its wall time per file
@@ -67,6 +68,7 @@ import argparse
 import json
 import os
 import re
+import signal
 import subprocess
 import sys
 import tempfile
@@ -151,12 +153,11 @@ def solve_one(entry: dict, folder: Path, cpu_limit_s: int = CPU_LIMIT_S) -> dict
         if max(width, height) > 2000:
             cmd += ["--downsample", str(2 if max(width, height) <= 4000 else 4)]
         started = time.perf_counter()
-        proc = subprocess.run(cmd, capture_output=True, text=True)  # run this script under nice
+        log, err = _run_bounded(cmd, 2 * cpu_limit_s)  # run this script under nice
         out["seconds"] = round(time.perf_counter() - started, 2)  # wall time, FITS to .wcs
         wcs = Path(tmp) / f"{stem}.wcs"
         out["command"] = " ".join(["solve-field", "FILE.fits", *cmd[2:]]).replace(tmp, "TMP")
         out["solved"] = wcs.exists()
-        log = proc.stdout
         match = re.search(r"Field 1: solved with index (\S+?)\.?\s", log)
         out["index"] = match.group(1) if match else None
         for key, pattern in (
@@ -169,8 +170,23 @@ def solve_one(entry: dict, folder: Path, cpu_limit_s: int = CPU_LIMIT_S) -> dict
         out["parity_text"] = match.group(1) if match else None
         if out["solved"]:
             (WORK / f"{stem}.wcs").write_bytes(wcs.read_bytes())
-        (WORK / f"{stem}.log").write_text(log + proc.stderr)
+        (WORK / f"{stem}.log").write_text(log + err)
     return out
+
+
+def _run_bounded(cmd: list[str], wall_s: float) -> tuple[str, str]:
+    """(stdout, stderr) of ``cmd``, its whole process group killed after ``wall_s`` seconds:
+    astrometry-engine looks at ``--cpulimit`` only between index files, and one pass over
+    the 22′-44′ files can take minutes of CPU on a wide field."""
+    proc = subprocess.Popen(
+        cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True
+    )
+    try:
+        return proc.communicate(timeout=wall_s)
+    except subprocess.TimeoutExpired:
+        os.killpg(proc.pid, signal.SIGKILL)
+        log, err = proc.communicate()
+        return log, err + f"\nkilled after {wall_s:g} s of wall time\n"
 
 
 def width_hint_deg(entry: dict) -> tuple[float, float]:
