@@ -26,8 +26,9 @@ the first 50 files were solved with ``-10-19`` only) runs as::
         [--downsample 2 when the image is larger than 2000 px, 4 above 4000 px]
 
 its process group killed after 60 s of wall time (astrometry-engine looks at the CPU limit
-only between index files), with a loose width hint: 0.3°-100°, or half to twice ``fov_guess_deg`` where sources.json
-has one (what the source says of its lens, or the lens's focal length and sensor);
+only between index files), with a loose width hint: 0.3°-100°, or half to twice
+``fov_guess_deg`` where sources.json has one (what the source says of its lens, or the
+lens's focal length and sensor);
 ``solve --again --cpulimit 150 FILE...`` retries unsolved ones with more time, and two
 processes can share the work (``--status solve2.json --reverse``). Its wall time per file
 is kept as ``seconds`` and its ``.wcs`` header in ``STARNAV_CORPUS_WORK`` (default
