@@ -68,6 +68,13 @@ OCCLUDED = {
     "openstartracker_science_cam_img0.png": "4 stars Hp <= 6.5 in its 6° field",
 }
 
+# the repositories of the first 50 files (the rest came with issue 34)
+FIRST_CORPUS = {
+    "esa/tetra3", "granasat/startrackerpy", "UBNanosatLab/openstartracker", "smroid/cedar-solve",
+    "smroid/cedar-detect", "dstndstn/astrometry.net", "brickbots/PiFinder",
+    "oresat/oresat-star-tracker-software",
+}  # fmt: skip
+
 # measured with starnav at the merge of the detection for real skies (FOV unknown, default
 # options), per image; "roll" is the rotation about the boresight against the reference
 KNOWN_FAILURES = {
@@ -191,13 +198,18 @@ def test_references_put_catalog_stars_on_detected_stars():
     WCS: the Hipparcos stars projected with the converted attitude and field land on detected
     stars; turned by 180°, mirrored or with the rows flipped they do not."""
     solved = {n: r for n, r in REFERENCE.items() if r["solved_by_reference"]}
-    assert len(solved) >= 30
+    assert len(solved) >= 120
     for name, ref in solved.items():
         check = ref["check"]
+        if ref.get("check_inconclusive"):  # a narrow field: no Hp <= 6.5 star in view
+            assert check["reference"]["n_catalog"] < make_reference.CHECK_MIN_IN_VIEW
+            continue
         good, brightest = check["reference"], check["reference_brightest"]
         others = max(check[k]["n_matched"] for k in ("roll_plus_180", "mirrored", "rows_flipped"))
         assert good["n_matched"] >= max(3, 3 * others), f"{name}: {good} vs {others}"
-        if name in OCCLUDED:
+        # the first corpus, every star: the photographs added for issue 34 hold clouds, trees,
+        # processed glows and saturated blooms that hide some of the bright stars
+        if name in OCCLUDED or SOURCES[name]["repository"] not in FIRST_CORPUS:
             continue
         assert good["n_matched"] >= 0.7 * good["n_catalog"], f"{name}: {good}"
         assert brightest["n_matched"] >= 0.7 * brightest["n_catalog"], f"{name}: {brightest}"
