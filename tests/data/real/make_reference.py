@@ -124,16 +124,27 @@ def astrometry_version() -> str:
     return out.stdout.strip() or out.stderr.strip()
 
 
-def solve_one(entry: dict, folder: Path, cpu_limit_s: int = CPU_LIMIT_S) -> dict:
-    """Run solve-field on one file; returns what it reported (and writes the .wcs)."""
+def solve_one(
+    entry: dict,
+    folder: Path,
+    cpu_limit_s: int = CPU_LIMIT_S,
+    *,
+    near: tuple[float, float, float] | None = None,
+    work: Path = WORK,
+) -> dict:
+    """Run solve-field on one file; returns what it reported (and writes the .wcs into
+    ``work``). ``near``: (RA, Dec, width) in degrees, another solver's answer to verify: the
+    field is then searched within 5° of it and 10 % of its width only."""
     from astropy.io import fits
 
     from starnav.detect.read import read_image
 
     pixels = read_image(folder / entry["name"])
     scale_deg = width_hint_deg(entry)
+    if near is not None:
+        scale_deg = (0.9 * near[2], 1.1 * near[2])
     height, width = pixels.shape
-    WORK.mkdir(parents=True, exist_ok=True)
+    work.mkdir(parents=True, exist_ok=True)
     stem = Path(entry["name"]).stem
     out = {"width": width, "height": height}
     with tempfile.TemporaryDirectory() as tmp:
@@ -158,6 +169,8 @@ def solve_one(entry: dict, folder: Path, cpu_limit_s: int = CPU_LIMIT_S) -> dict
             "--cpulimit",
             str(cpu_limit_s),
         ]
+        if near is not None:
+            cmd += ["--ra", f"{near[0]:.6f}", "--dec", f"{near[1]:.6f}", "--radius", "5"]
         if max(width, height) > 2000:
             cmd += ["--downsample", str(2 if max(width, height) <= 4000 else 4)]
         started = time.perf_counter()
@@ -177,8 +190,8 @@ def solve_one(entry: dict, folder: Path, cpu_limit_s: int = CPU_LIMIT_S) -> dict
         match = re.search(r"Field parity: (\w+)", log)
         out["parity_text"] = match.group(1) if match else None
         if out["solved"]:
-            (WORK / f"{stem}.wcs").write_bytes(wcs.read_bytes())
-        (WORK / f"{stem}.log").write_text(log + err)
+            (work / f"{stem}.wcs").write_bytes(wcs.read_bytes())
+        (work / f"{stem}.log").write_text(log + err)
     return out
 
 
@@ -227,12 +240,12 @@ def cmd_solve(args) -> None:
     status_file.write_text(json.dumps(status, indent=1))
 
 
-def wcs_of(name: str):
+def wcs_of(name: str, work: Path = WORK):
     """astropy WCS of astrometry.net's solution of ``name`` (None when it did not solve)."""
     from astropy.io import fits
     from astropy.wcs import WCS, FITSFixedWarning
 
-    path = WORK / f"{Path(name).stem}.wcs"
+    path = work / f"{Path(name).stem}.wcs"
     if not path.exists():
         return None, None
     header = fits.getheader(path)
