@@ -208,10 +208,12 @@ def verify_unreferenced(corpus, folder: Path, rows: list[dict]) -> None:
     done_file = work / "hinted.json"
     done = json.loads(done_file.read_text()) if done_file.exists() else {}
     for r in rows:
-        if r["outcome"] != "answer, no reference" or "R" not in r or not r.get("fov_deg"):
+        if r["outcome"] != "answer, no reference" or not r.get("fov_deg"):
             continue
-        R = np.asarray(r["R"])
-        ra, dec, _, _ = radec_roll_from_attitude(R)
+        if "R" in r:  # starnav's worker: the attitude matrix; the peers': RA, Dec, roll
+            ra, dec, _, _ = radec_roll_from_attitude(np.asarray(r["R"]))
+        else:
+            ra, dec = r["ra_deg"], r["dec_deg"]
         key = f"{r['name']} {ra:.3f} {dec:.3f} {r['fov_deg']:.3f}"
         if key not in done:
             status = corpus.solve_one({"name": r["name"]}, folder, near=(ra, dec, r["fov_deg"]),
@@ -257,7 +259,7 @@ def band_table(entries, references, rows, labels, before) -> list[str]:
         cells = [band, len(group), ref_solved if band != NO_REFERENCE else 0]
         if before is not None:
             old = [before[n] for n in names if n in before]
-            cells.append(sum(r["outcome"] == "right" for r in old))
+            cells.append(sum(r["outcome"] == "right" for r in old) if old else "-")
         for label in labels:
             got = [by[(n, label)] for n in names if (n, label) in by]
             if band == NO_REFERENCE:
