@@ -100,7 +100,8 @@ def diagnose(
     )
     return Failure(
         OUTSIDE,
-        f"no pattern of the brightest stars matches the catalog {where}: give the field of "
-        "view (--fov-deg) or a range that holds it (--fov-range, 3-100° for the pinhole lens); "
-        "narrower than 3° is beyond the embedded catalog",
+        f"no pattern of the brightest stars matches the catalog {where}: the field lies "
+        "outside that (give it: --fov-deg, or --fov-range within 3-100° for the pinhole lens; "
+        "narrower than 3° is beyond the embedded catalog), or the brightest points are not "
+        "the brightest stars (a processed or stacked picture, a nebula, noise)",
     )
