@@ -165,7 +165,7 @@ def score(ref: dict, out: dict) -> dict:
     return {**row, "outcome": "WRONG" if verdict(result) == "wrong" else "right"}
 
 
-def run(corpus, folder: Path, entries: list[dict], runs: list[Solver], references) -> list[dict]:
+def run(folder: Path, entries: list[dict], runs: list[Solver], references) -> list[dict]:
     """Every solver on every file present: one row per (image, solver), its answer as the
     adapter printed it (scored against the references when the tables are written)."""
     present = [e for e in entries if (folder / e["name"]).is_file()]
@@ -414,7 +414,7 @@ def main() -> None:
         installs = {}
     else:
         runs, installs = solvers(cache_dir(), args.solvers.split(","))
-        rows = run(corpus, folder, entries, runs, references)
+        rows = run(folder, entries, runs, references)
         labels = [s.label for s in runs]
     if args.rows:
         args.rows.write_text("".join(json.dumps(r) + "\n" for r in rows))
