@@ -25,11 +25,11 @@ def test_a_cache_is_one_per_name_and_empties_when_full():
 
 
 def test_the_solver_caches_are_registered_and_filled_by_a_solve():
-    from shared_data import CONTEST
+    from shared_data import CONTEST, shared_file
     from starnav.starlist import read_star_csv
 
-    xy = read_star_csv(CONTEST / "images" / "xingtu01.csv").xy
-    starnav.solve_stars(xy, width=512, fov_deg=12.0, catalog=CONTEST / "catalog.csv")
+    xy = read_star_csv(shared_file(CONTEST / "images" / "xingtu01.csv")).xy
+    starnav.solve_stars(xy, width=512, fov_deg=12.0, catalog=shared_file(CONTEST / "catalog.csv"))
     sizes = caches.caches()
     assert sizes["pair databases"] >= 1 and sizes["prepared solvers"] >= 1
     assert {"Hipparcos catalogs", "4-star pattern tables", "FOV-search bands"} <= set(sizes)
