@@ -376,6 +376,16 @@ def write_doc(args, entries, references, rows, labels, installs, before, t_start
         "",
         *source_table(entries, references),
         "",
+        *(
+            [
+                "The answers are the saved rows of earlier runs (`--rows`), scored and verified "
+                "when these tables were written: the times are those runs', the line below is "
+                "the writing's.",
+                "",
+            ]
+            if args.from_rows
+            else []
+        ),  # fmt: skip
         f"{machine()}; `nice python benchmarks/peers/real_images.py {' '.join(sys.argv[1:])}`"
         f", {time.time() - t_start:.0f} s.",
     ]
@@ -411,7 +421,7 @@ def main() -> None:
     if args.from_rows:
         rows = [r for path in args.from_rows for r in read_rows(path)]
         labels = list(dict.fromkeys(r["solver"] for r in rows))
-        installs = {}
+        _, installs = solvers(cache_dir(), labels)  # the peers' install lines
     else:
         runs, installs = solvers(cache_dir(), args.solvers.split(","))
         rows = run(folder, entries, runs, references)
