@@ -385,7 +385,7 @@ def write_doc(args, entries, references, rows, labels, installs, before, t_start
             ]
             if args.from_rows
             else []
-        ),  # fmt: skip
+        ),
         f"{machine()}; `nice python benchmarks/peers/real_images.py {' '.join(sys.argv[1:])}`"
         f", {time.time() - t_start:.0f} s.",
     ]
