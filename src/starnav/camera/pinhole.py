@@ -46,7 +46,7 @@ class Camera(Lens):
     kind = "pinhole"
     scans_focal = False  # an unknown field of view: the FOV search (4-star patterns)
     default_fov_range_deg = (5.0, 40.0)
-    # then a wide-angle or phone photograph's, then a long lens's: a frame of 48° or 4.5° is
+    # then a wide-angle or phone photograph's, then a long lens's: a 45-55° phone frame is
     # solved without a --fov-range, in the time the default range left (searching 3-70° at
     # once took twice the time on the frames the default holds, and lost one to the budget)
     extended_fov_ranges_deg = ((40.0, 70.0), (3.0, 5.0))

@@ -52,7 +52,7 @@ _EDGE_INDEX = {(int(i), int(j)): e for e, (i, j) in enumerate(_PAIRS)}
 _EDGE_INDEX.update({(j, i): e for (i, j), e in list(_EDGE_INDEX.items())})
 _PERM_EDGES = np.array([[_EDGE_INDEX[(int(p[i]), int(p[j]))] for i, j in _PAIRS] for p in _PERMS])
 _MAX_PROBES = 200_000  # bin look-ups per batch of observed patterns (bounds memory)
-_MAX_CANDIDATES = 500_000  # table rows per batch (a pattern of short edges draws 100 000)
+_MAX_CANDIDATES = 500_000  # table rows per batch (bounds memory and the work between deadlines)
 _BUILD_BLOCK = 4096  # lattice fields expanded at once while building
 _MAX_PATTERN_ROWS = 5e7  # patterns expanded before removing duplicates (about 0.4 GB)
 _EDGE_STEPS = 65535  # the table's largest edge in uint16 steps
