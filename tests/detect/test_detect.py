@@ -759,3 +759,49 @@ def test_sky_clipped_at_the_black_level():
     assert found.background_rms > 1.0  # (sigma-clipped, the clipped sky says 0.03 ADU)
     assert _brightest_found(found, xy, flux, 15).all()
     assert _found(found, xy, 2.0).sum() >= 0.9 * len(found)
+
+
+def test_bloated_bright_stars_of_a_stretched_photograph(tmp_path):
+    """A deep, stretched colour photograph (8-bit JPEG, noise ~15 levels): its five brightest
+    stars are discs with halos 5-7 PSF sigmas wide, their cores clipped near 255 in each
+    colour; faint stars crowd the field. The bloated stars are found, and first."""
+    rng = np.random.default_rng(34)
+    xy, flux = _stars(rng, 150)
+    inner = np.flatnonzero((np.abs(xy - SIZE / 2) < SIZE / 2 - 40).all(axis=1))
+    bright = inner[np.argsort(-flux[inner])[:5]]  # whole discs, not cut by the edge
+    width = rng.uniform(5.0, 7.0, len(bright))
+    planes = []
+    for tint in (1.0, 0.9, 1.1):
+        sky = np.full((SIZE, SIZE), 400.0 * tint)
+        faint = np.setdiff1d(np.arange(len(xy)), bright)
+        sky += star_electrons(xy[faint], flux[faint] * tint, SIZE, SIZE, 1.2)
+        for i, s in zip(bright, width, strict=True):  # a disc and a halo far over the range
+            sky += star_electrons(xy[i : i + 1], np.array([3e7 * tint]), SIZE, SIZE, s)
+        planes.append(sky)
+    linear = np.stack(planes, -1)
+    noisy = rng.poisson(linear) + rng.normal(0, 20.0, linear.shape)
+    stretched = 255.0 * np.clip(np.arcsinh((noisy - 300.0) / 300.0) / 3.2, 0, 1)
+    Image.fromarray(np.rint(stretched).astype(np.uint8)).save(tmp_path / "d.jpg", quality=85)
+    found = detect_stars(read_image(tmp_path / "d.jpg"), max_stars=50)
+    assert _found(found, xy[bright], 3.0).all()
+    assert (cKDTree(xy[bright]).query(found.xy[:5])[0] < 3.0).all()
+
+
+def test_quiet_8_bit_sky_is_not_foreground():
+    """An 8-bit sky whose noise is under 2 levels (a dark site, a short exposure: what a
+    small camera's JPEG holds): the median absolute deviation of its whole-number pixel steps
+    reads 1.05 where their rms is 1.57, which once made star annuli look rough ("in
+    foreground"). Every star well above the threshold is found."""
+    from scipy import ndimage
+
+    rng = np.random.default_rng(35)
+    xy, flux = _stars(rng, 40)
+    flux = np.exp(rng.uniform(np.log(150.0), np.log(3000.0), len(xy)))
+    sky = 20.0 + star_electrons(xy, flux, SIZE, SIZE, 1.3)
+    # rms 1.8 levels, smoothed (correlation 1.16) as a JPEG's: steps of rms 1.57, MAD 1.05
+    noise = ndimage.gaussian_filter(rng.normal(0.0, 2.8, sky.shape), 0.5)
+    image = np.clip(np.rint(sky + noise), 0, 255).astype(np.uint8)
+    found = detect_stars(image)
+    peak = flux / (2 * np.pi * 1.3**2)
+    clear = peak > 15 * 1.8  # 15 sigmas at the peak
+    assert _found(found, xy[clear], 1.0).mean() >= 0.95

@@ -32,10 +32,16 @@ one module per stage:
    brighter than a star's), *misshapen* (a trail, an edge: a > 2.5 b; or b > 4 sigma), *in
    foreground* (its annulus rougher than its pixel-to-pixel noise explains: foliage, a lit
    wall, an edge across it) or fainter than half ``threshold_sigma`` against its
-   surroundings;
+   surroundings; a source dropped so whose peak comes near the image's maximum (90 % of the
+   way up from the sky) and that is round and wider than 2 PSF sigmas (sep's sqrt(a b)) is
+   judged again in zones of its own size (up to 32 px): the brightest stars of a long
+   exposure or a stretched photograph are discs with halos, which the PSF's zones cut, and
+   a patch of cloud or glow that wide has no core near the top;
 7. ranking: saturated stars first, then by ``snr``, the local flux over the image's noise or
-   the clearly higher (x 1.25) noise of the surroundings: a lit wall, a patch of glow or a
-   branch cannot outrank a star by being large or bright.
+   the clearly higher (x 1.25) noise of the surroundings (a star judged whole: its whole
+   flux, as if in the PSF): a lit wall, a patch of glow or a branch cannot outrank a star by
+   being large or bright. Sources are measured in that order's likely part first: saturated
+   ones, then by the better of their ranks in peak over the noise map and in sep's flux.
 
 docs/images.md ("How stars are found in real skies") measures this on real photographs and
 says what it still cannot do.
@@ -69,7 +75,12 @@ from starnav.detect.background import (
     subtract_background,
 )
 from starnav.detect.hot import clean_hot_pixels
-from starnav.detect.photometry import local_photometry, misshapen
+from starnav.detect.photometry import (
+    elongated,
+    local_photometry,
+    misshapen,
+    own_scale_photometry,
+)
 from starnav.detect.psf import measure_psf_sigma
 from starnav.errors import ImageError, shown
 
@@ -85,6 +96,8 @@ _MIN_SNR_FRACTION = 0.5  # of threshold_sigma: a source fainter than that here i
 _CANDIDATES_PER_STAR, _CANDIDATES_EXTRA = 4, 30  # most sources measured for max_stars
 _FIRST_PER_STAR, _FIRST_EXTRA = 2, 20  # sources measured first
 _UNIFORM_NOISE = 1.25
+_WIDE_SIGMAS = 2.0  # a source this many PSF sigmas wide (sep's sqrt(a b)) is measured whole
+_NEAR_TOP = 0.9  # of the way from the sky level to the image's maximum: a peak near the top
 _PLATEAU_PX = 1500  # a source of more filtered pixels is a patch of residual glow
 _WIDEST_FOR_DEFAULT_KERNEL = 2.5  # PSF sigma (px) beyond which its own Gaussian is used
 # sep's buffers (its defaults: 300 000 pixels above the threshold at once, 1024 sub-objects in
@@ -194,11 +207,13 @@ def detect_stars(
         if len(objects) == 0:
             return _empty(width, height, psf_sigma_px, level, rms, n_hot, n_saturated)
     peak_snr = objects["peak"] / _rms_at_peaks(background, objects)
+    near_top = _raw_peaks(objects, data, background) >= level + _NEAR_TOP * (high - level)
     stars, n_rejected, elongation = _measured_in_batches(
         data,
         mask,
         objects,
         saturated,
+        near_top,
         peak_snr,
         sigma,
         background,
@@ -268,6 +283,7 @@ def _measured_in_batches(
     mask: np.ndarray | None,
     objects: np.ndarray,
     saturated: np.ndarray,
+    near_top: np.ndarray,
     peak_snr: np.ndarray,
     sigma: float,
     background: Background,
@@ -275,21 +291,32 @@ def _measured_in_batches(
     max_stars: int | None,
     correlation: float,
 ):
-    """``_measured`` on the likely stars first (saturated ones, then by peak over the
-    noise map), 2 ``max_stars`` + 20 of them, twice as many until ``max_stars`` are taken
-    for stars or 4 ``max_stars`` + 30 were measured (all with ``max_stars`` None)."""
+    """``_measured`` on the likely stars first (saturated ones, then by the better of their
+    ranks in peak over the noise map and in sep's flux), 2 ``max_stars`` + 20 of them,
+    twice as many until ``max_stars`` are taken for stars or 4 ``max_stars`` + 30 were
+    measured (all with ``max_stars`` None)."""
     args = (sigma, background, threshold_sigma, max_stars, correlation)
     if max_stars is None:
-        return _measured(data, mask, objects, saturated, *args)
-    order = np.lexsort((-peak_snr, ~saturated))
+        return _measured(data, mask, objects, saturated, near_top, *args)
+    # the better of two ranks: peak over the noise map, and sep's total flux (a bright
+    # star's halo raises the noise map under its own peak)
+    rank = np.minimum(_ranks(-peak_snr), _ranks(-objects["flux"]))
+    order = np.lexsort((rank, ~saturated))
     limit = min(len(order), _CANDIDATES_PER_STAR * max_stars + _CANDIDATES_EXTRA)
     n = min(limit, _FIRST_PER_STAR * max_stars + _FIRST_EXTRA)
     while True:
         pick = order[:n]
-        measured = _measured(data, mask, objects[pick], saturated[pick], *args)
+        measured = _measured(data, mask, objects[pick], saturated[pick], near_top[pick], *args)
         if len(measured[0][0]) >= max_stars or n >= limit:
             return measured
         n = min(limit, 2 * n)
+
+
+def _ranks(values: np.ndarray) -> np.ndarray:
+    """Each value's rank, 0 for the smallest."""
+    rank = np.empty(len(values), dtype=np.intp)
+    rank[np.argsort(values, kind="stable")] = np.arange(len(values))
+    return rank
 
 
 def _measured(
@@ -297,6 +324,7 @@ def _measured(
     mask: np.ndarray | None,
     objects: np.ndarray,
     saturated: np.ndarray,
+    near_top: np.ndarray,
     sigma: float,
     background: Background,
     threshold_sigma: float,
@@ -305,25 +333,45 @@ def _measured(
 ) -> tuple[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray], int, float]:
     """(centroids (our pixel convention), local flux, peak, SNR and saturation flag of the
     sources taken for stars, saturated first then by SNR, the first ``max_stars`` (None:
-    all); how many sources were not taken for stars; their median elongation a / b)."""
+    all); how many sources were not taken for stars; their median elongation a / b).
+    ``near_top``: whether each source's peak comes near the image's maximum."""
     x, y = _centroids(data, objects, sigma, mask)
     phot = local_photometry(data, mask, x, y, sigma)
     # the noise of the surroundings where it is clearly above the image's (a tree line, a
     # roof edge, foliage, a bright sky), else the image's (so that uniform skies rank by flux)
     noise = np.fmax(background.rms, phot.noise / _LOCAL_NOISE_MARGIN)
-    snr = phot.flux / (noise * math.sqrt(4.0 * math.pi) * sigma)
-    shaped = ~misshapen(objects, sigma, phot.peak / noise)
+    flux = phot.flux
+    snr = flux / (noise * math.sqrt(4.0 * math.pi) * sigma)
+    peak_snr = phot.peak / noise
+    shaped = ~misshapen(objects, sigma, peak_snr)
     foreground = phot.in_foreground(correlation)
     star = shaped & ~phot.extended(noise) & ~foreground
     star &= snr >= _MIN_SNR_FRACTION * threshold_sigma
     star |= saturated & shaped  # a saturated star's flat top and halo fill the ring
+    # a star whose disc and halo are wider than the PSF, as the brightest are in a long
+    # exposure or a stretched photograph (their cores near the image's maximum: a patch of
+    # cloud or glow as wide has no such core): judged and measured whole, in its own zones
+    size = np.sqrt(objects["a"] * objects["b"])
+    wide = ~star & near_top & ~elongated(objects, sigma, peak_snr)
+    wide = np.flatnonzero(wide & (size > _WIDE_SIGMAS * sigma))
+    if len(wide):
+        whole = own_scale_photometry(data, mask, x[wide], y[wide], size[wide])
+        whole_noise = np.fmax(background.rms, whole.noise / _LOCAL_NOISE_MARGIN)
+        # ranked as bright as a star of the PSF with that flux
+        whole_snr = whole.flux / (whole_noise * math.sqrt(4.0 * math.pi) * sigma)
+        ok = ~whole.extended(whole_noise) & ~whole.in_foreground(correlation)
+        ok &= whole_snr >= threshold_sigma
+        wide = wide[ok]
+        flux, snr = flux.copy(), snr.copy()
+        flux[wide], snr[wide] = whole.flux[ok], whole_snr[ok]
+        star[wide] = True
     keep = np.flatnonzero(star)
-    order = keep[np.lexsort((-np.where(saturated, phot.flux, snr)[keep], ~saturated[keep]))]
+    order = keep[np.lexsort((-np.where(saturated, flux, snr)[keep], ~saturated[keep]))]
     if max_stars is not None:
         order = order[:max_stars]
     xy = np.column_stack([x[order], y[order]]) + 0.5
     peak = objects["peak"][order].astype(float)
-    measured = (xy, phot.flux[order], peak, snr[order], saturated[order])
+    measured = (xy, flux[order], peak, snr[order], saturated[order])
     b = np.maximum(objects["b"][order], 1e-3)
     elongation = float(np.median(objects["a"][order] / b)) if len(order) else 1.0
     return measured, int(len(objects) - len(keep)), elongation
@@ -465,10 +513,15 @@ def _saturated(
     """Whether each source's peak pixel, background added back, reaches ``saturation``."""
     if saturation is None:
         return np.zeros(len(objects), dtype=bool)
+    return _raw_peaks(objects, data, background) >= np.float32(saturation)
+
+
+def _raw_peaks(objects: np.ndarray, data: np.ndarray, background: Background) -> np.ndarray:
+    """Each source's peak pixel in background-subtracted ``data``, the background added
+    back."""
     xpeak = objects["xpeak"].astype(np.intp)
     ypeak = objects["ypeak"].astype(np.intp)
-    raw_peak = data[ypeak, xpeak] + background.level_at(xpeak, ypeak)
-    return raw_peak >= np.float32(saturation)
+    return data[ypeak, xpeak] + background.level_at(xpeak, ypeak)
 
 
 def _centroids(
