@@ -35,9 +35,10 @@ Scores per image (``harness.verdict``): right (within ``WRONG_DEG`` in boresight
 about the boresight, the reference's parity), wrong, or no answer. An answer on an image
 astrometry.net did not solve blind is given back to astrometry.net as a hint (within 5° and
 10 % of the answer, ``verify_unreferenced``): confirmed, unconfirmed (it still finds
-nothing) or wrong (it solves elsewhere). A wrong answer against a reference that failed the
-catalog check (``check_overridden`` in reference.json) is "right, reference off" when the
-same check passes for it and puts more catalog stars on detections
+nothing) or wrong (it solves elsewhere). A wrong answer against an astrometry.net answer
+that fails the catalog check (a reference kept for its log-odds, ``check_overridden`` in
+reference.json, or a hinted solve) is "right, reference off" (or "answer, confirmed") when
+the same check passes for it and puts more catalog stars on detections
 (``dispute_failed_references``; listed under the tables). starnav's unsolved images are
 grouped by the
 ``failure`` class its result names (``starnav.pipeline.diagnose``). ``--rows`` writes each
@@ -165,7 +166,7 @@ def score(ref: dict, out: dict) -> dict:
         return {**row, "outcome": "answer, no reference"}
     result = score_answer(out, attitude_from_radec_roll(
         ref["ra_deg"], ref["dec_deg"], ref["roll_deg"], ref["parity"]))  # fmt: skip
-    row.update(boresight_arcsec=result.boresight_arcsec, roll_deg=result.roll_deg)
+    row.update(boresight_arcsec=result.boresight_arcsec, roll_error_deg=result.roll_deg)
     return {**row, "outcome": "WRONG" if verdict(result) == "wrong" else "right"}
 
 
@@ -232,50 +233,65 @@ def verify_unreferenced(corpus, folder: Path, rows: list[dict]) -> None:
             r["outcome"] = "answer, unconfirmed"
             continue
         found = {**status["reference"], "solved_by_reference": True}
-        r["outcome"] = "answer, confirmed" if score(found, r)["outcome"] == "right" else "WRONG"
+        r.update(score(found, r))
+        r["outcome"] = "answer, confirmed" if r["outcome"] == "right" else "WRONG"
+        if r["outcome"] == "WRONG":
+            r["hinted_reference"] = status["reference"]
 
 
 RIGHT = ("right", "right, reference off")
 
 
 def dispute_failed_references(corpus, folder: Path, references, rows: list[dict]) -> None:
-    """A wrong answer on an image whose reference failed the catalog check (kept for
-    astrometry.net's log-odds: ``check_overridden``) is checked the same way
-    (``make_reference.attitude_check``): when it passes the check and puts more catalog
-    stars on detections than the reference did, it is "right, reference off" (counted
-    right, listed under the tables with both checks), in place."""
+    """A wrong answer against an astrometry.net answer that fails the catalog check
+    (``make_reference.attitude_check``: a reference kept for its log-odds,
+    ``check_overridden``, or a hinted solve of ``verify_unreferenced``) is checked the same
+    way: when it passes and puts more catalog stars on detections, it is "right, reference
+    off" (an image with a reference) or "answer, confirmed" (one without), listed under the
+    tables with both checks; in place."""
     from starnav.catalog import load_catalog
 
     catalog = None
     for r in rows:
         ref = references[r["name"]]
-        if r["outcome"] != "WRONG" or "check_overridden" not in ref:
+        hinted = r.get("hinted_reference")
+        if r["outcome"] != "WRONG" or ("check_overridden" not in ref and hinted is None):
             continue
         if catalog is None:
             catalog = load_catalog(None, mag_limit=corpus.CHECK_MAG_LIMIT)
+        if hinted is None:
+            theirs = ref["check"]["reference"]
+        else:
+            R_hinted = attitude_from_radec_roll(
+                hinted["ra_deg"], hinted["dec_deg"], hinted["roll_deg"], hinted["parity"]
+            )
+            check = corpus.attitude_check(R_hinted, hinted["fov_deg"], folder / r["name"], catalog)
+            if corpus.check_passes(check):
+                continue
+            theirs = check["reference"]
         R = r.get("R")
         if R is None:
             R = attitude_from_radec_roll(r["ra_deg"], r["dec_deg"], r["roll_deg"], r["parity"] or 1)
         check = corpus.attitude_check(np.asarray(R), r["fov_deg"], folder / r["name"], catalog)
-        matched = check["reference"]["n_matched"]
-        if corpus.check_passes(check) and matched > ref["check"]["reference"]["n_matched"]:
-            r["outcome"] = "right, reference off"
-            r["dispute"] = {"answer": check["reference"], "reference": ref["check"]["reference"]}
+        if corpus.check_passes(check) and check["reference"]["n_matched"] > theirs["n_matched"]:
+            r["outcome"] = "answer, confirmed" if hinted else "right, reference off"
+            r["dispute"] = {"answer": check["reference"], "reference": theirs}
 
 
 def dispute_lines(rows: list[dict]) -> list[str]:
     """The answers counted right against a reference that failed the catalog check."""
     lines = []
     for r in rows:
-        if r["outcome"] == "right, reference off":
+        if "dispute" in r:
             a, ref = r["dispute"]["answer"], r["dispute"]["reference"]
             lines.append(
                 f"- `{r['name']}`, {r['solver']}: {r.get('boresight_arcsec', 0) / 3600:.2f}° "
-                f"from astrometry.net's boresight, roll {r.get('roll_deg', 0):.2f}° off; the "
+                f"from astrometry.net's boresight, roll {r.get('roll_error_deg', 0):.2f}° off; the "
                 f"catalog check (Hp <= 6.5 on the detections) puts {a['n_matched']} of "
                 f"{a['n_catalog']} stars on detections with this answer (median "
                 f"{a['median_px']} px), {ref['n_matched']} of {ref['n_catalog']} with "
-                f"astrometry.net's (median {ref['median_px']} px)"
+                f"astrometry.net's{' hinted solve' if 'hinted_reference' in r else ''} "
+                f"(median {ref['median_px']} px)"
             )
     return lines
 
@@ -420,8 +436,9 @@ def write_doc(args, entries, references, rows, labels, installs, before, t_start
     disputed = dispute_lines(rows)
     if disputed:
         parts += [
-            "Answers counted right against a reference that fails the catalog check (its "
-            "attitude kept for astrometry.net's log-odds; `dispute_failed_references`):",
+            "Answers counted right (or confirmed) against an astrometry.net answer that fails "
+            "the catalog check (a reference kept for its log-odds, or a hinted solve; "
+            "`dispute_failed_references`):",
             "",
             *disputed,
             "",
