@@ -308,31 +308,3 @@ def test_a_wide_field_outside_the_default_range_is_found_next():
     given = solve_image(frame.image, fov_range_deg=DEFAULT_FOV_RANGE_DEG)
     assert given.solution is None and "40-70" not in given.reason
     assert given.failure is not None
-
-
-@pytest.mark.slow
-def test_a_distorted_wide_angle_frame_is_solved_by_the_fisheye_fallback():
-    """A 62° rectilinear lens with strong barrel distortion (k1 = -0.2: 95 px in the
-    corners): the pinhole search finds nothing in any of its ranges; the Kannala-Brandt scan
-    that follows, in what they left of the budget, solves it. With a range given, the
-    fallback is not run."""
-    sky = load_catalog(None, mag_limit=5.5)
-    camera = Camera(1500, 1000, Camera.from_fov(62.0, 1500, 1000).focal_px, k1=-0.2)
-    frame = simulate_frame(sky, camera, noise_px=0.5, seed=3)
-    brightest = np.argsort(frame.mag)[:50]
-    xy, brightness = frame.xy[brightest], frame.brightness[brightest]
-    res = solve_stars(xy, fov_exact=False, width=1500, height=1000, brightness=brightness)
-    assert res.solution is not None, res.reason
-    assert res.solution.camera.model == "kannala-brandt"
-    bore, roll = attitude_difference_deg(res.solution.R_cam_from_icrs, frame.R_cam_from_icrs)
-    assert bore < 0.05 and roll < 0.1
-    pinhole_only = solve_stars(
-        xy,
-        fov_exact=False,
-        width=1500,
-        height=1000,
-        brightness=brightness,
-        fov_range_deg=(40, 70),
-        time_budget_s=1.0,
-    )
-    assert pinhole_only.solution is None and "kannala-brandt" not in pinhole_only.reason

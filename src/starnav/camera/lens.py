@@ -58,10 +58,6 @@ class Lens:
     - ``default_fov_range_deg``: the horizontal field (degrees) searched when none is given;
     - ``extended_fov_ranges_deg``: the ranges searched after that one, in order, while the
       time budget lasts, when the default found nothing (none: the default only);
-    - ``wide_fallback``: (lens model, horizontal range in degrees) scanned last, with what
-      is left of the time budget, when the default and extended ranges found nothing: a
-      fisheye model that holds a wide-angle lens's distortion where this model cannot
-      (none: no fallback);
     - ``fov_limits_deg``: the horizontal fields (degrees) a search or a given field may take;
     - ``fits_projection``: the FITS zenithal projection (CTYPE suffix) whose radius is the
       model's with its coefficients at zero (``undistorted``); SIP polynomials take the rest;
@@ -81,7 +77,6 @@ class Lens:
     scans_focal: ClassVar[bool] = False
     default_fov_range_deg: ClassVar[tuple[float, float]] = (0.0, 0.0)
     extended_fov_ranges_deg: ClassVar[tuple[tuple[float, float], ...]] = ()
-    wide_fallback: ClassVar[tuple[str, tuple[float, float]] | None] = None
     fov_limits_deg: ClassVar[tuple[float, float]] = (0.0, 0.0)
     fits_projection: ClassVar[str] = ""
     sip_max_order: ClassVar[int] = 0

@@ -50,11 +50,6 @@ class Camera(Lens):
     # solved without a --fov-range, in the time the default range left (searching 3-70° at
     # once took twice the time on the frames the default holds, and lost one to the budget)
     extended_fov_ranges_deg = ((40.0, 70.0), (3.0, 5.0))
-    # a wide-angle lens bends its edge stars tens of pixels off a pinhole's places (a 62°
-    # field with k1 = -0.2: 95 px in the corners), more than the 4-star patterns and the fit
-    # hold: 5 of 10 such simulated frames solved by the search, 7 of 8 by a Kannala-Brandt
-    # focal scan in 3 s (benchmarks/images/wide_rectilinear.py)
-    wide_fallback = ("kannala-brandt", (40.0, 100.0))
     # the narrowest horizontal field searched: a 3° field holds about 12 Hipparcos stars to the
     # deepest band catalog (Hp 8.5; ~8 towards the galactic poles), narrower ones too few to
     # identify and verify on (README, "Field range")

@@ -307,61 +307,32 @@ def solve_unknown_field(
         return solver.solve(
             stars, prior=prior, prior_sigma_deg=options.prior_sigma_deg, deadline=deadline
         )
-    scan = (catalog, epoch_year, mag_limit, settings)
     if options.scans_focal:
-        return _scan_range(stars, base, camera, (lo, hi), *scan, budget_s)
+        cat = load_catalog(catalog, mag_limit=mag_limit, epoch_year=epoch_year)
+        focal_range = lens_focal_range(base, camera, (lo, hi))
+        solver = Solver(
+            base.with_focal(math.sqrt(focal_range[0] * focal_range[1])), cat, settings=settings
+        )
+        return scan_focal(stars, base, focal_range, solver, Deadline.after(budget_s))
     near = _near(position_hint_deg, options.position_radius_deg)
     ranges = [(lo, hi)]
-    fallback = None
     if options.fov_deg is None and camera is None:
         ranges += [r for r in options.searched_ranges_deg[1:] if r != (lo, hi)]
-        if options.fov_range_deg is None:
-            fallback = options.lens_class.wide_fallback
     results, left_s = [], budget_s
-    searches = len(ranges) + (fallback is not None)
-    for k in range(searches):
+    for k, (a, b) in enumerate(ranges):
         # the budget counts once the range's tables are loaded (built on first use); the
         # first range takes what it needs, the others share what it left equally
-        share_s = left_s / max(1, searches - k) if k else left_s
-        if k < len(ranges):
-            bands = load_bands(*ranges[k], base.width, base.height, catalog, epoch_year)
-            deadline = Deadline.after(share_s)
-            with first_use("solve"):
-                result = _search_and_fit(
-                    stars, base, bands, settings, ranges[k], options.pattern_stars, deadline, near
-                )
-        else:  # the wide-angle fallback: a fisheye model's focal scan
-            model, fov_range = fallback
-            lens = model_class(model)(int(base.width), int(base.height), 1.0)
-            result = _scan_range(stars, lens, None, fov_range, *scan, share_s)
-            ranges.append(fov_range)
+        bands = load_bands(a, b, base.width, base.height, catalog, epoch_year)
+        deadline = Deadline.after(left_s / max(1, len(ranges) - k) if k else left_s)
+        with first_use("solve"):
+            result = _search_and_fit(
+                stars, base, bands, settings, (a, b), options.pattern_stars, deadline, near
+            )
         results.append(result)
         left_s -= result.time_ms / 1e3
         if result.solution is not None or left_s <= 0:
             break
     return _searched(results, ranges)
-
-
-def _scan_range(
-    stars: StarList,
-    base: CameraModel,
-    camera: CameraModel | None,
-    fov_range_deg: tuple[float, float],
-    catalog: Catalog | str | Path | None,
-    epoch_year: float | None,
-    mag_limit: float | None,
-    settings: SolveSettings,
-    budget_s: float,
-) -> SolveResult:
-    """``scan_focal`` of the lens model of ``base`` over the focal lengths of
-    ``fov_range_deg`` (``lens_focal_range``), on the catalog to ``mag_limit``, for
-    ``budget_s`` seconds once its solver is prepared."""
-    cat = load_catalog(catalog, mag_limit=mag_limit, epoch_year=epoch_year)
-    focal_range = lens_focal_range(base, camera, fov_range_deg)
-    solver = Solver(
-        base.with_focal(math.sqrt(focal_range[0] * focal_range[1])), cat, settings=settings
-    )
-    return scan_focal(stars, base, focal_range, solver, Deadline.after(budget_s))
 
 
 def _searched(results: list[SolveResult], ranges: list[tuple[float, float]]) -> SolveResult:
