@@ -132,6 +132,21 @@ WRONG_RULE = f"wrong: {WRONG_DEG:g}° or more off in boresight or in roll, or th
 MIRROR = np.diag([-1.0, 1.0, 1.0])
 
 
+def answer_attitude(answer: dict) -> np.ndarray | None:
+    """The attitude ``R_cam_from_icrs`` of an answer in the JSON form the workers and the
+    peers' adapters print (and a converted reference's): ``R_cam_from_icrs`` (or ``R``),
+    else from ``ra_deg``/``dec_deg``/``roll_deg`` and ``parity`` (null or absent: +1); None
+    when it holds none."""
+    R = answer.get("R_cam_from_icrs", answer.get("R"))
+    if R is not None:
+        return np.asarray(R, dtype=float)
+    if answer.get("ra_deg") is None:
+        return None
+    return attitude_from_radec_roll(
+        answer["ra_deg"], answer["dec_deg"], answer["roll_deg"], answer.get("parity") or 1
+    )
+
+
 def score_answer(answer: dict, R_true: np.ndarray) -> AttitudeScore | None:
     """``score_attitude`` of an answer in the JSON form the workers and the peers' adapters
     print: ``R_cam_from_icrs`` (or ``R``), else ``ra_deg``/``dec_deg``/``roll_deg``; ``parity``
@@ -141,16 +156,10 @@ def score_answer(answer: dict, R_true: np.ndarray) -> AttitudeScore | None:
     that its errors mean something; it is wrong whatever they are."""
     if answer.get("error") is not None:
         return None
-    parity = answer.get("parity")
-    R = answer.get("R_cam_from_icrs", answer.get("R"))
-    if R is not None:
-        R = np.asarray(R, dtype=float)
-    elif answer.get("ra_deg") is None:
+    R = answer_attitude(answer)
+    if R is None:
         return None
-    else:
-        R = attitude_from_radec_roll(
-            answer["ra_deg"], answer["dec_deg"], answer["roll_deg"], parity or 1
-        )
+    parity = answer.get("parity")
     if parity is not None and parity != parity_of(R_true):
         R = MIRROR @ R
 

@@ -73,6 +73,7 @@ from benchmarks.harness import (
     DOCS,
     ROOT,
     WRONG_DEG,
+    answer_attitude,
     machine,
     score_answer,
     table_head,
@@ -215,10 +216,7 @@ def verify_unreferenced(corpus, folder: Path, rows: list[dict]) -> None:
     for r in rows:
         if r["outcome"] != "answer, no reference" or not r.get("fov_deg"):
             continue
-        if "R" in r:  # starnav's worker: the attitude matrix; the peers': RA, Dec, roll
-            ra, dec, _, _ = radec_roll_from_attitude(np.asarray(r["R"]))
-        else:
-            ra, dec = r["ra_deg"], r["dec_deg"]
+        ra, dec, _, _ = radec_roll_from_attitude(answer_attitude(r))
         key = f"{r['name']} {ra:.3f} {dec:.3f} {r['fov_deg']:.3f}"
         if key not in done:
             status = corpus.solve_one({"name": r["name"]}, folder, near=(ra, dec, r["fov_deg"]),
@@ -262,17 +260,13 @@ def dispute_failed_references(corpus, folder: Path, references, rows: list[dict]
         if hinted is None:
             theirs = ref["check"]["reference"]
         else:
-            R_hinted = attitude_from_radec_roll(
-                hinted["ra_deg"], hinted["dec_deg"], hinted["roll_deg"], hinted["parity"]
+            check = corpus.attitude_check(
+                answer_attitude(hinted), hinted["fov_deg"], folder / r["name"], catalog
             )
-            check = corpus.attitude_check(R_hinted, hinted["fov_deg"], folder / r["name"], catalog)
             if corpus.check_passes(check):
                 continue
             theirs = check["reference"]
-        R = r.get("R")
-        if R is None:
-            R = attitude_from_radec_roll(r["ra_deg"], r["dec_deg"], r["roll_deg"], r["parity"] or 1)
-        check = corpus.attitude_check(np.asarray(R), r["fov_deg"], folder / r["name"], catalog)
+        check = corpus.attitude_check(answer_attitude(r), r["fov_deg"], folder / r["name"], catalog)
         if corpus.check_passes(check) and check["reference"]["n_matched"] > theirs["n_matched"]:
             r["outcome"] = "answer, confirmed" if hinted else "right, reference off"
             r["dispute"] = {"answer": check["reference"], "reference": theirs}

@@ -76,6 +76,7 @@ from starnav.detect.background import (
 )
 from starnav.detect.hot import clean_hot_pixels
 from starnav.detect.photometry import (
+    LocalPhotometry,
     elongated,
     local_photometry,
     misshapen,
@@ -337,11 +338,8 @@ def _measured(
     ``near_top``: whether each source's peak comes near the image's maximum."""
     x, y = _centroids(data, objects, sigma, mask)
     phot = local_photometry(data, mask, x, y, sigma)
-    # the noise of the surroundings where it is clearly above the image's (a tree line, a
-    # roof edge, foliage, a bright sky), else the image's (so that uniform skies rank by flux)
-    noise = np.fmax(background.rms, phot.noise / _LOCAL_NOISE_MARGIN)
+    noise, snr = _judged(phot, background, sigma)
     flux = phot.flux
-    snr = flux / (noise * math.sqrt(4.0 * math.pi) * sigma)
     peak_snr = phot.peak / noise
     shaped = ~misshapen(objects, sigma, peak_snr)
     foreground = phot.in_foreground(correlation)
@@ -356,9 +354,8 @@ def _measured(
     wide = np.flatnonzero(wide & (size > _WIDE_SIGMAS * sigma))
     if len(wide):
         whole = own_scale_photometry(data, mask, x[wide], y[wide], size[wide])
-        whole_noise = np.fmax(background.rms, whole.noise / _LOCAL_NOISE_MARGIN)
         # ranked as bright as a star of the PSF with that flux
-        whole_snr = whole.flux / (whole_noise * math.sqrt(4.0 * math.pi) * sigma)
+        whole_noise, whole_snr = _judged(whole, background, sigma)
         ok = ~whole.extended(whole_noise) & ~whole.in_foreground(correlation)
         ok &= whole_snr >= threshold_sigma
         wide = wide[ok]
@@ -375,6 +372,17 @@ def _measured(
     b = np.maximum(objects["b"][order], 1e-3)
     elongation = float(np.median(objects["a"][order] / b)) if len(order) else 1.0
     return measured, int(len(objects) - len(keep)), elongation
+
+
+def _judged(
+    phot: LocalPhotometry, background: Background, sigma: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """(the noise each source is judged by, its SNR): the noise of its surroundings where it
+    is clearly above the image's (a tree line, a roof edge, foliage, a bright sky), else the
+    image's (so that uniform skies rank by flux); the SNR of its local flux as if in a
+    Gaussian PSF of ``sigma`` px."""
+    noise = np.fmax(background.rms, phot.noise / _LOCAL_NOISE_MARGIN)
+    return noise, phot.flux / (noise * math.sqrt(4.0 * math.pi) * sigma)
 
 
 def _sample(data: np.ndarray, mask: np.ndarray | None) -> np.ndarray:
