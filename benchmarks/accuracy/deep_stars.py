@@ -88,9 +88,22 @@ def merge_unresolved(frame: SimulatedFrame) -> SimulatedFrame:
     )
 
 
-def scenes(n: int, seed: int, deep, camera) -> list[tuple[str, SimulatedFrame, int]]:
+def scenes(
+    n: int,
+    seed: int,
+    deep,
+    camera,
+    *,
+    noise_px: float = NOISE_PX,
+    false_stars: int = FALSE_STARS,
+    missing_frac: float = MISSING,
+    mag_noise: float = 0.0,
+) -> list[tuple[str, SimulatedFrame, int]]:
     """``n`` scenes (kind, frame, points merged into unresolved doubles): a fifth on
-    resolved close pairs, a fifth on unresolved ones, the rest uniform on the sky."""
+    resolved close pairs, a fifth on unresolved ones, the rest uniform on the sky; the
+    stars to ``SCENE_MAG`` with ``noise_px`` centroid noise, ``false_stars``, a
+    ``missing_frac`` of the stars dropped and ``mag_noise`` (mag, 1 sigma) on the
+    brightness."""
     rng = np.random.default_rng(seed)
     seen = deep.brighter_than(SCENE_MAG)
     resolved = close_pairs(seen, camera, 1.0, 2.0)
@@ -110,9 +123,10 @@ def scenes(n: int, seed: int, deep, camera) -> list[tuple[str, SimulatedFrame, i
             seen,
             camera,
             R_cam_from_icrs=R,
-            noise_px=NOISE_PX,
-            false_stars=FALSE_STARS,
-            missing_frac=MISSING,
+            noise_px=noise_px,
+            false_stars=false_stars,
+            missing_frac=missing_frac,
+            mag_noise=mag_noise,
             seed=rng,
         )
         merged = merge_unresolved(frame)
@@ -131,12 +145,14 @@ def swapped_pairs(ids: np.ndarray, true: np.ndarray) -> int:
     )  # fmt: skip
 
 
-def score(ids: np.ndarray, frame: SimulatedFrame, deep, camera) -> tuple[int, int, int, int]:
+def score(
+    ids: np.ndarray, frame: SimulatedFrame, deep, camera, noise_px: float = NOISE_PX
+) -> tuple[int, int, int, int]:
     """(correct, wrong, forgiven, true stars) of one scene's ids."""
     true = frame.true_id
     t = int(np.sum(true != FALSE_STAR_ID))
     c = int(np.sum((ids != -1) & (ids == true)))
-    w = _wrong_ids(ids, true, deep, camera, NOISE_PX)
+    w = _wrong_ids(ids, true, deep, camera, noise_px)
     forgiven = int(np.sum((ids != -1) & (ids != true))) - w
     return c, w, forgiven, t
 

@@ -12,7 +12,9 @@ from starnav.camera import Camera
 from starnav.catalog import Catalog, load_catalog
 from starnav.errors import StarnavError
 from starnav.geometry import attitude_from_radec_roll, unit_to_radec
-from starnav.pipeline.deep import deep_match, match_probability
+from starnav.pipeline.deep import DEEP_OFF, deep_match, match_probability
+from starnav.pipeline.fov import known_field_depth
+from starnav.pipeline.options import SolveOptions
 from starnav.results import Solution, StarTable
 from starnav.simulate import FALSE_STAR_ID, simulate_frame
 from starnav.starlist import StarList
@@ -54,7 +56,7 @@ def _solve(frame, deep_mag_limit):
 
 @pytest.mark.slow
 def test_deep_stage_identifies_stars_fainter_than_the_bright_catalog(frame):
-    bright = _solve(frame, None).solution
+    bright = _solve(frame, "off").solution
     deep = _solve(frame, DEEP_MAG).solution
     true_id = frame.true_id
     real = true_id != FALSE_STAR_ID
@@ -234,3 +236,81 @@ def test_cli_solve_takes_deep_mag_limit(capsys, tmp_path):
     code, out, err = run_cli(capsys, "solve", str(image), "--deep-mag-limit", "abc")
     assert code == 2 and out == "" and len(err.strip().splitlines()) == 1
     assert "--deep-mag-limit" in err
+
+
+# ---------------------------------------------------------------------------------------------
+# the depths a known field gets by default (``pipeline.fov.known_field_depth``)
+
+
+@pytest.mark.parametrize(
+    ("fov_deg", "width", "height", "expected"),
+    [
+        (6.1, 1392, 1040, (8.5, DEEP_MAG)),  # a Kelvins-format star tracker
+        (6.0, 1024, 1024, (8.25, DEEP_MAG)),
+        (8.0, 1024, 1024, (7.5, None)),  # 1 point in 110 would land on a chance Hp 12 star
+        (12.0, 512, 512, (6.75, None)),
+        (20.0, 1024, 1024, (6.0, None)),
+        (60.0, 1024, 1024, (6.0, None)),  # wide fields keep Hp 6
+    ],
+)
+def test_known_field_depth_follows_the_field(fov_deg, width, height, expected):
+    camera = Camera.from_fov(fov_deg, width, height)
+    assert known_field_depth(camera, SolveOptions(fov_deg=fov_deg)) == expected
+
+
+def test_known_field_depth_keeps_what_it_is_told():
+    camera = Camera.from_fov(6.1, 1392, 1040)
+    told = SolveOptions(fov_deg=6.1, mag_limit=7.0, deep_mag_limit=DEEP_OFF)
+    assert known_field_depth(camera, told) == (7.0, DEEP_OFF)
+    catalog = load_catalog(None, mag_limit=6.0)
+    assert known_field_depth(camera, SolveOptions(fov_deg=6.1, catalog=catalog)) == (None, None)
+    # a coarser centroid told: a wider match circle, no deep stage by default
+    assert known_field_depth(camera, SolveOptions(fov_deg=6.1, sigma_px=3.0))[1] is None
+
+
+@pytest.fixture(scope="module")
+def tracker_frame():
+    """A Kelvins-format frame: 1392 x 1040 px, 6.1°, the stars to Hp 10.3, 0.3 px and
+    0.3 mag noise, 3 false stars, 10 % missing."""
+    return simulate_frame(
+        load_catalog(None, mag_limit=10.3),
+        Camera.from_fov(6.1, 1392, 1040),
+        R_cam_from_icrs=attitude_from_radec_roll(210.0, 40.0, 75.0, 1),  # far from the plane
+        noise_px=0.3,
+        mag_noise=0.3,
+        false_stars=3,
+        missing_frac=0.1,
+        seed=35,
+    )
+
+
+def test_a_6_degree_tracker_is_solved_at_default_options(tracker_frame):
+    """Given only the field, the catalog depths follow it; told the old defaults (Hp 6, no
+    deep stage) the same frame holds too few catalog stars to be solved."""
+    f = tracker_frame
+    s = api.solve_stars(f.xy, width=1392, height=1040, fov_deg=6.1, brightness=f.brightness)
+    assert s.solution is not None, s.reason
+    table = s.solution.star_table
+    assert table.deep
+    real = f.true_id != FALSE_STAR_ID
+    assert np.mean(table.catalog_id[real] == f.true_id[real]) > 0.97
+    assert not np.any(table.catalog_id[~real] != -1)  # no false star named
+    right = table.catalog_id[real] == f.true_id[real]
+    assert np.all(table.match_probability[real][right] > 0.5)
+    old = api.solve_stars(
+        f.xy, width=1392, height=1040, fov_deg=6.1, brightness=f.brightness,
+        mag_limit=6.0, deep_mag_limit="off",
+    )  # fmt: skip
+    assert old.solution is None
+
+
+def test_cli_deep_mag_limit_off(capsys, tmp_path, tracker_frame):
+    path = tmp_path / "stars.csv"
+    path.write_text("x,y\n" + "".join(f"{x:.3f},{y:.3f}\n" for x, y in tracker_frame.xy))
+    base = ["identify", str(path), "--fov-deg", "6.1", "--width", "1392", "--height", "1040"]
+    code, out, err = run_cli(capsys, *base, "--json")
+    assert code == 0, err
+    assert all("match_probability" in s for s in json.loads(out)["stars"])
+    code, out, err = run_cli(capsys, *base, "--deep-mag-limit", "OFF", "--json")
+    assert code in (0, 1), err
+    assert not any("match_probability" in s for s in json.loads(out)["stars"])

@@ -13,6 +13,7 @@ from starnav.catalog import DEFAULT_MAG_LIMIT
 from starnav.errors import StarnavError
 from starnav.identify import ALGORITHMS, DEFAULT_ALGORITHM
 from starnav.identify.options import check_algorithm_options
+from starnav.pipeline.deep import DEEP_OFF
 from starnav.runtime.budget import DEFAULTS
 
 EXIT_OK, EXIT_NOT_SOLVED, EXIT_BAD_INPUT = 0, 1, 2
@@ -146,8 +147,8 @@ def add_catalog(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--mag-limit",
         type=finite,
-        help=f"faintest catalog magnitude used (default {DEFAULT_MAG_LIMIT:g} for Hipparcos, "
-        "all stars for a CSV)",
+        help=f"faintest catalog magnitude used (Hipparcos: default {DEFAULT_MAG_LIMIT:g}, deeper "
+        "when a known field's identification needs it; a CSV: all its stars)",
     )
     p.add_argument("--epoch", type=finite, help="year of Hipparcos proper motion (default: now)")
 
@@ -156,12 +157,18 @@ def add_deep_mag_limit(p: argparse.ArgumentParser) -> None:
     """--deep-mag-limit (the deep stage, ``starnav.pipeline.deep``)."""
     p.add_argument(
         "--deep-mag-limit",
-        type=finite,
+        type=_deep_mag,
         metavar="MAG",
-        help="after the fit, match every star to the catalog down to this magnitude (e.g. 12 "
-        "for a 6° star tracker): ids of faint stars, each with its match probability and a "
-        "flag for unresolved doubles (default: off)",
+        help="after the fit, match every star to the catalog down to this magnitude: ids of "
+        "faint stars, each with its match probability and a flag for unresolved doubles; "
+        "'off': never (default: Hp 12 for a known field of the embedded Hipparcos with pixels "
+        "fine enough, as a 6° star tracker's; else off)",
     )
+
+
+def _deep_mag(text: str) -> float | str:
+    """Argument type of --deep-mag-limit: a finite number or ``DEEP_OFF``."""
+    return DEEP_OFF if text.strip().lower() == DEEP_OFF else finite(text)
 
 
 def add_algorithm(p: argparse.ArgumentParser) -> None:

@@ -75,15 +75,23 @@ _NO_PAIR = 1e12  # cost of a point and a star that are not within the match circ
 
 
 MAX_DEEP_MAG = 16.0  # deep_mag_limit is a magnitude up to this (Hipparcos ends near Hp 14)
+# the depth of the deep stage a narrow known field of the embedded Hipparcos runs by default
+# (``pipeline.fov.known_field_depth``; docs/deep_stars.md), and the value that turns it off
+DEEP_MAG_LIMIT = 12.0
+DEEP_OFF = "off"
+DEEP_CHANCE = 0.005  # ... where a match circle holds a chance deep star for fewer points
 
 
 def deep_catalog(
-    catalog: Catalog | str | Path | None, deep_mag_limit: float | None, epoch_year: float | None
+    catalog: Catalog | str | Path | None,
+    deep_mag_limit: float | str | None,
+    epoch_year: float | None,
 ) -> Catalog | None:
     """The deep stage's catalog: ``catalog`` (a ``Catalog``, a CSV path or None for the
     embedded Hipparcos, as ``load_catalog``) to ``deep_mag_limit``, at ``epoch_year``; None
-    when ``deep_mag_limit`` is None (no deep stage). A one-line error for a bad limit."""
-    if deep_mag_limit is None:
+    when ``deep_mag_limit`` is None or ``DEEP_OFF`` (no deep stage). A one-line error for a
+    bad limit."""
+    if deep_mag_limit is None or deep_mag_limit == DEEP_OFF:
         return None
     m = deep_mag_limit
     if isinstance(m, bool) or not isinstance(m, int | float) or not -2.0 <= m <= MAX_DEEP_MAG:

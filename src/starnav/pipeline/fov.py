@@ -9,6 +9,7 @@ sqrt(2)^k, so every range and image shape shares the same cached tables.
 
 from __future__ import annotations
 
+import functools
 import math
 import time
 from collections.abc import Iterator
@@ -18,13 +19,14 @@ from pathlib import Path
 import numpy as np
 
 from starnav.camera import Camera, CameraModel, Fisheye, focal_px_from_fov, model_class
-from starnav.catalog import Catalog, load_catalog
+from starnav.catalog import DEFAULT_MAG_LIMIT, Catalog, hipparcos_mags, load_catalog
 from starnav.errors import CatalogError, StarnavError, shown
 from starnav.geometry import radec_to_unit
-from starnav.identify.base import MatchSettings
+from starnav.identify.base import SEARCH_SIGMA_PX, MatchSettings
 from starnav.identify.database import catalog_only
 from starnav.identify.pattern4 import FIELD_RADIUS_FRACTION, build_pattern_table
 from starnav.pipeline.conclude import elapsed_ms
+from starnav.pipeline.deep import DEEP_CHANCE, DEEP_MAG_LIMIT, MATCH_SIGMAS
 from starnav.pipeline.fov_search import BAND_FACTOR, Band, search_fov
 from starnav.pipeline.options import SolveOptions
 from starnav.pipeline.solver import Candidate, Solver, SolveSettings, first_use, fit_first
@@ -93,15 +95,52 @@ def horizontal_fov_deg(diagonal_deg: float, width: int, height: int) -> float:
     )
 
 
+def _sky_stars_needed(diagonal_deg: float) -> int:
+    """Stars on the whole sky for ``_STARS_PER_FIELD`` on average in a pattern field of a
+    ``diagonal_deg`` diagonal FOV."""
+    radius = FIELD_RADIUS_FRACTION * math.radians(diagonal_deg) / 2.0
+    return int(_STARS_PER_FIELD * 2.0 / (1.0 - math.cos(radius)))  # 4 pi / field solid angle
+
+
 def band_mag_limit(diagonal_deg: float, sorted_mags: np.ndarray) -> float:
     """Magnitude limit of a band's catalog: about ``_STARS_PER_FIELD`` stars on average in
     a pattern field of the band's widest diagonal FOV, counted in the catalog's own sorted
     magnitudes (rounded up to 0.25 mag, at most ``_MAX_MAG``, 8.5; the whole catalog when it
     is sparser)."""
-    radius = FIELD_RADIUS_FRACTION * math.radians(diagonal_deg) / 2.0
-    needed = _STARS_PER_FIELD * 2.0 / (1.0 - math.cos(radius))  # 4 pi / field solid angle
-    mag = sorted_mags[min(int(needed), len(sorted_mags) - 1)]
+    mag = sorted_mags[min(_sky_stars_needed(diagonal_deg), len(sorted_mags) - 1)]
     return float(min(math.ceil(mag * 4.0) / 4.0, _MAX_MAG))
+
+
+@functools.lru_cache(maxsize=64)
+def _hipparcos_depth(diagonal_deg: float, circle_rad: float) -> tuple[float, float | None]:
+    mags = hipparcos_mags()
+    mag_limit = band_mag_limit(diagonal_deg, mags[: np.searchsorted(mags, _MAX_MAG, "right")])
+    deep_density = np.searchsorted(mags, DEEP_MAG_LIMIT, "right") / (4.0 * math.pi)  # per sr
+    chance = deep_density * 2.0 * math.pi * (1.0 - math.cos(circle_rad))
+    return max(DEFAULT_MAG_LIMIT, mag_limit), DEEP_MAG_LIMIT if chance < DEEP_CHANCE else None
+
+
+def known_field_depth(
+    camera: CameraModel, options: SolveOptions
+) -> tuple[float | None, float | str | None]:
+    """The catalog depths of a solve through a known ``camera``: (the identification
+    catalog's magnitude limit, the deep stage's). Each as ``options`` gives it; unset, for
+    the embedded Hipparcos, they follow the field: the identification as deep as the FOV
+    search's band of the camera's diagonal (``band_mag_limit``), never shallower than
+    ``DEFAULT_MAG_LIMIT`` (Hp 6: wide fields keep it), and the deep stage
+    (``pipeline.deep``) to ``DEEP_MAG_LIMIT`` where its match circle (``MATCH_SIGMAS`` of
+    the told centroid sigma, else of ``SEARCH_SIGMA_PX``, 1 px) holds a chance catalog star
+    for fewer than ``DEEP_CHANCE`` of the points: fine pixels, as a 6° star tracker's (the
+    camera sees stars the identification catalog cannot hold, and a false star rarely lands
+    on one). A CSV or ``Catalog`` is used whole, with no deep stage unless told."""
+    mag_limit, deep = options.mag_limit, options.deep_mag_limit
+    if options.catalog is None or str(options.catalog).lower() == "hipparcos":
+        sigma_px = SEARCH_SIGMA_PX if options.sigma_px is None else options.sigma_px
+        circle_rad = MATCH_SIGMAS * sigma_px / camera.scale_px_per_rad
+        field_mag, field_deep = _hipparcos_depth(round(camera.diagonal_deg, 6), circle_rad)
+        mag_limit = field_mag if mag_limit is None else mag_limit
+        deep = field_deep if deep is None else deep
+    return mag_limit, deep
 
 
 def band_stars_per_field(diagonal_deg: float) -> int:

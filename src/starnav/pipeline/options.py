@@ -51,7 +51,12 @@ class SolveOptions:
     The catalog: ``catalog`` (a ``Catalog``, a CSV path, or None for the embedded
     Hipparcos), ``mag_limit`` (None: the field's default), ``epoch_year`` (proper motion;
     None: now), ``deep_mag_limit`` (match every point to the catalog down to this magnitude
-    after the fit, with a per-star ``match_probability``; None: no deep stage).
+    after the fit, with a per-star ``match_probability``; None: the field's default, ``"off"``:
+    none). The field's defaults, for the embedded Hipparcos through a known camera
+    (``pipeline.fov.known_field_depth``): identification as deep as the FOV search's band of
+    that field, at least Hp 6, and a deep stage to Hp 12 where the pixels are fine enough
+    that a false star rarely lands on a catalog star (a 6° star tracker's); a searched field
+    identifies on its bands' catalogs and runs no deep stage unless told.
 
     The identification: ``algorithm`` (``starnav.identify.ALGORITHMS``) and its
     ``algorithm_options``; ``sigma_px`` (1-sigma centroid error, px; None: not known, the
@@ -80,7 +85,7 @@ class SolveOptions:
     catalog: Catalog | str | Path | None = field(default=None, repr=False)
     mag_limit: float | None = None
     epoch_year: float | None = None
-    deep_mag_limit: float | None = None
+    deep_mag_limit: float | str | None = None
     algorithm: str = DEFAULT_ALGORITHM
     algorithm_options: tuple[tuple[str, Any], ...] = ()
     sigma_px: float | None = None

@@ -76,9 +76,16 @@ class SolveSettings:
         )
 
     @classmethod
-    def from_options(cls, options: SolveOptions, *, fit_focal: bool | None = None) -> SolveSettings:
-        """The settings of ``options`` (``fit_focal`` overriding the option's), with the deep
-        stage's catalog loaded."""
+    def from_options(
+        cls,
+        options: SolveOptions,
+        *,
+        fit_focal: bool | None = None,
+        deep_mag_limit: float | str | None = None,
+    ) -> SolveSettings:
+        """The settings of ``options`` (``fit_focal`` and ``deep_mag_limit`` overriding the
+        options'), with the deep stage's catalog loaded."""
+        deep = options.deep_mag_limit if deep_mag_limit is None else deep_mag_limit
         return cls(
             sigma_px=options.sigma_px,
             parity=options.parity,
@@ -86,7 +93,7 @@ class SolveSettings:
             fit_distortion=options.fit_distortion,
             max_false_match_probability=options.max_false_match_probability,
             min_matched_fraction=options.min_matched_fraction,
-            deep_catalog=deep_catalog(options.catalog, options.deep_mag_limit, options.epoch_year),
+            deep_catalog=deep_catalog(options.catalog, deep, options.epoch_year),
         )
 
     @property

@@ -14,7 +14,7 @@ from starnav.camera import CameraModel, model_class
 from starnav.catalog import load_catalog
 from starnav.errors import CameraError, StarnavError
 from starnav.identify import DEFAULT_ALGORITHM
-from starnav.pipeline.fov import solve_unknown_field
+from starnav.pipeline.fov import known_field_depth, solve_unknown_field
 from starnav.pipeline.options import SolveOptions
 from starnav.pipeline.solver import Solver, SolveSettings, check_prior
 from starnav.results import Solution, SolveResult
@@ -66,10 +66,9 @@ def prepare_solver(
         camera=options.camera,
         lens=options.lens,
     )
-    settings = SolveSettings.from_options(options)
-    catalog = load_catalog(
-        options.catalog, mag_limit=options.mag_limit, epoch_year=options.epoch_year
-    )
+    mag_limit, deep_mag_limit = known_field_depth(camera, options)
+    settings = SolveSettings.from_options(options, deep_mag_limit=deep_mag_limit)
+    catalog = load_catalog(options.catalog, mag_limit=mag_limit, epoch_year=options.epoch_year)
     key = (
         camera,
         catalog.fingerprint,
