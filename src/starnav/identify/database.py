@@ -2,8 +2,8 @@
 
 Built once per (catalog, largest angle) and cached on disk as ``.npz`` under
 ``$STARNAV_CACHE_DIR`` (default ``~/.cache/starnav``), keyed by a hash of the catalog content,
-the angle and the format version. The catalog's KD-tree (for cone searches) is rebuilt on
-load: it takes a few milliseconds.
+the angle and the format version. The catalog's KD-tree (the cone searches of the algorithms
+that use one) is built on first use: a few milliseconds, and scipy.spatial loaded only then.
 """
 
 from __future__ import annotations
@@ -11,18 +11,19 @@ from __future__ import annotations
 import functools
 import hashlib
 import math
-import os
-import tempfile
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from starnav.catalog import Catalog
 from starnav.geometry import angle_between, chord_from_angle
-from starnav.runtime.caching import cache_dir
+from starnav.runtime.caching import cache_dir, load_cached, save_cached
+
+if TYPE_CHECKING:
+    from scipy.spatial import cKDTree
 
 _FORMAT_VERSION = 2
 GRID_STEP_DEG = 1.0  # cells of the RA / Dec grid the cone searches of the kernels use
@@ -46,7 +47,6 @@ class PairDatabase:
     pair_a: np.ndarray
     pair_b: np.ndarray
     pair_angle_rad: np.ndarray
-    tree: cKDTree
     build_s: float
     from_cache: bool
     path: Path | None
@@ -68,6 +68,13 @@ class PairDatabase:
         shared = np.shares_memory(self.tree.data, self.catalog.vectors)
         data = 0 if shared else self.tree.data.nbytes
         return int(self.catalog.vectors.nbytes + data + self.tree.indices.nbytes + self.grid_nbytes)
+
+    @functools.cached_property
+    def tree(self) -> cKDTree:
+        """The KD-tree of the catalog vectors (built on first use, a few ms for 5000 stars)."""
+        from scipy.spatial import cKDTree
+
+        return cKDTree(self.catalog.vectors)
 
     @property
     def grid_nbytes(self) -> int:
@@ -186,38 +193,10 @@ def near_grid(vectors: np.ndarray, radius_rad: float) -> tuple:
 
 
 def catalog_only(catalog: Catalog, max_angle_rad: float) -> PairDatabase:
-    """A database without pairs, for searches that only verify (catalog vectors and their
+    """A database without pairs, for searches that only verify (the catalog and its
     KD-tree; ``max_angle_rad`` still bounds the field)."""
-    t0 = time.perf_counter()
-    tree = cKDTree(catalog.vectors)
     none = np.empty(0, dtype=np.int32)
-    return PairDatabase(
-        catalog, max_angle_rad, none, none, np.empty(0), tree, time.perf_counter() - t0, False, None
-    )
-
-
-def load_cached(path: Path) -> dict[str, np.ndarray] | None:
-    """The arrays of a cached table, or None when it is missing or damaged (then rebuilt)."""
-    if not path.exists():
-        return None
-    try:
-        with np.load(path) as data:
-            return {name: data[name] for name in data.files}
-    except (OSError, KeyError, ValueError):
-        return None
-
-
-def save_cached(path: Path, **arrays) -> Path | None:
-    """Write a table's arrays to ``path`` (written then renamed, so a concurrent reader never
-    sees half a file); None when it cannot be written (a read-only home still works)."""
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        with tempfile.NamedTemporaryFile(dir=path.parent, suffix=".npz", delete=False) as fh:
-            np.savez(fh, **arrays)
-        os.replace(fh.name, path)
-        return path
-    except OSError:
-        return None
+    return PairDatabase(catalog, max_angle_rad, none, none, np.empty(0), 0.0, False, None)
 
 
 def database_angle_deg(max_angle_deg: float) -> float:
@@ -227,9 +206,10 @@ def database_angle_deg(max_angle_deg: float) -> float:
 
 def build_pairs(vectors: np.ndarray, max_angle_rad: float):
     """Pairs (a, b) of the unit ``vectors`` closer than ``max_angle_rad``, sorted by angle,
-    their angles (radians) and the KD-tree of the vectors."""
-    tree = cKDTree(vectors)
-    pairs = tree.query_pairs(chord_from_angle(max_angle_rad), output_type="ndarray")
+    and their angles (radians)."""
+    from scipy.spatial import cKDTree
+
+    pairs = cKDTree(vectors).query_pairs(chord_from_angle(max_angle_rad), output_type="ndarray")
     angles = angle_between(vectors[pairs[:, 0]], vectors[pairs[:, 1]])
     order = np.argsort(angles, kind="stable")
     # 16-bit indices when they fit: half the memory, and numpy radix-sorts them
@@ -238,14 +218,13 @@ def build_pairs(vectors: np.ndarray, max_angle_rad: float):
         pairs[order, 0].astype(index_type),
         pairs[order, 1].astype(index_type),
         angles[order],
-        tree,
     )
 
 
 def brightest_pairs(catalog: Catalog, max_angle_rad: float, n_stars: int):
     """``build_pairs`` among the brightest ``n_stars`` of ``catalog``, as catalog rows."""
     rows = np.sort(np.argsort(catalog.mag, kind="stable")[:n_stars])
-    a, b, ang, _ = build_pairs(catalog.vectors[rows], max_angle_rad)
+    a, b, ang = build_pairs(catalog.vectors[rows], max_angle_rad)
     index_type = a.dtype if len(catalog) <= np.iinfo(np.uint16).max else np.int32
     return rows[a].astype(index_type), rows[b].astype(index_type), ang  # rows ascending: a < b
 
@@ -278,7 +257,6 @@ def build_database(
             data["a"],
             data["b"],
             data["angle"],
-            cKDTree(catalog.vectors),
             float(data["build_s"]),
             True,
             path,
@@ -287,9 +265,8 @@ def build_database(
     t0 = time.perf_counter()
     if subset:
         a, b, ang = brightest_pairs(catalog, max_angle_rad, n_pair)
-        tree = cKDTree(catalog.vectors)
     else:
-        a, b, ang, tree = build_pairs(catalog.vectors, max_angle_rad)
+        a, b, ang = build_pairs(catalog.vectors, max_angle_rad)
     build_s = time.perf_counter() - t0
     saved = save_cached(path, a=a, b=b, angle=ang, build_s=build_s) if use_cache else None
-    return PairDatabase(catalog, max_angle_rad, a, b, ang, tree, build_s, False, saved, n_pair)
+    return PairDatabase(catalog, max_angle_rad, a, b, ang, build_s, False, saved, n_pair)

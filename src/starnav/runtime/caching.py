@@ -1,7 +1,7 @@
-"""Where starnav keeps what it computes once: the pair and pattern tables, and the machine code
-of its numba kernels.
+"""Where starnav keeps what it computes once: the pair and pattern tables, the columns of the
+embedded Hipparcos catalog it reads, and the machine code of its numba kernels.
 
-Both live under ``$STARNAV_CACHE_DIR`` (default ``~/.cache/starnav``). The machine code goes to
+They live under ``$STARNAV_CACHE_DIR`` (default ``~/.cache/starnav``). The machine code goes to
 ``numba/kernels-<hash>`` there (or under ``$NUMBA_CACHE_DIR`` when that is set), the hash taken
 over the sources of every kernel module together: numba invalidates a cached function when its
 own file changes, not when a function it calls in another file does (``pipeline.kernels``
@@ -14,8 +14,11 @@ from __future__ import annotations
 import functools
 import hashlib
 import os
+import tempfile
 from collections.abc import Callable
 from pathlib import Path
+
+import numpy as np
 
 PACKAGE = Path(__file__).resolve().parents[1]
 # every module with numba kernels (tests/runtime/test_caching.py checks the list against the
@@ -24,6 +27,7 @@ KERNEL_SOURCES = (
     "attitude/kernels.py",
     "attitude/rotation.py",
     "camera/kernels.py",
+    "detect/kernels.py",
     "identify/kernels/evidence.py",
     "identify/kernels/hypothesis.py",
     "identify/kernels/pairing.py",
@@ -38,6 +42,30 @@ def cache_dir() -> Path:
     """Directory of starnav's caches (``$STARNAV_CACHE_DIR`` or ``~/.cache/starnav``)."""
     env = os.environ.get("STARNAV_CACHE_DIR")
     return Path(env) if env else Path.home() / ".cache" / "starnav"
+
+
+def load_cached(path: Path) -> dict[str, np.ndarray] | None:
+    """The arrays of a cached table, or None when it is missing or damaged (then rebuilt)."""
+    if not path.exists():
+        return None
+    try:
+        with np.load(path) as data:
+            return {name: data[name] for name in data.files}
+    except (OSError, KeyError, ValueError):
+        return None
+
+
+def save_cached(path: Path, **arrays) -> Path | None:
+    """Write a table's arrays to ``path`` (written then renamed, so a concurrent reader never
+    sees half a file); None when it cannot be written (a read-only home still works)."""
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with tempfile.NamedTemporaryFile(dir=path.parent, suffix=".npz", delete=False) as fh:
+            np.savez(fh, **arrays)
+        os.replace(fh.name, path)
+        return path
+    except OSError:
+        return None
 
 
 @functools.cache
