@@ -209,10 +209,16 @@ def _spread(R, p, free, res, J):
             N_inv[:, i] = cholesky_solve(L, unit)
     cov = s2 * N_inv
     leverage = np.empty((n, 2, 2))
-    for s in range(n):
+    for s in range(n):  # J_i N^-1 J_j^T of the star's two rows, in loops: no temporaries
         for i in range(2):
             for j in range(2):
-                leverage[s, i, j] = J[s + i * n] @ N_inv @ J[s + j * n]
+                h = 0.0
+                for a in range(n_par):
+                    t = 0.0
+                    for b in range(n_par):
+                        t += N_inv[a, b] * J[s + j * n, b]
+                    h += J[s + i * n, a] * t
+                leverage[s, i, j] = h
     sigma_b = math.sqrt(max(cov[0, 0] + cov[1, 1], 0.0)) * ARCSEC_PER_RAD
     sigma_r = math.sqrt(max(cov[2, 2], 0.0)) * ARCSEC_PER_RAD
     sigma_f = p[0] * math.sqrt(max(cov[3, 3], 0.0)) if free[0] else 0.0  # f = f0 exp(q)
@@ -262,23 +268,56 @@ def studentized(residuals, leverage, sigma_px):
 
 
 @njit(cache=True)
+def focal_system(R, icrs, xy, model, p):
+    """The linearised problem of the attitude with the focal length freed, at ``R`` and the
+    camera ``p``: residuals, Jacobian (rotation, log focal length) and the normal equations
+    ``J^T J``, ``J^T res`` (``focal_step`` solves it, whole or a star left out)."""
+    free = np.zeros(N_INTRINSIC, dtype=np.bool_)
+    free[0] = True
+    res, J = residuals_jacobian(R, icrs, xy, model, p, free)
+    return res, J, J.T @ J, J.T @ res
+
+
+@njit(cache=True)
+def focal_step(res, J, N, g, f0, sigma_px=0.0, skip=-1):
+    """(focal length px, its 1-sigma) of one Gauss-Newton step of ``focal_system`` from the
+    focal length ``f0``, star ``skip`` left out (its two rows taken off the normal
+    equations; -1: none). The 1-sigma is at the a-posteriori variance, at least
+    ``sigma_px``² (``variance_scale``; 0: no floor)."""
+    n = len(res) // 2
+    if skip >= 0:
+        N, g = N.copy(), g.copy()
+        for r in (skip, skip + n):
+            for a in range(4):
+                g[a] -= J[r, a] * res[r]
+                for b in range(4):
+                    N[a, b] -= J[r, a] * J[r, b]
+    L, definite = cholesky(N)
+    if not definite:
+        return f0, np.inf
+    step = cholesky_solve(L, -g)
+    left = 0.0  # the residuals after the step, of the stars kept
+    for r in range(2 * n):
+        if skip >= 0 and (r == skip or r == skip + n):
+            continue
+        e = res[r]
+        for a in range(4):
+            e += J[r, a] * step[a]
+        left += e * e
+    s2 = left / max(2 * n - (2 if skip >= 0 else 0) - 4, 1)
+    if sigma_px > 0:
+        s2 *= variance_scale(s2, sigma_px)
+    var = s2 / L[3, 3] ** 2  # (J^T J)^-1 [3, 3]
+    f = f0 * math.exp(step[3])
+    return f, f * math.sqrt(max(var, 0.0))
+
+
+@njit(cache=True)
 def free_focal_step(R, icrs, xy, model, p, sigma_px=0.0):
     """(focal length px, its 1-sigma) the stars fit, by one Gauss-Newton step with the focal
     length freed from the attitude ``R`` at the camera ``p`` (``R`` of a fit that held the
     focal length, or of one that freed it, as the scale test on a free fit's pairs passes).
     The 1-sigma is at the a-posteriori variance, at least ``sigma_px``² (``variance_scale``;
     0: no floor)."""
-    free = np.zeros(N_INTRINSIC, dtype=np.bool_)
-    free[0] = True
-    res, J = residuals_jacobian(R, icrs, xy, model, p, free)
-    L, definite = cholesky(J.T @ J)
-    if not definite:
-        return p[0], np.inf
-    step = cholesky_solve(L, -(J.T @ res))
-    left = res + J @ step
-    s2 = (left @ left) / max(len(res) - 4, 1)
-    if sigma_px > 0:
-        s2 *= variance_scale(s2, sigma_px)
-    var = s2 / L[3, 3] ** 2  # (J^T J)^-1 [3, 3]
-    f = p[0] * math.exp(step[3])
-    return f, f * math.sqrt(max(var, 0.0))
+    res, J, N, g = focal_system(R, icrs, xy, model, p)
+    return focal_step(res, J, N, g, p[0], sigma_px)

@@ -94,10 +94,12 @@ def refine_attitude(
 
 
 def refinement(f, camera: CameraModel) -> Refinement:
-    """The ``Refinement`` of a kernel ``Fit`` of ``camera``."""
+    """The ``Refinement`` of a kernel ``Fit`` of ``camera`` (``camera`` itself when the fit
+    kept its parameters)."""
+    kept = np.array_equal(f.params, camera.params)
     return Refinement(
         R_cam_from_icrs=f.R,
-        camera=type(camera).from_params(camera.width, camera.height, f.params),
+        camera=camera if kept else type(camera).from_params(camera.width, camera.height, f.params),
         residuals_px=f.residuals,
         rms_px=float(f.rms_px),
         sigma_boresight_arcsec=float(f.sigma_boresight_arcsec),

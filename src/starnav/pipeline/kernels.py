@@ -17,7 +17,8 @@ import numpy as np
 from starnav.attitude.kernels import (
     at_least_sigma,
     fit,
-    free_focal_step,
+    focal_step,
+    focal_system,
     studentized,
     variance_scale,
 )
@@ -132,14 +133,12 @@ def scale_off(R, icrs, xy, model, p0, sigma_px):
     few per cent off by itself, and one star across the field matched to a wrong neighbour
     where that scale puts one then holds the joint fit at the focal length given."""
     n = len(xy)
-    f_all, sigma = free_focal_step(R, icrs, xy, model, p0, sigma_px)
+    res, J, N, g = focal_system(R, icrs, xy, model, p0)
+    f_all, sigma = focal_step(res, J, N, g, p0[0], sigma_px)
     if _focal_off(f_all, sigma, p0[0]):
         return True, f_all
-    keep = np.ones(n, dtype=np.bool_)
     for left_out in range(n if n > MIN_STARS_SCALE_CHECK else 0):
-        keep[:] = True
-        keep[left_out] = False
-        f_scale, sigma = free_focal_step(R, icrs[keep], xy[keep], model, p0, sigma_px)
+        f_scale, sigma = focal_step(res, J, N, g, p0[0], sigma_px, left_out)
         if _focal_off(f_scale, sigma, p0[0]):
             return True, f_scale
     return False, f_all

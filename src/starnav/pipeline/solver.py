@@ -259,9 +259,10 @@ class Solver:
             bearings = self.camera.pixels_to_bearings(stars.xy)
             order = stars.order
             t1 = time.perf_counter()
-            settings = replace(self.match_settings, point_mag=stars.magnitudes)
+            given = {"point_mag": stars.magnitudes}
             if deadline is not None:
-                settings = replace(settings, deadline=deadline)
+                given["deadline"] = deadline
+            settings = replace(self.match_settings, **given)
             outcome, algorithm = self._identify(bearings, order, prior, prior_sigma_deg, settings)
             t2 = time.perf_counter()
             stages = {"bearings": (t1 - t0) * 1e3, "identify": (t2 - t1) * 1e3}
