@@ -104,16 +104,6 @@ def test_no_user_facing_text_names_an_issue_number():
     assert not found
 
 
-def test_importing_starnav_does_not_load_numba():
-    """numba costs ~0.2 s to import: only a solve (or a projection) that needs it loads it."""
-    import subprocess
-    import sys
-
-    code = "import sys, starnav, starnav.cli; print('numba' in sys.modules)"
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
-    assert out.stdout.strip() == "False"
-
-
 def test_test_folders_mirror_the_packages():
     folders = {p.name for p in TESTS.iterdir() if p.is_dir() and not p.name.startswith((".", "_"))}
     packages = {p.parent.name for p in SRC.glob("*/__init__.py")}

@@ -4,6 +4,10 @@
 Every solve goes through ``starnav.pipeline`` (``pipeline.stars.solve_stars`` decides once how
 a list is solved); this module takes the user's arguments and keeps the old names working,
 with a ``DeprecationWarning``, for one release.
+
+``solve_image`` and ``ImageSolveResult`` are imported from ``pipeline.image`` on first use
+(module ``__getattr__``), and ``best_three_star`` imports ``starnav.pointing`` when called: a
+star-list solve loads neither the image stack (astropy, sep, scipy.ndimage) nor scipy.optimize.
 """
 
 from __future__ import annotations
@@ -11,7 +15,7 @@ from __future__ import annotations
 import warnings
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -19,7 +23,6 @@ from starnav.catalog import Catalog, load_catalog
 from starnav.errors import StarnavError
 from starnav.pipeline import stars as _stars
 from starnav.pipeline.batch import solve_frames
-from starnav.pipeline.image import ImageSolveResult, solve_image
 from starnav.pipeline.options import (
     DEFAULT_FOV_RANGE_DEG,
     DEFAULT_MAX_FALSE_MATCH_PROBABILITY,
@@ -29,9 +32,12 @@ from starnav.pipeline.options import (
 )
 from starnav.pipeline.solver import Solver, get_database
 from starnav.pipeline.stars import make_camera
-from starnav.pointing import Pointing, best_triple, three_star
 from starnav.results import FrameResult, Solution, SolveResult, StarMatch
 from starnav.starlist import StarList
+
+if TYPE_CHECKING:
+    from starnav.pipeline.image import ImageSolveResult, solve_image
+    from starnav.pointing import Pointing
 
 __all__ = [
     "DEFAULT_MAX_FALSE_MATCH_PROBABILITY",
@@ -55,6 +61,18 @@ __all__ = [
     "solve_stars_batch",
     "solve_verbose",
 ]
+
+_IMAGE_NAMES = ("ImageSolveResult", "solve_image")  # from starnav.pipeline.image, on first use
+
+
+def __getattr__(name: str):
+    if name not in _IMAGE_NAMES:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    from starnav.pipeline import image
+
+    value = getattr(image, name)
+    globals()[name] = value  # the next lookup is a plain attribute
+    return value
 
 
 def solve_stars(
@@ -230,6 +248,8 @@ def best_three_star(
     reported 1-sigma. Returns the ``Pointing`` and the labels of the stars used.
     ``catalog``, ``mag_limit``, ``epoch_year``: as given to the solve that made ``solution``.
     """
+    from starnav.pointing import best_triple, three_star
+
     cat = load_catalog(catalog, mag_limit=mag_limit, epoch_year=epoch_year)
     height = width if height is None else height
     matched = [m for m in solution.stars if m.catalog_id is not None]

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -17,7 +18,9 @@ from starnav.cli.common import (
 )
 from starnav.cli.output import print_json
 from starnav.errors import PointingError, StarnavError
-from starnav.pointing import Pointing
+
+if TYPE_CHECKING:
+    from starnav.pointing import Pointing
 
 
 def add_parser(subparsers: Subparsers) -> None:

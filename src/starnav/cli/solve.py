@@ -10,6 +10,7 @@ import sys
 import time
 from dataclasses import replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from starnav.cli.common import (
     EXIT_BAD_INPUT,
@@ -27,8 +28,10 @@ from starnav.cli.common import (
 from starnav.cli.field import add_fov_search, check_fov
 from starnav.cli.output import print_json, print_solution, to_json
 from starnav.errors import StarnavError
-from starnav.pipeline.image import DEFAULT_MAX_STARS, FISHEYE_MAX_STARS, ImageSolveResult
+from starnav.pipeline.options import DEFAULT_MAX_STARS, FISHEYE_MAX_STARS
 
+if TYPE_CHECKING:
+    from starnav.pipeline.image import ImageSolveResult
 WCS_SUFFIXES = (".fits", ".fit", ".fts", ".wcs")
 
 
