@@ -95,3 +95,16 @@ def test_the_python_page_s_first_example_prints_the_line_it_shows():
         return re.sub(r"epoch [0-9]{4}", "epoch YYYY", line)
 
     assert machine_free(printed) == machine_free(quoted)
+
+
+def test_the_star_tracker_example_names_its_faint_stars(capsys, tmp_path, monkeypatch):
+    """The README's 6° tracker, as written: every star of the list named, to Hp 10.3."""
+    (block,) = [b for b in _blocks("") if "tracker.csv" in b]
+    monkeypatch.chdir(tmp_path)
+    codes = [main(line.split()[1:]) for line in block.strip().splitlines()]
+    out = capsys.readouterr().out
+    assert codes == [0, 0], out
+    solved = next(line for line in out.splitlines() if "stars matched" in line)
+    matched, total = map(int, solved.split()[0].split("/"))
+    assert matched == total > 40, solved
+    assert "match_probability" in out

@@ -223,7 +223,8 @@ def deep_match(solution: Solution, stars: StarList, deep: Catalog, *, sigma_px: 
     chance = stars_per_px2 + false_per_px2 + companions
     probability = match_probability(residual_px, sigma, chance)
     deep_table = StarTable(table.labels, table.xy, catalog_id, residual_px, probability, double)
-    return replace(solution, star_table=deep_table, n_matched=len(matched))
+    catalog = f"{solution.catalog}; deep stage: {deep.name}"
+    return replace(solution, star_table=deep_table, n_matched=len(matched), catalog=catalog)
 
 
 def _magnitude_model(stars: StarList, row_of: np.ndarray, deep: Catalog):
