@@ -41,20 +41,34 @@ def measure_psf_sigma(
     ``objects``, the ``peak_snr`` (peak over the local noise) of each choosing the best
     detected, those in foreground (``starnav.detect.photometry``; ``noise_correlation`` of
     the sky's noise) left out."""
-    a, b = objects["a"], objects["b"]
-    usable = np.flatnonzero((objects["npix"] >= 5) & (a <= _ROUND * b) & (b > 0))
-    if len(usable) < 3:
+    pick = psf_samples(objects, peak_snr)
+    if len(pick) < 3:
         return DEFAULT_SIGMA_PX
-    pick = usable[np.argsort(-peak_snr[usable], kind="stable")[:PSF_CANDIDATES]]
     # not sources in foreground (judged with their second moments as the PSF's size)
-    size = float(np.median(np.sqrt(a[pick] * b[pick])))
+    size = float(np.median(np.sqrt(objects["a"][pick] * objects["b"][pick])))
     phot = local_photometry(data, mask, objects["x"][pick], objects["y"][pick], size)
     clean = ~phot.in_foreground(noise_correlation)
     if clean.sum() >= 3:
         pick = pick[clean]
-    size = np.sqrt(objects["x2"][pick] + objects["y2"][pick])
+    return psf_sigma_from(data, objects[pick], mask)
+
+
+def psf_samples(objects: np.ndarray, peak_snr: np.ndarray) -> np.ndarray:
+    """Indices of the sources (sep's fields) fit to measure the PSF on: of 5 pixels or more,
+    round (a <= 2 b), up to ``PSF_CANDIDATES`` of them by decreasing ``peak_snr``."""
+    a, b = objects["a"], objects["b"]
+    usable = np.flatnonzero((objects["npix"] >= 5) & (a <= _ROUND * b) & (b > 0))
+    return usable[np.argsort(-peak_snr[usable], kind="stable")[:PSF_CANDIDATES]]
+
+
+def psf_sigma_from(data: np.ndarray, objects: np.ndarray, mask: np.ndarray | None) -> float:
+    """PSF Gaussian sigma (px) from the modal half-light radius of ``objects`` (sep's
+    fields) in background-subtracted ``data`` (sep's ``flux_radius`` within 3 times each
+    one's second-moment size, 3..50 px); ``DEFAULT_SIGMA_PX`` from fewer than 3."""
+    size = np.sqrt(objects["x2"] + objects["y2"])
     rmax = np.clip(3.0 * size, 3.0, 50.0)
-    r_half, _ = sep.flux_radius(data, objects["x"][pick], objects["y"][pick], rmax, 0.5, mask=mask)
+    x, y = np.ascontiguousarray(objects["x"]), np.ascontiguousarray(objects["y"])
+    r_half, _ = sep.flux_radius(data, x, y, rmax, 0.5, mask=mask)
     r_half = r_half[np.isfinite(r_half) & (r_half > 0)]
     if len(r_half) < 3:
         return DEFAULT_SIGMA_PX

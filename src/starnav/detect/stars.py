@@ -46,6 +46,14 @@ one module per stage:
 docs/images.md ("How stars are found in real skies") measures this on real photographs and
 says what it still cannot do.
 
+A clean star-tracker frame (finite pixels, white noise, a smooth unclipped sky, compact
+sources, the PSF unknown: ``starnav.detect.tracker`` says what is tested) takes a fast path
+instead of steps 1-4: its background on 64 px tiles, its sources found as sep finds them, in
+numba kernels (``starnav.detect.kernels``); steps 5-7 follow with the same primitives
+(windowed centroids, flux above the annulus's plane and median, the same SNR and ranking),
+without the tests for foreground and extended sources a clean sky does not need. Any frame it
+declines is detected as above, unchanged. docs/images.md ("Detection time") times both.
+
 Limits: stars closer than ~4.5 px (PSF sigma 1) come out as one; a star cut by the image edge
 is pulled inwards (up to ~0.6 px when centred on the last pixel); a star whose annulus (8 PSF
 sigmas) reaches foreground is judged by it and usually dropped.
@@ -83,6 +91,7 @@ from starnav.detect.photometry import (
     own_scale_photometry,
 )
 from starnav.detect.psf import measure_psf_sigma
+from starnav.detect.tracker import TrackerSources, local_flux, tracker_sources
 from starnav.errors import ImageError, shown
 
 _DEFAULT_KERNEL = np.array([[1.0, 2.0, 1.0], [2.0, 4.0, 2.0], [1.0, 2.0, 1.0]], dtype=np.float32)
@@ -181,6 +190,12 @@ def detect_stars(
         return _empty(width, height, psf_sigma_px, float(low))
     if saturation is None:
         saturation = _infer_saturation(data, dtype, high)
+    if mask is None and psf_sigma_px is None:  # a clean star-tracker frame: the fast path
+        found = tracker_sources(
+            data, low, threshold_sigma, min_area_px, saturation, reject_hot_pixels
+        )
+        if found is not None:
+            return _tracker_detections(found, threshold_sigma, max_stars, keep_saturated)
 
     clipped = _clipped(data, mask, low)
     background = estimate_background(data, mask)
@@ -292,13 +307,25 @@ def _measured_in_batches(
     max_stars: int | None,
     correlation: float,
 ):
-    """``_measured`` on the likely stars first (saturated ones, then by the better of their
-    ranks in peak over the noise map and in sep's flux), 2 ``max_stars`` + 20 of them,
-    twice as many until ``max_stars`` are taken for stars or 4 ``max_stars`` + 30 were
-    measured (all with ``max_stars`` None)."""
+    """``_measured`` on the likely stars first (``_in_batches``)."""
     args = (sigma, background, threshold_sigma, max_stars, correlation)
+
+    def measure(pick):
+        if pick is None:
+            return _measured(data, mask, objects, saturated, near_top, *args)
+        return _measured(data, mask, objects[pick], saturated[pick], near_top[pick], *args)
+
+    return _in_batches(objects, saturated, peak_snr, max_stars, measure)
+
+
+def _in_batches(objects, saturated, peak_snr, max_stars, measure):
+    """``measure(pick)`` (the sources ``pick`` measured and ranked) on the likely stars
+    first (saturated ones, then by the better of their ranks in peak over the noise map,
+    ``peak_snr``, and in sep's flux), 2 ``max_stars`` + 20 of them, twice as many until
+    ``max_stars`` are taken for stars or 4 ``max_stars`` + 30 were measured (all, ``pick``
+    None, with ``max_stars`` None)."""
     if max_stars is None:
-        return _measured(data, mask, objects, saturated, near_top, *args)
+        return measure(None)
     # the better of two ranks: peak over the noise map, and sep's total flux (a bright
     # star's halo raises the noise map under its own peak)
     rank = np.minimum(_ranks(-peak_snr), _ranks(-objects["flux"]))
@@ -306,8 +333,7 @@ def _measured_in_batches(
     limit = min(len(order), _CANDIDATES_PER_STAR * max_stars + _CANDIDATES_EXTRA)
     n = min(limit, _FIRST_PER_STAR * max_stars + _FIRST_EXTRA)
     while True:
-        pick = order[:n]
-        measured = _measured(data, mask, objects[pick], saturated[pick], near_top[pick], *args)
+        measured = measure(order[:n])
         if len(measured[0][0]) >= max_stars or n >= limit:
             return measured
         n = min(limit, 2 * n)
@@ -343,9 +369,7 @@ def _measured(
     peak_snr = phot.peak / noise
     shaped = ~misshapen(objects, sigma, peak_snr)
     foreground = phot.in_foreground(correlation)
-    star = shaped & ~phot.extended(noise) & ~foreground
-    star &= snr >= _MIN_SNR_FRACTION * threshold_sigma
-    star |= saturated & shaped  # a saturated star's flat top and halo fill the ring
+    star = _taken(shaped, ~phot.extended(noise) & ~foreground, snr, saturated, threshold_sigma)
     # a star whose disc and halo are wider than the PSF, as the brightest are in a long
     # exposure or a stretched photograph (their cores near the image's maximum: a patch of
     # cloud or glow as wide has no such core): judged and measured whole, in its own zones
@@ -362,6 +386,37 @@ def _measured(
         flux, snr = flux.copy(), snr.copy()
         flux[wide], snr[wide] = whole.flux[ok], whole_snr[ok]
         star[wide] = True
+    return _ranked(objects, x, y, flux, snr, saturated, star, max_stars)
+
+
+def _taken(
+    shaped: np.ndarray,
+    surroundings: np.ndarray | bool,
+    snr: np.ndarray,
+    saturated: np.ndarray,
+    threshold_sigma: float,
+) -> np.ndarray:
+    """Whether each source is taken for a star: ``shaped`` as a star, its ``surroundings``
+    a star's (not extended, not in foreground) and of SNR ``_MIN_SNR_FRACTION``
+    ``threshold_sigma`` or more; or saturated and ``shaped`` (a saturated star's flat top and
+    halo fill the ring)."""
+    star = shaped & surroundings & (snr >= _MIN_SNR_FRACTION * threshold_sigma)
+    return star | (saturated & shaped)
+
+
+def _ranked(
+    objects: np.ndarray,
+    x: np.ndarray,
+    y: np.ndarray,
+    flux: np.ndarray,
+    snr: np.ndarray,
+    saturated: np.ndarray,
+    star: np.ndarray,
+    max_stars: int | None,
+) -> tuple[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray], int, float]:
+    """``_measured``'s answer from the sources' centroids (sep's convention), flux, SNR,
+    saturation and whether each is taken for a star: saturated first (by flux), then by
+    SNR, the first ``max_stars`` (None: all)."""
     keep = np.flatnonzero(star)
     order = keep[np.lexsort((-np.where(saturated, flux, snr)[keep], ~saturated[keep]))]
     if max_stars is not None:
@@ -374,6 +429,51 @@ def _measured(
     return measured, int(len(objects) - len(keep)), elongation
 
 
+def _tracker_detections(
+    found: TrackerSources,
+    threshold_sigma: float,
+    max_stars: int | None,
+    keep_saturated: bool,
+) -> Detections:
+    """The stars of a clean star-tracker frame's sources (``starnav.detect.tracker``):
+    windowed centroids, each source's flux against its annulus, taken for a star when not
+    misshapen (a saturated one too) and, unsaturated, of SNR half ``threshold_sigma`` or
+    more; ranked as ``_measured`` ranks."""
+    objects, data, rms, sigma = found.objects, found.data, found.rms, found.psf_sigma_px
+    height, width = data.shape
+    saturated = found.saturated
+    n_saturated = int(saturated.sum())
+    if not keep_saturated:
+        objects, saturated = objects[~saturated], saturated[~saturated]
+    if len(objects) == 0:
+        return _empty(width, height, sigma, found.level, rms, found.n_hot, n_saturated)
+    peak_snr = objects["peak"] / rms
+
+    def measure(pick):
+        part = objects if pick is None else objects[pick]
+        sat = saturated if pick is None else saturated[pick]
+        x, y = _centroids(data, part, sigma, None)
+        flux, local_noise = local_flux(found, x, y, sigma)
+        _, snr = _snr(flux, local_noise, rms, sigma)
+        shaped = ~misshapen(part, sigma, part["peak"] / rms)
+        star = _taken(shaped, True, snr, sat, threshold_sigma)
+        return _ranked(part, x, y, flux, snr, sat, star, max_stars)
+
+    stars, n_rejected, elongation = _in_batches(objects, saturated, peak_snr, max_stars, measure)
+    return Detections(
+        *stars,
+        found.level,
+        rms,
+        sigma,
+        n_saturated,
+        found.n_hot,
+        width,
+        height,
+        n_rejected,
+        elongation,
+    )
+
+
 def _judged(
     phot: LocalPhotometry, background: Background, sigma: float
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -381,8 +481,17 @@ def _judged(
     is clearly above the image's (a tree line, a roof edge, foliage, a bright sky), else the
     image's (so that uniform skies rank by flux); the SNR of its local flux as if in a
     Gaussian PSF of ``sigma`` px."""
-    noise = np.fmax(background.rms, phot.noise / _LOCAL_NOISE_MARGIN)
-    return noise, phot.flux / (noise * math.sqrt(4.0 * math.pi) * sigma)
+    return _snr(phot.flux, phot.noise, background.rms, sigma)
+
+
+def _snr(
+    flux: np.ndarray, local_noise: np.ndarray, rms: float, sigma: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """(the noise each source is judged by: its surroundings' ``local_noise`` where clearly
+    above the image's ``rms``, else that; the SNR of its ``flux`` as if in a Gaussian PSF of
+    ``sigma`` px)."""
+    noise = np.fmax(rms, local_noise / _LOCAL_NOISE_MARGIN)
+    return noise, flux / (noise * math.sqrt(4.0 * math.pi) * sigma)
 
 
 def _sample(data: np.ndarray, mask: np.ndarray | None) -> np.ndarray:

@@ -1,0 +1,587 @@
+"""The kernels of a clean star-tracker frame's detection (numba): its background on tiles,
+its sources (sep's 3 x 3 matched filter, a threshold, 8-connected pixels split at their
+saddles) and each source's photometry against its own annulus. ``starnav.detect.tracker``
+is their Python face; they are imported on first use (numba takes ~0.2 s to load).
+
+Pixel coordinates here are sep's: pixel centres at integers.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from starnav.runtime.caching import njit
+
+CLIPPED_GAUSSIAN_STD = 0.98664  # the std of a Gaussian clipped at 3 sigmas, in sigmas
+_MAD_TO_SIGMA = 1.4826
+_START_SAMPLES = 17  # a tile's clipping starts from the median of this many of its pixels
+# sep's deblending, as ``starnav.detect.stars`` calls it: 16 levels, contrast 0.005
+DEBLEND_LEVELS = 16
+DEBLEND_CONTRAST = 0.005
+# status of ``find_sources``
+FOUND, TOO_MANY_PIXELS, PLATEAU = 0, 1, 2
+
+
+@njit(cache=True)
+def _select(values, n, k):
+    """The k-th smallest of ``values[:n]``, reordering them in place (quickselect)."""
+    lo, hi = 0, n - 1
+    while lo < hi:
+        pivot = values[(lo + hi) // 2]
+        i, j = lo, hi
+        while i <= j:
+            while values[i] < pivot:
+                i += 1
+            while values[j] > pivot:
+                j -= 1
+            if i <= j:
+                values[i], values[j] = values[j], values[i]
+                i += 1
+                j -= 1
+        if k <= j:
+            hi = j
+        elif k >= i:
+            lo = i
+        else:
+            break
+    return values[k]
+
+
+@njit(cache=True)
+def _median(values, n):
+    """The median of ``values[:n]`` (n >= 1), reordering them in place."""
+    high = _select(values, n, n // 2)
+    if n % 2:
+        return high
+    low = values[0]
+    for i in range(1, n // 2):  # the largest of the lower half, which select left below
+        low = max(low, values[i])
+    return 0.5 * (low + high)
+
+
+@njit(cache=True)
+def _level_rms(values, dx, dy, n, scratch):
+    """(level, rms) of ``values[:n]`` at offsets (``dx``, ``dy``) from the tile's centre: a
+    plane fitted to the values within 3 sigmas of it, clipped three times from the median
+    and median absolute deviation of ``_START_SAMPLES`` of them spread over the n (the
+    clipping's sigma the std about the plane over that of a clipped Gaussian); the level is
+    the plane at the centre, the rms the median absolute deviation about it x 1.4826, as the
+    real-sky mesh has it (a gradient of vignetting or moonlight is not noise), or the std
+    where that is 0. (The median of all of them would need a selection, whose unpredictable
+    branches cost 4x the whole.) With ``dx`` and ``dy`` zeros, a constant instead of a
+    plane. ``scratch``: ``_START_SAMPLES`` values."""
+    k = min(n, _START_SAMPLES)
+    every = n // k
+    for i in range(k):
+        scratch[i] = values[i * every]
+    level = _median(scratch, k)
+    for i in range(k):
+        scratch[i] = abs(values[i * every] - level)
+    rms = _MAD_TO_SIGMA * _median(scratch, k)
+    if not rms > 0:
+        rms = values[:n].std()
+    gx, gy = 0.0, 0.0
+    for _ in range(3):
+        count, sx, sy, sxx, syy = 0.0, 0.0, 0.0, 0.0, 0.0
+        total, tx, ty, squares = 0.0, 0.0, 0.0, 0.0
+        for i in range(n):
+            d = values[i] - level - gx * dx[i] - gy * dy[i]
+            kept = 1.0 if abs(d) <= 3.0 * rms else 0.0
+            count += kept
+            sx += kept * dx[i]
+            sy += kept * dy[i]
+            sxx += kept * dx[i] * dx[i]
+            syy += kept * dy[i] * dy[i]
+            total += kept * d
+            tx += kept * d * dx[i]
+            ty += kept * d * dy[i]
+            squares += kept * d * d
+        if count < 4:
+            break
+        # the plane's correction, as if the kept samples were symmetric about their mean
+        mx, my, mean = sx / count, sy / count, total / count
+        vx, vy = sxx - sx * mx, syy - sy * my
+        cx = (tx - mean * sx) / vx if vx > 0 else 0.0
+        cy = (ty - mean * sy) / vy if vy > 0 else 0.0
+        spread = squares / count - mean * mean - cx * (tx / count - mean * mx)
+        spread -= cy * (ty / count - mean * my)
+        gx, gy = gx + cx, gy + cy
+        level += mean - cx * mx - cy * my
+        rms = math.sqrt(max(spread, 0.0)) / CLIPPED_GAUSSIAN_STD
+    # as the real-sky mesh measures it: the median absolute deviation about the plane of the
+    # values within 3 sigmas, x 1.4826 (on a sky clipped or skewed near the black level it
+    # differs from the std, and the threshold with it)
+    mad = _abs_median(values, dx, dy, n, level, gx, gy, 3.0 * rms)
+    if mad > 0:
+        rms = _MAD_TO_SIGMA * mad
+    return level, rms
+
+
+@njit(cache=True)
+def _abs_median(values, dx, dy, n, level, gx, gy, limit):
+    """The median of |v - plane| over the values within ``limit`` of the plane level + gx
+    dx + gy dy, by bisection on counts (branch-free passes; a selection's unpredictable
+    branches cost more), to 1/1024 of ``limit``; 0 for none."""
+    kept = 0.0
+    for i in range(n):
+        kept += 1.0 if abs(values[i] - level - gx * dx[i] - gy * dy[i]) <= limit else 0.0
+    if kept == 0.0:
+        return 0.0
+    lo, hi = 0.0, limit
+    for _ in range(10):
+        mid = 0.5 * (lo + hi)
+        below = 0.0
+        for i in range(n):
+            below += 1.0 if abs(values[i] - level - gx * dx[i] - gy * dy[i]) <= mid else 0.0
+        if below >= 0.5 * kept:
+            hi = mid
+        else:
+            lo = mid
+    return 0.5 * (lo + hi)
+
+
+@njit(cache=True)
+def tile_statistics(data, tile_px, stride, low):
+    """Per tile of ``tile_px`` px a side (the last row and column of tiles may be shorter),
+    from every other pixel of every ``stride``-th row (a row's pixels share cache lines):
+    (level, pixel rms, white rms, samples at ``low``). level and rms: ``_level_rms`` of the
+    pixels; white rms, on every other tile each way (NaN on the others): the rms of the
+    differences of horizontally adjacent pixels over sqrt 2 (noise only: a smooth gradient
+    or the smoothing of JPEG compression does not change from one pixel to the next); the
+    last: how many samples in all equal ``low`` (a sky clipped at the black level)."""
+    height, width = data.shape
+    ny, nx = -(-height // tile_px), -(-width // tile_px)
+    level = np.empty((ny, nx))
+    rms = np.empty((ny, nx))
+    white = np.empty((ny, nx))
+    at_low = 0
+    most = -(-tile_px // stride) * -(-tile_px // 2)
+    values = np.empty(most)
+    dx = np.empty(most)
+    dy = np.empty(most)
+    steps = np.empty(most)
+    flat = np.zeros(most)
+    scratch = np.empty(_START_SAMPLES)
+    for i in range(ny):
+        for j in range(nx):
+            n = 0
+            m = 0
+            yc = 0.5 * (i * tile_px + min((i + 1) * tile_px, height))
+            xc = 0.5 * (j * tile_px + min((j + 1) * tile_px, width))
+            for y in range(i * tile_px + stride // 2, min((i + 1) * tile_px, height), stride):
+                for x in range(j * tile_px, min((j + 1) * tile_px, width), 2):
+                    v = data[y, x]
+                    values[n] = v
+                    dx[n], dy[n] = x + 0.5 - xc, y + 0.5 - yc
+                    n += 1
+                    if v == low:
+                        at_low += 1
+                    if x + 1 < width:
+                        steps[m] = data[y, x + 1] - v
+                        m += 1
+            if n == 0:  # a tile narrower than half the stride: its first pixel
+                values[0] = data[min(i * tile_px, height - 1), min(j * tile_px, width - 1)]
+                dx[0], dy[0] = 0.0, 0.0
+                n = 1
+            level[i, j], rms[i, j] = _level_rms(values, dx, dy, n, scratch)
+            white[i, j] = np.nan
+            if m > 1 and i % 2 == 0 and j % 2 == 0:
+                white[i, j] = _level_rms(steps, flat, flat, m, scratch)[1] / math.sqrt(2.0)
+    return level, rms, white, at_low
+
+
+@njit(cache=True)
+def _tile_centres(n, tile_px, tiles):
+    """The centres (px, corner origin) of the tiles along an axis of ``n`` px: the middle
+    of each tile's pixels (the last tile may be shorter)."""
+    centre = np.empty(tiles)
+    for k in range(tiles):
+        centre[k] = 0.5 * (k * tile_px + min((k + 1) * tile_px, n))
+    return centre
+
+
+@njit(cache=True)
+def _interpolated(values, centre, n, out):
+    """``values`` given at ``centre``s interpolated linearly to the centres of ``n`` pixels
+    (constant beyond the outer centres), into ``out``."""
+    tiles = len(values)
+    # pixels c with c + 0.5 <= centre[k]: the first ``edge[k]``
+    edge = np.empty(tiles, dtype=np.int64)
+    for k in range(tiles):
+        edge[k] = min(n, max(0, math.floor(centre[k] - 0.5) + 1))
+    for c in range(edge[0]):
+        out[c] = values[0]
+    for k in range(tiles - 1):
+        slope = (values[k + 1] - values[k]) / (centre[k + 1] - centre[k])
+        base = values[k] + slope * (0.5 - centre[k])
+        for c in range(edge[k], edge[k + 1]):
+            out[c] = base + slope * c
+    for c in range(edge[tiles - 1], n):
+        out[c] = values[tiles - 1]
+
+
+@njit(cache=True)
+def _across(level, tile_px, height, width):
+    """(each row of tiles' values interpolated across the ``width`` columns, the tile rows'
+    centres): the first half of ``_map_row``'s bilinear interpolation."""
+    ny, nx = level.shape
+    across = _tile_centres(width, tile_px, nx)
+    rows = np.empty((ny, width))
+    for i in range(ny):
+        _interpolated(level[i], across, width, rows[i])
+    return rows, _tile_centres(height, tile_px, ny)
+
+
+@njit(cache=True)
+def _map_row(rows, down, r, out):
+    """Row ``r`` of a tile map interpolated bilinearly between tile centres (constant beyond
+    the outer ones), from ``_across``'s (rows, down), into ``out``."""
+    ny = len(down)
+    at = r + 0.5
+    k = 0
+    while k < ny - 1 and down[k + 1] <= at:
+        k += 1
+    lower = rows[k]
+    if at <= down[k] or k == ny - 1:
+        out[:] = lower
+        return
+    upper = rows[k + 1]
+    w = (at - down[k]) / (down[k + 1] - down[k])
+    for c in range(len(out)):
+        out[c] = lower[c] + w * (upper[c] - lower[c])
+
+
+@njit(cache=True)
+def background_subtracted(data, level, tile_px):
+    """``data`` less its background, float32: the tile ``level``s interpolated bilinearly
+    between tile centres (constant beyond the outer ones)."""
+    height, width = data.shape
+    rows, down = _across(level, tile_px, height, width)
+    out = np.empty((height, width), dtype=np.float32)
+    back = np.empty(width)
+    for r in range(height):
+        _map_row(rows, down, r, back)
+        for c in range(width):
+            out[r, c] = data[r, c] - back[c]
+    return out
+
+
+@njit(cache=True, inline="always")
+def _find(parent, i):
+    while parent[i] != i:
+        parent[i] = parent[parent[i]]
+        i = parent[i]
+    return i
+
+
+@njit(cache=True, inline="always")
+def _row_sums(data, r, out):
+    """[1 2 1] along row ``r`` of ``data`` (zero beyond the edges; a row outside: zeros)."""
+    height, width = data.shape
+    if r < 0 or r >= height:
+        out[:] = 0.0
+        return
+    row = data[r]
+    two = np.float32(2.0)
+    for c in range(1, width - 1):
+        out[c] = row[c - 1] + two * row[c] + row[c + 1]
+    out[0] = two * row[0] + (row[1] if width > 1 else np.float32(0.0))
+    if width > 1:
+        out[width - 1] = row[width - 2] + two * row[width - 1]
+
+
+@njit(cache=True)
+def _pixels_above(data, threshold, tile_px, capacity):
+    """The pixels whose 3 x 3 filtered value ([1 2 1] x [1 2 1] / 16, zero beyond the
+    edges) exceeds the ``threshold`` map (per tile of ``tile_px`` px, interpolated as the
+    background is), in raster order: (rows, columns, filtered values, their 8-connected
+    group's root, count); count -1 when more than ``capacity``."""
+    height, width = data.shape
+    rows = np.empty(capacity, dtype=np.int32)
+    cols = np.empty(capacity, dtype=np.int32)
+    values = np.empty(capacity, dtype=np.float32)
+    parent = np.empty(capacity, dtype=np.int64)
+    index = np.empty((2, width), dtype=np.int64)
+    stamp = np.full((2, width), -2, dtype=np.int64)
+    above = np.empty(width, dtype=np.float32)
+    here = np.empty(width, dtype=np.float32)
+    below = np.empty(width, dtype=np.float32)
+    filtered = np.empty(width, dtype=np.float32)
+    level = np.empty(width)
+    maps, down = _across(threshold, tile_px, height, width)
+    _row_sums(data, -1, above)
+    _row_sums(data, 0, here)
+    n = 0
+    for r in range(height):
+        _row_sums(data, r + 1, below)
+        two, sixteenth = np.float32(2.0), np.float32(1.0 / 16.0)
+        for c in range(width):
+            filtered[c] = (above[c] + two * here[c] + below[c]) * sixteenth
+        _map_row(maps, down, r, level)
+        now, before = r % 2, (r + 1) % 2
+        for c in range(width):
+            f = filtered[c]
+            if not f > level[c]:
+                continue
+            if n == capacity:
+                return rows, cols, values, parent, -1
+            rows[n], cols[n], values[n], parent[n] = r, c, f, n
+            # 8-connected neighbours seen before: left, and the three above
+            if c > 0 and stamp[now, c - 1] == r:
+                _join(parent, n, index[now, c - 1])
+            for dc in (-1, 0, 1):
+                cc = c + dc
+                if 0 <= cc < width and stamp[before, cc] == r - 1:
+                    _join(parent, n, index[before, cc])
+            index[now, c], stamp[now, c] = n, r
+            n += 1
+        above, here, below = here, below, above
+    for i in range(n):
+        parent[i] = _find(parent, i)
+    return rows, cols, values, parent, n
+
+
+@njit(cache=True, inline="always")
+def _join(parent, a, b):
+    ra, rb = _find(parent, a), _find(parent, b)
+    if ra != rb:
+        parent[max(ra, rb)] = min(ra, rb)
+
+
+@njit(cache=True)
+def _deblended(rows, cols, values, threshold, min_area):
+    """Each pixel's object in one group of connected pixels (local indices 0..m-1): the
+    pixels flooded from the brightest down (filtered ``values``), a branch kept as an object
+    of its own where it meets a brighter one, as sep's deblending keeps it, when one of its
+    ``DEBLEND_LEVELS`` levels (exponentially spaced from ``threshold`` to the group's peak)
+    lies between the saddle and the branch's peak, and the branch has ``min_area`` pixels
+    and ``DEBLEND_CONTRAST`` of the group's filtered flux."""
+    m = len(rows)
+    obj = np.arange(m)
+    if m < 2 * min_area:
+        return np.zeros(m, dtype=np.int64)
+    r0, c0 = rows.min(), cols.min()
+    bh, bw = rows.max() - r0 + 1, cols.max() - c0 + 1
+    if bh * bw > 64 * m:  # a long thin group (a trail): one object, it is not a star
+        return np.zeros(m, dtype=np.int64)
+    grid = np.full((bh, bw), -1, dtype=np.int64)
+    order = np.argsort(-values)
+    total = values.sum()
+    peak_all = values[order[0]]
+    log_span = math.log(peak_all / threshold) if peak_all > threshold else 0.0
+    basin = np.arange(m)  # union-find over the branches met so far
+    area = np.zeros(m, dtype=np.int64)
+    flux = np.zeros(m)
+    peak = np.zeros(m)
+    top = np.arange(m)  # the object a branch's new pixels join
+    roots = np.empty(8, dtype=np.int64)
+    for p in order:
+        y, x = rows[p] - r0, cols[p] - c0
+        k = 0
+        for dy in (-1, 0, 1):
+            for dx in (-1, 0, 1):
+                yy, xx = y + dy, x + dx
+                if 0 <= yy < bh and 0 <= xx < bw and grid[yy, xx] >= 0:
+                    root = _find(basin, grid[yy, xx])
+                    seen = False
+                    for j in range(k):
+                        seen |= roots[j] == root
+                    if not seen:
+                        roots[k] = root
+                        k += 1
+        if k == 0:
+            area[p], flux[p], peak[p] = 1, values[p], values[p]
+            grid[y, x] = p
+            continue
+        win = roots[0]
+        for j in range(1, k):
+            if peak[roots[j]] > peak[win]:
+                win = roots[j]
+        saddle = values[p]
+        for j in range(k):
+            q = roots[j]
+            if q == win:
+                continue
+            # the first level above the saddle, below the branch's peak?
+            split = False
+            if log_span > 0.0 and area[q] >= min_area and flux[q] >= DEBLEND_CONTRAST * total:
+                step = math.floor(DEBLEND_LEVELS * math.log(saddle / threshold) / log_span) + 1
+                level = threshold * math.exp(step * log_span / DEBLEND_LEVELS)
+                split = step < DEBLEND_LEVELS and level <= peak[q]
+            if not split:
+                obj[top[q]] = top[win]
+            basin[q] = win
+            area[win] += area[q]
+            flux[win] += flux[q]
+        basin[p] = win
+        obj[p] = top[win]
+        area[win] += 1
+        flux[win] += values[p]
+        grid[y, x] = p
+    for p in range(m):  # the absorbed branches' pixels to the object that absorbed them
+        o = obj[p]
+        while obj[o] != o:
+            o = obj[o]
+        obj[p] = o
+    return obj
+
+
+@njit(cache=True)
+def find_sources(data, threshold, tile_px, min_area, capacity, plateau_px):
+    """sep-like sources of background-subtracted ``data``: pixels whose 3 x 3 filtered value
+    exceeds the ``threshold`` map (per tile of ``tile_px`` px, interpolated as the background
+    is), 8-connected groups of at least ``min_area`` of them, each split into objects at its
+    saddles (``_deblended``). Returns (status, per object: pixel count, flux (the sum of its
+    unfiltered pixels), moments (n, 5: barycentre x, y and second moments x2, y2, xy, px
+    and px², weighted by the unfiltered pixels, or by 1 where their sum is not positive),
+    peaks (n, 3: the brightest pixel's value, column and row)). ``status``: ``FOUND``;
+    ``TOO_MANY_PIXELS`` beyond ``capacity`` pixels above the threshold; ``PLATEAU`` when a
+    group has more than ``plateau_px`` pixels (residual glow: not a clean frame); with
+    either, no objects."""
+    rows, cols, values, parent, n = _pixels_above(data, threshold, tile_px, capacity)
+    no_count, no_flux = np.zeros(0, dtype=np.int64), np.zeros(0)
+    no_moments, no_peaks = np.zeros((0, 5)), np.zeros((0, 3))
+    if n < 0:
+        return TOO_MANY_PIXELS, no_count, no_flux, no_moments, no_peaks
+    # pixels grouped by their root (counting sort; a root is its group's first pixel)
+    group = np.full(n, -1, dtype=np.int64)
+    n_groups = 0
+    for i in range(n):
+        if parent[i] == i:
+            group[i] = n_groups
+            n_groups += 1
+    size = np.zeros(n_groups + 1, dtype=np.int64)
+    for i in range(n):
+        size[group[parent[i]] + 1] += 1
+    for g in range(n_groups):
+        if size[g + 1] > plateau_px:
+            return PLATEAU, no_count, no_flux, no_moments, no_peaks
+    start = np.cumsum(size)
+    fill = start[:-1].copy()
+    members = np.empty(n, dtype=np.int64)
+    for i in range(n):
+        g = group[parent[i]]
+        members[fill[g]] = i
+        fill[g] += 1
+    # per object: the sums of v, v x, v y, v x², v y², v x y (v: the pixel), then of 1, x,
+    # y, x², y², x y; the peak pixel and where it is
+    acc = np.zeros((n, 12))
+    peaks = np.empty((n, 3))
+    n_obj = 0
+    for g in range(n_groups):
+        idx = members[start[g] : start[g + 1]]
+        if len(idx) < min_area:
+            continue
+        local = threshold[rows[idx[0]] // tile_px, cols[idx[0]] // tile_px]
+        obj = _deblended(rows[idx], cols[idx], values[idx], local, min_area)
+        label = np.full(len(idx), -1, dtype=np.int64)
+        for k in range(len(idx)):
+            o = obj[k]
+            if label[o] < 0:
+                label[o] = n_obj
+                peaks[n_obj, 0] = -np.inf
+                n_obj += 1
+            t = label[o]
+            y, x = float(rows[idx[k]]), float(cols[idx[k]])
+            v = float(data[rows[idx[k]], cols[idx[k]]])
+            for j, term in enumerate((1.0, x, y, x * x, y * y, x * y)):
+                acc[t, j + 6] += term
+                acc[t, j] += v * term
+            if v > peaks[t, 0]:
+                peaks[t, 0], peaks[t, 1], peaks[t, 2] = v, x, y
+    moments = np.empty((n_obj, 5))
+    for t in range(n_obj):
+        base = 0 if acc[t, 0] > 0.0 else 6  # unweighted where the pixels' sum is not positive
+        norm = acc[t, base]
+        x, y = acc[t, base + 1] / norm, acc[t, base + 2] / norm
+        moments[t, 0], moments[t, 1] = x, y
+        moments[t, 2] = acc[t, base + 3] / norm - x * x
+        moments[t, 3] = acc[t, base + 4] / norm - y * y
+        moments[t, 4] = acc[t, base + 5] / norm - x * y
+    count = acc[:n_obj, 6].astype(np.int64)
+    return FOUND, count, acc[:n_obj, 0].copy(), moments, peaks[:n_obj].copy()
+
+
+@njit(cache=True)
+def _plane(values, dx, dy, keep):
+    """(c0, cx, cy): the plane c0 + cx dx + cy dy through the ``keep`` values, fitted as if
+    their offsets were symmetric about the source (``starnav.detect.photometry._plane``)."""
+    count, sx, sy, total = 0.0, 0.0, 0.0, 0.0
+    for i in range(len(values)):
+        if keep[i]:
+            count += 1.0
+            sx += dx[i]
+            sy += dy[i]
+            total += values[i]
+    count = max(count, 1.0)
+    mx, my, c0 = sx / count, sy / count, total / count
+    vx, vy, tx, ty = 0.0, 0.0, 0.0, 0.0
+    for i in range(len(values)):
+        if keep[i]:
+            ux, uy = dx[i] - mx, dy[i] - my
+            vx += ux * ux
+            vy += uy * uy
+            tx += values[i] * ux
+            ty += values[i] * uy
+    cx, cy = tx / max(vx, 1e-9), ty / max(vy, 1e-9)
+    return c0 - cx * mx - cy * my, cx, cy
+
+
+@njit(cache=True)
+def annulus_photometry(data, x, y, r_ap, r_in, r_out):
+    """Per source at (``x``, ``y``) of background-subtracted ``data``, as
+    ``starnav.detect.photometry.local_photometry`` measures it: (flux in the aperture r <
+    ``r_ap`` above the local background, the annulus's rms): the local background a plane
+    fitted to the annulus ``r_in`` <= r < ``r_out`` (again without its pixels beyond 3
+    sigmas of the first), plus the median of what is left; the rms the median absolute
+    deviation of that, x 1.4826 (NaN with no annulus). Pixels by their centres; off the
+    image: left out."""
+    height, width = data.shape
+    n = len(x)
+    half = math.ceil(r_out)
+    flux = np.zeros(n)
+    noise = np.full(n, np.nan)
+    size = (2 * half + 1) ** 2
+    ring, dx, dy = np.empty(size), np.empty(size), np.empty(size)
+    rest, scratch = np.empty(size), np.empty(size)
+    keep = np.empty(size, dtype=np.bool_)
+    for s in range(n):
+        xc, yc = round(x[s]), round(y[s])
+        m = 0
+        for r in range(max(0, yc - half), min(height, yc + half + 1)):
+            for c in range(max(0, xc - half), min(width, xc + half + 1)):
+                d2 = (c - x[s]) ** 2 + (r - y[s]) ** 2
+                if r_in * r_in <= d2 < r_out * r_out:
+                    ring[m], dx[m], dy[m] = data[r, c], c - x[s], r - y[s]
+                    m += 1
+        c0, cx, cy, offset = 0.0, 0.0, 0.0, 0.0
+        if m > 0:
+            keep[:m] = True
+            c0, cx, cy = _plane(ring[:m], dx[:m], dy[:m], keep[:m])
+            for i in range(m):
+                rest[i] = ring[i] - c0 - cx * dx[i] - cy * dy[i]
+            scratch[:m] = rest[:m]
+            centre = _median(scratch, m)
+            for i in range(m):
+                scratch[i] = abs(rest[i] - centre)
+            spread = _MAD_TO_SIGMA * _median(scratch, m)
+            for i in range(m):
+                keep[i] = abs(rest[i] - centre) <= 3.0 * spread
+            c0, cx, cy = _plane(ring[:m], dx[:m], dy[:m], keep[:m])
+            for i in range(m):
+                rest[i] = ring[i] - c0 - cx * dx[i] - cy * dy[i]
+            scratch[:m] = rest[:m]
+            offset = _median(scratch, m)
+            for i in range(m):
+                scratch[i] = abs(rest[i] - offset)
+            noise[s] = _MAD_TO_SIGMA * _median(scratch, m)
+        total = 0.0
+        for r in range(max(0, yc - half), min(height, yc + half + 1)):
+            for c in range(max(0, xc - half), min(width, xc + half + 1)):
+                ox, oy = c - x[s], r - y[s]
+                if ox * ox + oy * oy < r_ap * r_ap:
+                    total += data[r, c] - c0 - cx * ox - cy * oy - offset
+        flux[s] = total
+    return flux, noise
