@@ -110,7 +110,9 @@ class Solution:
     ``sigma_*_arcsec``: 1-sigma from the fit (``sigma_focal_px`` 0 unless the focal length
     was fitted); ``camera_model``: the lens model's name, ``k1``..``k4`` its coefficients
     (fitted or given, see ``starnav.camera``; 0 for those it lacks), ``camera`` the fitted
-    camera itself; ``time_ms``: identification and fit, without
+    camera itself; ``rotation_cov_rad2`` (3, 3): the fit's covariance of a small rotation
+    about the camera axes (x right, y down, z boresight; radians squared), the matrix the
+    1-sigmas come from (None when not known); ``time_ms``: identification and fit, without
     loading the catalog or database; ``star_table``: every input point with its id and
     residual, as arrays (``stars``: the same as ``StarMatch`` records, made on first use).
     """
@@ -138,6 +140,7 @@ class Solution:
     k3: float = 0.0
     k4: float = 0.0
     camera: CameraModel | None = None
+    rotation_cov_rad2: np.ndarray | None = field(default=None, repr=False)
 
     def __repr__(self) -> str:
         n = len(self.star_table.labels)
@@ -156,7 +159,7 @@ class Solution:
 
     def to_dict(self) -> dict:
         """JSON-ready dict of every field (the matrix as nested lists)."""
-        skip = ("star_table", "R_cam_from_icrs", "camera")
+        skip = ("star_table", "R_cam_from_icrs", "camera", "rotation_cov_rad2")
         out = {f.name: getattr(self, f.name) for f in fields(self) if f.name not in skip}
         out["solved"] = True
         out["R_cam_from_icrs"] = self.R_cam_from_icrs.tolist()

@@ -23,6 +23,7 @@ from starnav.cli import (
     serve,
     simulate,
     solve,
+    track,
 )
 from starnav.cli.common import EXIT_BAD_INPUT, EXIT_OK, Parser
 from starnav.errors import StarnavError
@@ -40,6 +41,7 @@ COMMAND_MODULES = (
     render,
     calibrate,
     serve,
+    track,
 )
 
 

@@ -138,6 +138,7 @@ def solution_of(
         catalog=cat.name,
         camera_model=camera.model,
         camera=camera,
+        rotation_cov_rad2=fit.rotation_cov_rad2,
         **{name: getattr(camera, name) for name in camera.coefficients},
     )
 
