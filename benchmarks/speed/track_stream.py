@@ -10,9 +10,11 @@ pipe both ways, reading, solving and writing the answer, as flight software sees
 frames (Hipparcos stars to Hp 6, made before the process starts, so their making is not
 timed) are a slew at ``--step-deg`` per frame with a slow roll drift, 0.1 px noise and one
 false star, from a random start; every ``--outage-every``-th frame comes after a 10 s outage
-(its ``t`` jumps), so it is solved lost in space, and every ``--bad-every``-th line is not
-JSON. Answers are scored by ``starnav evaluate``'s rule (``harness.CORRECT_RULE``). Writes
-the ``track-latency`` block of docs/track.md (``--out -``: print only).
+(its ``t`` jumps), so it is solved lost in space, every ``--random-every``-th holds 30
+random points and no star field (the hardest frame: the whole search runs, nothing is found),
+and every ``--bad-every``-th line is not JSON. Answers are scored by ``starnav evaluate``'s
+rule (``harness.CORRECT_RULE``). Writes the ``track-latency`` block of docs/track.md
+(``--out -``: print only).
 """
 
 from __future__ import annotations
@@ -44,10 +46,12 @@ from starnav.simulate import simulate_frame
 DOC = DOCS / "track.md"
 COMMAND = ["-m", "starnav", "track", "--fov-deg", "12", "--width", "512", "--sigma-px", "0.1"]
 OUTAGE_S = 10.0  # the time jump before an outage frame (longer than --max-gap-s's default)
+RANDOM_POINTS = 30  # the points of a frame that holds no star field
 
 
 def make_frames(args: argparse.Namespace) -> list[tuple[str, str, np.ndarray | None]]:
-    """(kind, JSON line, true attitude or None) per line: kinds "frame", "outage", "bad"."""
+    """(kind, JSON line, true attitude or None) per line: kinds "frame", "outage", "random",
+    "bad"."""
     rng = np.random.default_rng(args.seed)
     catalog = load_catalog(None, mag_limit=6.0)
     camera = Camera.from_fov(12.0, 512)
@@ -58,6 +62,10 @@ def make_frames(args: argparse.Namespace) -> list[tuple[str, str, np.ndarray | N
     for k in range(1, args.frames + 1):
         if k % args.bad_every == 0:
             out.append(("bad", '{"x": [1, 2, 3], "y": ', None))
+            continue
+        if k % args.random_every == 0:  # no star field: the whole search runs, nothing found
+            xy = rng.uniform(0, 512, (RANDOM_POINTS, 2)).round(3)
+            out.append(("random", json.dumps({"xy": xy.tolist(), "id": k}), None))
             continue
         kind = "outage" if k % args.outage_every == 0 else "frame"
         t_s += OUTAGE_S if kind == "outage" else 1.0 / args.rate_hz
@@ -118,7 +126,10 @@ def table(rows) -> list[str]:
     groups = {
         "tracked": [r for r in rows if r[2]["mode"] == "tracked"],
         "lost in space": [r for r in rows if r[2]["mode"] == "lost_in_space"],
-        "not solved": [r for r in rows if not r[2]["solved"] and r[2]["error"] is None],
+        "not solved: random points": [r for r in rows if r[0] == "random"],
+        "not solved: star frames": [
+            r for r in rows if r[0] != "random" and not r[2]["solved"] and r[2]["error"] is None
+        ],
         "bad line (error)": [r for r in rows if r[2]["error"] is not None],
         "all lines": rows,
     }
@@ -145,6 +156,7 @@ def main() -> None:
     parser.add_argument("--step-deg", type=float, default=0.05,
                         help="slew per frame (degrees; default 0.05, 0.5°/s at 10 Hz)")  # fmt: skip
     parser.add_argument("--outage-every", type=int, default=20, help="default 20")
+    parser.add_argument("--random-every", type=int, default=50, help="default 50")
     parser.add_argument("--bad-every", type=int, default=100, help="default 100")
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--out", default=str(DOC), help="markdown file ('-': print only)")
@@ -162,7 +174,9 @@ def main() -> None:
         f"{len(rows)} lines at {args.rate_hz:g} Hz through one `starnav track` process over a "
         f"pipe: a slew at {args.step_deg:g}° per frame, 12° / 512 px, stars to Hp 6, 0.1 px noise, "
         f"one false star; every {args.outage_every}th frame after a {OUTAGE_S:g} s outage (lost "
-        f"in space), every {args.bad_every}th line not JSON (seed {args.seed}).",
+        f"in space), every {args.random_every}th {RANDOM_POINTS} random points without "
+        f"brightness (no star field: the whole search runs), every {args.bad_every}th line not "
+        f"JSON (seed {args.seed}).",
         "",
         *table(rows),
         "",

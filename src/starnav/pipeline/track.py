@@ -41,6 +41,9 @@ from starnav.starlist import StarList, check_star_list
 _log = logging.getLogger(__name__)
 DEFAULT_MAX_GAP_S = 1.0  # track from an attitude at most this old (s)
 TRACKED, LOST_IN_SPACE = "tracked", "lost_in_space"
+# the warm-up's boresights: crowded and sparse fields, north and south (the paths of a solve)
+WARM_UP_RADEC_DEG = ((10.0, 20.0), (83.8, -5.4), (200.0, 60.0), (280.0, -30.0))
+WARM_UP_DEEP_MAG = 9.0  # with a deep stage, the warm-up frames hold stars to this magnitude
 # the keys of every answer line, in this order (null where they do not apply)
 TRACK_KEYS = (
     "frame",
@@ -302,22 +305,31 @@ class Tracker:
         )
 
     def warm_up(self) -> float:
-        """Solve one simulated frame lost in space and tracked, so that the first frame of the
-        stream does not load the machine code; the seconds it took. Forgets nothing: the
-        stream's state is untouched."""
+        """Solve simulated frames (noisy, with false stars, with and without brightness) lost
+        in space and tracked, so that the stream's first frames do not load machine code or
+        modules a solve imports on first use; the seconds it took. The stream's state is
+        untouched."""
         from starnav.simulate import simulate_frame
 
         t0 = time.perf_counter()
         cam = self.solver.camera
-        frame = simulate_frame(self.solver.catalog, cam, ra_deg=10.0, dec_deg=20.0, roll_deg=30.0)
-        if len(frame.xy) >= 3:
+        deep = self.solver.settings.deep_catalog  # its stars in view: the deep stage's paths
+        sky = self.solver.catalog if deep is None else deep.brighter_than(WARM_UP_DEEP_MAG)
+        for ra_deg, dec_deg in WARM_UP_RADEC_DEG:
+            frame = simulate_frame(sky, cam, ra_deg=ra_deg, dec_deg=dec_deg, roll_deg=30.0,
+                                   noise_px=0.2, false_stars=2, seed=0)  # fmt: skip
+            if len(frame.xy) < 3:
+                continue
             for brightness in (frame.brightness, None):  # both paths of the verification
                 stars = check_star_list(
                     frame.xy, width=cam.width, height=cam.height, brightness=brightness
                 )
                 for prior in (None, frame.R_cam_from_icrs):
                     self._solve(stars, prior)
-            quaternion_xyzw(frame.R_cam_from_icrs)  # imports scipy's rotations
+        quaternion_xyzw(np.eye(3))  # imports scipy's rotations
+        if deep is not None:  # what the deep stage imports on its first contested pair
+            import scipy.optimize
+            import scipy.sparse.csgraph  # noqa: F401
         return time.perf_counter() - t0
 
     def reset(self) -> None:
