@@ -39,6 +39,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))  # the repository: benchmarks.*
 from benchmarks.harness import DOCS, machine, replace_block, table_head, table_row
+from starnav.api import prepare_solver
 from starnav.camera import Camera
 from starnav.catalog import load_catalog
 from starnav.simulate import simulate_frame
@@ -157,6 +158,16 @@ def measure(args: argparse.Namespace, folder: Path) -> tuple[dict[str, list], fl
     return samples, warm_s
 
 
+def tables() -> str:
+    """What the solve holds besides code: its catalog and pair table (the defaults of a
+    known field)."""
+    database = prepare_solver(fov_deg=FOV_DEG, width=WIDTH).database
+    return (
+        f"the solve's catalog: {database.catalog.name}, {len(database.catalog)} stars; its pair "
+        f"table {len(database.pair_a) / 1e6:.2f} million pairs, {database.nbytes / 1e6:.1f} MB"
+    )
+
+
 def spread(values, digits: int = 2) -> str:
     """'median (min)' of ``values``."""
     v = np.asarray(values, dtype=float)
@@ -207,7 +218,8 @@ def report(samples: dict[str, list], warm_s: float, args, load: float, seconds: 
         "",
         f"Targets: `import starnav` {status(import_s, TARGET_IMPORT_S, 's')}; "
         f"`starnav identify` {status(id_wall, TARGET_IDENTIFY_S, 's')}; peak RSS of the "
-        f"star-list solve {status(py_rss, TARGET_RSS_MB, 'MB')}.",
+        f"star-list solve {status(py_rss, TARGET_RSS_MB, 'MB')}. In memory besides the code: "
+        f"{tables()}.",
         "",
         f"{machine(load, load_at_end=True)}; `python benchmarks/speed/startup.py --repeats "
         f"{args.repeats}`, {seconds:.0f} s.",
