@@ -79,7 +79,7 @@ def version() -> str:
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``starnav`` command."""
-    # The interpreter's last garbage collections at exit walk every object numba made (~0.3 s
+    # The interpreter's last garbage collections at exit walk every object numba made (0.1-0.3 s
     # of a command that solved); frozen, they are skipped and the system takes the memory back.
     atexit.unregister(gc.freeze)  # registered once, however often main runs in a process
     atexit.register(gc.freeze)
