@@ -248,9 +248,9 @@ def test_cli_solve_takes_deep_mag_limit(capsys, tmp_path):
         (6.1, 1392, 1040, (8.5, DEEP_MAG)),  # a Kelvins-format star tracker
         (6.0, 1024, 1024, (8.25, DEEP_MAG)),
         (8.0, 1024, 1024, (7.5, None)),  # 1 point in 110 would land on a chance Hp 12 star
-        (12.0, 512, 512, (6.75, None)),
-        (20.0, 1024, 1024, (6.0, None)),
-        (60.0, 1024, 1024, (6.0, None)),  # wide fields keep Hp 6
+        (10.0, 1024, 1024, (7.25, None)),  # Hp 6: 11 stars in an average image
+        (12.0, 512, 512, (6.0, None)),  # Hp 6: 16 stars, enough
+        (60.0, 1024, 1024, (6.0, None)),
     ],
 )
 def test_known_field_depth_follows_the_field(fov_deg, width, height, expected):

@@ -51,6 +51,7 @@ SCAN_HYPOTHESES = 2000  # testing at most this many hypotheses per trial focal l
 GIVEN_FOV_TOLERANCE = 0.05  # a given FOV is searched within +-5 %
 CAMERA_FOV_TOLERANCE = 0.01  # a calibrated camera's within +-1 %
 _STARS_PER_FIELD = 40.0  # catalog depth of a band: mean stars in one of its pattern fields
+FIELD_STARS = 15  # a known field's catalog: at least this many stars in an average image
 # the deepest band catalog: Hipparcos is complete to Hp 7.3-9 (by galactic latitude), and
 # its 56863 stars to Hp 8.5 keep a table's catalog rows 16-bit (below 65536)
 _MAX_MAG = 8.5
@@ -112,12 +113,17 @@ def band_mag_limit(diagonal_deg: float, sorted_mags: np.ndarray) -> float:
 
 
 @functools.lru_cache(maxsize=64)
-def _hipparcos_depth(diagonal_deg: float, circle_rad: float) -> tuple[float, float | None]:
+def _hipparcos_depth(
+    image_sr: float, diagonal_deg: float, circle_rad: float
+) -> tuple[float, float | None]:
     mags = hipparcos_mags()
-    mag_limit = band_mag_limit(diagonal_deg, mags[: np.searchsorted(mags, _MAX_MAG, "right")])
+    band = band_mag_limit(diagonal_deg, mags[: np.searchsorted(mags, _MAX_MAG, "right")])
+    in_image = np.searchsorted(mags, DEFAULT_MAG_LIMIT, "right") * image_sr / (4.0 * math.pi)
+    mag_limit = DEFAULT_MAG_LIMIT if in_image >= FIELD_STARS else max(band, DEFAULT_MAG_LIMIT)
     deep_density = np.searchsorted(mags, DEEP_MAG_LIMIT, "right") / (4.0 * math.pi)  # per sr
     chance = deep_density * 2.0 * math.pi * (1.0 - math.cos(circle_rad))
-    return max(DEFAULT_MAG_LIMIT, mag_limit), DEEP_MAG_LIMIT if chance < DEEP_CHANCE else None
+    narrow = mag_limit > DEFAULT_MAG_LIMIT  # a field Hp 6 is too sparse for
+    return mag_limit, DEEP_MAG_LIMIT if narrow and chance < DEEP_CHANCE else None
 
 
 def known_field_depth(
@@ -125,19 +131,27 @@ def known_field_depth(
 ) -> tuple[float | None, float | str | None]:
     """The catalog depths of a solve through a known ``camera``: (the identification
     catalog's magnitude limit, the deep stage's). Each as ``options`` gives it; unset, for
-    the embedded Hipparcos, they follow the field: the identification as deep as the FOV
-    search's band of the camera's diagonal (``band_mag_limit``), never shallower than
-    ``DEFAULT_MAG_LIMIT`` (Hp 6: wide fields keep it), and the deep stage
-    (``pipeline.deep``) to ``DEEP_MAG_LIMIT`` where its match circle (``MATCH_SIGMAS`` of
-    the told centroid sigma, else of ``SEARCH_SIGMA_PX``, 1 px) holds a chance catalog star
-    for fewer than ``DEEP_CHANCE`` of the points: fine pixels, as a 6° star tracker's (the
-    camera sees stars the identification catalog cannot hold, and a false star rarely lands
-    on one). A CSV or ``Catalog`` is used whole, with no deep stage unless told."""
+    the embedded Hipparcos, they follow the field. The identification: Hp 6
+    (``DEFAULT_MAG_LIMIT``) where that catalog holds ``FIELD_STARS`` stars in an average
+    image (fields of 12° and wider: there a deeper catalog than the camera sees would make
+    chance agreement likelier and refuse more few-star frames), else as deep as the FOV
+    search's band of the field (``band_mag_limit``: Hp 8.5 at 6°). On such a narrow field,
+    the deep stage (``pipeline.deep``) to ``DEEP_MAG_LIMIT`` where its match circle
+    (``MATCH_SIGMAS`` of the told centroid sigma, else of ``SEARCH_SIGMA_PX``, 1 px) holds a
+    chance catalog star for fewer than ``DEEP_CHANCE`` of the points: fine pixels, as a 6°
+    star tracker's (it sees stars the identification catalog does not hold, and a false
+    star rarely lands on one). A CSV or ``Catalog`` is used whole, with no deep stage unless
+    told."""
     mag_limit, deep = options.mag_limit, options.deep_mag_limit
     if options.catalog is None or str(options.catalog).lower() == "hipparcos":
         sigma_px = SEARCH_SIGMA_PX if options.sigma_px is None else options.sigma_px
         circle_rad = MATCH_SIGMAS * sigma_px / camera.scale_px_per_rad
-        field_mag, field_deep = _hipparcos_depth(round(camera.diagonal_deg, 6), circle_rad)
+        half_w = math.atan(camera.width / (2.0 * camera.focal_px))
+        half_h = math.atan(camera.height / (2.0 * camera.focal_px))
+        image_sr = 4.0 * math.asin(math.sin(half_w) * math.sin(half_h))  # a pinhole's
+        field_mag, field_deep = _hipparcos_depth(
+            round(image_sr, 9), round(camera.diagonal_deg, 6), circle_rad
+        )
         mag_limit = field_mag if mag_limit is None else mag_limit
         deep = field_deep if deep is None else deep
     return mag_limit, deep
