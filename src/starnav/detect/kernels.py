@@ -530,6 +530,21 @@ def _plane(values, dx, dy, keep):
 
 
 @njit(cache=True)
+def _plane_and_mad(ring, dx, dy, keep, rest, scratch, m):
+    """The plane (c0, cx, cy) fitted to the ``keep`` values of ``ring[:m]`` (offsets ``dx``,
+    ``dy``), the residuals of all m from it (to ``rest``), their median and their median
+    absolute deviation about it (``scratch`` reordered)."""
+    c0, cx, cy = _plane(ring[:m], dx[:m], dy[:m], keep[:m])
+    for i in range(m):
+        rest[i] = ring[i] - c0 - cx * dx[i] - cy * dy[i]
+    scratch[:m] = rest[:m]
+    centre = _median(scratch, m)
+    for i in range(m):
+        scratch[i] = abs(rest[i] - centre)
+    return c0, cx, cy, centre, _median(scratch, m)
+
+
+@njit(cache=True)
 def annulus_photometry(data, x, y, r_ap, r_in, r_out):
     """Per source at (``x``, ``y``) of background-subtracted ``data``, as
     ``starnav.detect.photometry.local_photometry`` measures it: (flux in the aperture r <
@@ -559,24 +574,12 @@ def annulus_photometry(data, x, y, r_ap, r_in, r_out):
         c0, cx, cy, offset = 0.0, 0.0, 0.0, 0.0
         if m > 0:
             keep[:m] = True
-            c0, cx, cy = _plane(ring[:m], dx[:m], dy[:m], keep[:m])
-            for i in range(m):
-                rest[i] = ring[i] - c0 - cx * dx[i] - cy * dy[i]
-            scratch[:m] = rest[:m]
-            centre = _median(scratch, m)
-            for i in range(m):
-                scratch[i] = abs(rest[i] - centre)
-            spread = _MAD_TO_SIGMA * _median(scratch, m)
+            c0, cx, cy, centre, mad = _plane_and_mad(ring, dx, dy, keep, rest, scratch, m)
+            spread = _MAD_TO_SIGMA * mad
             for i in range(m):
                 keep[i] = abs(rest[i] - centre) <= 3.0 * spread
-            c0, cx, cy = _plane(ring[:m], dx[:m], dy[:m], keep[:m])
-            for i in range(m):
-                rest[i] = ring[i] - c0 - cx * dx[i] - cy * dy[i]
-            scratch[:m] = rest[:m]
-            offset = _median(scratch, m)
-            for i in range(m):
-                scratch[i] = abs(rest[i] - offset)
-            noise[s] = _MAD_TO_SIGMA * _median(scratch, m)
+            c0, cx, cy, offset, mad = _plane_and_mad(ring, dx, dy, keep, rest, scratch, m)
+            noise[s] = _MAD_TO_SIGMA * mad
         total = 0.0
         for r in range(max(0, yc - half), min(height, yc + half + 1)):
             for c in range(max(0, xc - half), min(width, xc + half + 1)):
