@@ -207,6 +207,12 @@ def load_csv(path: str | Path, *, mag_limit: float | None = None) -> Catalog:
     return cat if mag_limit is None else cat.brighter_than(mag_limit)
 
 
+def is_embedded(source: Catalog | str | Path | None) -> bool:
+    """Whether ``source`` names the embedded Hipparcos catalog (None or "hipparcos"). A
+    ``Catalog`` is never turned into a string: its repr holds every array (~0.2 ms)."""
+    return source is None or (isinstance(source, str | Path) and str(source).lower() == "hipparcos")
+
+
 def load_catalog(
     source: Catalog | str | Path | None = None,
     *,
@@ -218,8 +224,7 @@ def load_catalog(
     ``mag_limit``: keep stars with ``mag <= mag_limit`` (Hipparcos default 6.0, others: all);
     ``epoch_year``: for Hipparcos only (a CSV or ``Catalog`` is used at its own epoch).
     """
-    # (a Catalog is never turned into a string: its repr holds every array)
-    if source is None or (isinstance(source, str | Path) and str(source).lower() == "hipparcos"):
+    if is_embedded(source):
         cat = _cached_hipparcos(
             DEFAULT_MAG_LIMIT if mag_limit is None else float(mag_limit),
             default_epoch_year() if epoch_year is None else float(epoch_year),

@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from starnav.camera import Camera, CameraModel, Fisheye, focal_px_from_fov, model_class
-from starnav.catalog import DEFAULT_MAG_LIMIT, Catalog, hipparcos_mags, load_catalog
+from starnav.catalog import DEFAULT_MAG_LIMIT, Catalog, hipparcos_mags, is_embedded, load_catalog
 from starnav.errors import CatalogError, StarnavError, shown
 from starnav.geometry import radec_to_unit
 from starnav.identify.base import SEARCH_SIGMA_PX, MatchSettings
@@ -143,7 +143,7 @@ def known_field_depth(
     star rarely lands on one). A CSV or ``Catalog`` is used whole, with no deep stage unless
     told."""
     mag_limit, deep = options.mag_limit, options.deep_mag_limit
-    if options.catalog is None or str(options.catalog).lower() == "hipparcos":
+    if is_embedded(options.catalog):
         sigma_px = SEARCH_SIGMA_PX if options.sigma_px is None else options.sigma_px
         circle_rad = MATCH_SIGMAS * sigma_px / camera.scale_px_per_rad
         half_w = math.atan(camera.width / (2.0 * camera.focal_px))
@@ -193,7 +193,7 @@ def load_band(table_diagonal_deg: float, lo: float, hi: float, catalog: Catalog)
 def search_catalog(catalog: Catalog | str | Path | None, epoch_year: float | None) -> Catalog:
     """The catalog the bands are cut from: Hipparcos to Hp 8.5 (``_MAX_MAG``: Hipparcos is
     complete to Hp 7.3-9), or the whole CSV / ``Catalog`` given."""
-    if catalog is None or (isinstance(catalog, str | Path) and str(catalog).lower() == "hipparcos"):
+    if is_embedded(catalog):
         return load_catalog(None, mag_limit=_MAX_MAG, epoch_year=epoch_year)
     return load_catalog(catalog, epoch_year=epoch_year)
 
