@@ -2,19 +2,21 @@
 
     python benchmarks/speed/track_stream.py --frames 600
 
-A real ``starnav track`` process (12° / 512 px, ``--sigma-px 0.1``, its default catalog depth
-and time budget) is fed frames at ``--rate-hz`` (default 10 Hz: the script sleeps until each
+A real ``starnav track`` process (``--camera``: 12° / 512 px with ``--sigma-px 0.1``, or a
+6° star tracker, 6.1° / 1392 x 1040 px with ``--sigma-px 0.3``; its default catalog depth and
+time budget) is fed frames at ``--rate-hz`` (default 10 Hz: the script sleeps until each
 frame is due, as a camera would deliver it) and each answer line is read before the next frame
 is due. Latency is from the frame's line written (and flushed) to its answer line read: the
 pipe both ways, reading, solving and writing the answer, as flight software sees it. The
-frames (Hipparcos stars to Hp 6, made before the process starts, so their making is not
-timed) are a slew at ``--step-deg`` per frame with a slow roll drift, 0.1 px noise and one
-false star, from a random start; every ``--outage-every``-th frame comes after a 10 s outage
-(its ``t`` jumps), so it is solved lost in space, every ``--random-every``-th holds 30
-random points and no star field (the hardest frame: the whole search runs, nothing is found),
-and every ``--bad-every``-th line is not JSON. Answers are scored by ``starnav evaluate``'s
-rule (``harness.CORRECT_RULE``). Writes the ``track-latency`` block of docs/track.md
-(``--out -``: print only).
+frames (Hipparcos stars to Hp 6, or 10.3 for the tracker, made before the process starts, so
+their making is not timed) are a slew at ``--step-deg`` per frame with a slow roll drift,
+0.1 px noise (0.3 for the tracker) and one false star, from a random start; every
+``--outage-every``-th frame comes after a 10 s outage (its ``t`` jumps), so it is solved lost
+in space, every ``--random-every``-th holds 30 random points and no star field (the hardest
+frame: the whole search runs, nothing is found), and every ``--bad-every``-th line is not
+JSON. Answers are scored by ``starnav evaluate``'s rule (``harness.CORRECT_RULE``). Writes
+the ``track-latency`` block of docs/track.md (``track-latency-tracker`` for the tracker;
+``--out -``: print only).
 """
 
 from __future__ import annotations
@@ -44,7 +46,16 @@ from starnav.geometry import attitude_from_radec_roll
 from starnav.simulate import simulate_frame
 
 DOC = DOCS / "track.md"
-COMMAND = ["-m", "starnav", "track", "--fov-deg", "12", "--width", "512", "--sigma-px", "0.1"]
+# the cameras: (description, command options, horizontal FOV deg, width, height px, the
+# stars' Hp limit, centroid noise px, the docs block)
+CAMERAS = {
+    "12": ("12° / 512 px, stars to Hp 6, 0.1 px noise",
+           ["--fov-deg", "12", "--width", "512", "--sigma-px", "0.1"],
+           12.0, 512, 512, 6.0, 0.1, "track-latency"),
+    "tracker": ("a 6° star tracker: 6.1° / 1392 x 1040 px, stars to Hp 10.3, 0.3 px noise",
+                ["--fov-deg", "6.1", "--width", "1392", "--height", "1040", "--sigma-px", "0.3"],
+                6.1, 1392, 1040, 10.3, 0.3, "track-latency-tracker"),
+}  # fmt: skip
 OUTAGE_S = 10.0  # the time jump before an outage frame (longer than --max-gap-s's default)
 RANDOM_POINTS = 30  # the points of a frame that holds no star field
 
@@ -53,8 +64,9 @@ def make_frames(args: argparse.Namespace) -> list[tuple[str, str, np.ndarray | N
     """(kind, JSON line, true attitude or None) per line: kinds "frame", "outage", "random",
     "bad"."""
     rng = np.random.default_rng(args.seed)
-    catalog = load_catalog(None, mag_limit=6.0)
-    camera = Camera.from_fov(12.0, 512)
+    _, _, fov_deg, width, height, mag, noise_px, _ = CAMERAS[args.camera]
+    catalog = load_catalog(None, mag_limit=mag)
+    camera = Camera.from_fov(fov_deg, width, height)
     R = attitude_from_radec_roll(rng.uniform(0, 360), rng.uniform(-60, 60), rng.uniform(0, 360))
     # a steady turn about a fixed axis in the camera frame: mostly across the sky, a little roll
     step = Rotation.from_rotvec(np.radians(args.step_deg) * np.array([0.96, 0.2, 0.2])).as_matrix()
@@ -64,13 +76,13 @@ def make_frames(args: argparse.Namespace) -> list[tuple[str, str, np.ndarray | N
             out.append(("bad", '{"x": [1, 2, 3], "y": ', None))
             continue
         if k % args.random_every == 0:  # no star field: the whole search runs, nothing found
-            xy = rng.uniform(0, 512, (RANDOM_POINTS, 2)).round(3)
+            xy = (rng.uniform(0, 1, (RANDOM_POINTS, 2)) * (width, height)).round(3)
             out.append(("random", json.dumps({"xy": xy.tolist(), "id": k}), None))
             continue
         kind = "outage" if k % args.outage_every == 0 else "frame"
         t_s += OUTAGE_S if kind == "outage" else 1.0 / args.rate_hz
         R = step @ R
-        f = simulate_frame(catalog, camera, R_cam_from_icrs=R, noise_px=0.1, false_stars=1,
+        f = simulate_frame(catalog, camera, R_cam_from_icrs=R, noise_px=noise_px, false_stars=1,
                            seed=rng)  # fmt: skip
         line = {"x": f.xy[:, 0].round(3).tolist(), "y": f.xy[:, 1].round(3).tolist(),
                 "mag": f.mag.round(2).tolist(), "t": round(t_s, 3), "id": k}  # fmt: skip
@@ -78,9 +90,10 @@ def make_frames(args: argparse.Namespace) -> list[tuple[str, str, np.ndarray | N
     return out
 
 
-def start(extra: list[str]) -> tuple[subprocess.Popen, str]:
+def start(options: list[str]) -> tuple[subprocess.Popen, str]:
     """The ``starnav track`` process, once it says it is ready (its ready line)."""
-    proc = subprocess.Popen([sys.executable, *COMMAND, *extra], stdin=subprocess.PIPE,
+    command = [sys.executable, "-m", "starnav", "track", *options]
+    proc = subprocess.Popen(command, stdin=subprocess.PIPE,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)  # fmt: skip
     line = ""
     for line in proc.stderr:  # the lines before it: a notice when the machine code compiles
@@ -159,11 +172,14 @@ def main() -> None:
     parser.add_argument("--random-every", type=int, default=50, help="default 50")
     parser.add_argument("--bad-every", type=int, default=100, help="default 100")
     parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--camera", choices=list(CAMERAS), default="12",
+                        help="12: 12° / 512 px (default); tracker: a 6° star tracker")  # fmt: skip
     parser.add_argument("--out", default=str(DOC), help="markdown file ('-': print only)")
     args = parser.parse_args()
     frames = make_frames(args)
     t0 = time.time()
-    proc, ready = start([])
+    described, options, *_, block = CAMERAS[args.camera]
+    proc, ready = start(options)
     try:
         rows, late = feed(proc, frames, args.rate_hz)
     finally:
@@ -172,23 +188,24 @@ def main() -> None:
     wall = time.time() - t0
     lines = [
         f"{len(rows)} lines at {args.rate_hz:g} Hz through one `starnav track` process over a "
-        f"pipe: a slew at {args.step_deg:g}° per frame, 12° / 512 px, stars to Hp 6, 0.1 px noise, "
-        f"one false star; every {args.outage_every}th frame after a {OUTAGE_S:g} s outage (lost "
-        f"in space), every {args.random_every}th {RANDOM_POINTS} random points without "
-        f"brightness (no star field: the whole search runs), every {args.bad_every}th line not "
-        f"JSON (seed {args.seed}).",
+        f"pipe: a slew at {args.step_deg:g}° per frame, {described}, one false star; "
+        f"`starnav track {' '.join(options)}`; every {args.outage_every}th frame after a "
+        f"{OUTAGE_S:g} s outage (lost in space), every {args.random_every}th "
+        f"{RANDOM_POINTS} random points without brightness (no star field: the whole search "
+        f"runs), every {args.bad_every}th line not JSON (seed {args.seed}).",
         "",
         *table(rows),
         "",
         f"Latency: the frame's line written to its answer line read; in the process: the "
         f"answer's `time_ms`. Lines sent late (the previous answer came after the next frame "
         f'was due): {late}. Before the first frame: "{ready}". Exit status at the end of '
-        f"input: {code}. `python benchmarks/speed/track_stream.py --frames {args.frames}`: "
+        f"input: {code}. `python benchmarks/speed/track_stream.py --frames {args.frames} "
+        f"--camera {args.camera}`: "
         f"{wall:.0f} s on {machine(load_at_end=True)}.",
     ]
     text = "\n".join(lines)
     if args.out != "-":
-        replace_block(args.out, "track-latency", text)
+        replace_block(args.out, block, text)
     print(text)
 
 
