@@ -96,8 +96,14 @@ def read_star_csv(path: str | Path) -> StarList:
     if bright_col == "flux":
         brightness = bright
     elif bright_col == "mag":
-        brightness = 10.0 ** (-0.4 * bright)
+        brightness = brightness_of_mag(bright)
     return StarList(xy, tuple(labels), brightness)
+
+
+def brightness_of_mag(mag: np.ndarray) -> np.ndarray:
+    """The brightness (larger is brighter, flux units of magnitude 0) of magnitudes ``mag``:
+    how a star list given as magnitudes is ordered and weighed."""
+    return 10.0 ** (-0.4 * np.asarray(mag, dtype=float))
 
 
 def check_star_list(

@@ -14,6 +14,7 @@ from starnav.errors import StarnavError
 from starnav.identify import ALGORITHMS, DEFAULT_ALGORITHM
 from starnav.identify.options import check_algorithm_options
 from starnav.pipeline.deep import DEEP_OFF
+from starnav.pipeline.options import DEFAULT_MAX_FALSE_MATCH_PROBABILITY
 from starnav.runtime.budget import DEFAULTS
 
 EXIT_OK, EXIT_NOT_SOLVED, EXIT_BAD_INPUT = 0, 1, 2
@@ -71,6 +72,14 @@ def seconds(text: str) -> float:
     if value <= 0:
         raise argparse.ArgumentTypeError(f"must be a positive number of seconds, got {text}")
     return value
+
+
+def add_acceptance(p: argparse.ArgumentParser) -> None:
+    """--parity and --max-false-match-probability: what a star-list solve may answer."""
+    p.add_argument("--parity", type=int, choices=(1, -1), help="force parity (default: find)")
+    p.add_argument("--max-false-match-probability", type=finite,
+                   default=DEFAULT_MAX_FALSE_MATCH_PROBABILITY,
+                   help="refuse less certain answers (default %(default)g)")  # fmt: skip
 
 
 def add_time_budget(p: argparse.ArgumentParser) -> None:

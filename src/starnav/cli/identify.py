@@ -11,7 +11,6 @@ from pathlib import Path
 import numpy as np
 
 from starnav.api import (
-    DEFAULT_MAX_FALSE_MATCH_PROBABILITY,
     DEFAULT_SIGMA_PX,
     SolveOptions,
     solve_stars,
@@ -22,6 +21,7 @@ from starnav.cli.common import (
     EXIT_NOT_SOLVED,
     EXIT_OK,
     Subparsers,
+    add_acceptance,
     add_algorithm,
     add_catalog,
     add_deep_mag_limit,
@@ -64,14 +64,8 @@ def add_parser(subparsers: Subparsers) -> None:
         f"tolerances allow {DEFAULT_SIGMA_PX:g} px, the false-match probability takes the sigma "
         "the stars fit best)",
     )
-    p.add_argument("--parity", type=int, choices=(1, -1), help="force parity (default: find)")
+    add_acceptance(p)
     p.add_argument("--fit-focal", action="store_true", help="fit the focal length too")
-    p.add_argument(
-        "--max-false-match-probability",
-        type=finite,
-        default=DEFAULT_MAX_FALSE_MATCH_PROBABILITY,
-        help="refuse less certain answers (default %(default)g)",
-    )
     add_algorithm(p)
     p.add_argument(
         "--workers", type=positive_int, help="a directory: processes (default: all cores)"

@@ -20,6 +20,7 @@ from starnav.camera import MODELS
 from starnav.cli.common import (
     EXIT_OK,
     Subparsers,
+    add_acceptance,
     add_algorithm,
     add_catalog,
     add_deep_mag_limit,
@@ -30,7 +31,7 @@ from starnav.cli.common import (
 from starnav.cli.identify import solve_options
 from starnav.cli.output import to_json
 from starnav.errors import StarnavError
-from starnav.pipeline.options import DEFAULT_MAX_FALSE_MATCH_PROBABILITY, SolveOptions
+from starnav.pipeline.options import SolveOptions
 from starnav.pipeline.track import DEFAULT_MAX_GAP_S, Tracker
 
 
@@ -53,10 +54,7 @@ def add_parser(subparsers: Subparsers) -> None:
     add_deep_mag_limit(p)
     p.add_argument("--sigma-px", type=finite, help="centroid error, 1 sigma (px; default: "
                    "not known, as for starnav identify)")  # fmt: skip
-    p.add_argument("--parity", type=int, choices=(1, -1), help="force parity (default: find)")
-    p.add_argument("--max-false-match-probability", type=finite,
-                   default=DEFAULT_MAX_FALSE_MATCH_PROBABILITY,
-                   help="refuse less certain answers (default %(default)g)")  # fmt: skip
+    add_acceptance(p)
     add_algorithm(p)
     p.add_argument("--prior-sigma-deg", type=finite, default=SolveOptions.prior_sigma_deg,
                    help="1-sigma error of the last attitude as a prior for the next frame "

@@ -96,19 +96,14 @@ def horizontal_fov_deg(diagonal_deg: float, width: int, height: int) -> float:
     )
 
 
-def _sky_stars_needed(diagonal_deg: float) -> int:
-    """Stars on the whole sky for ``_STARS_PER_FIELD`` on average in a pattern field of a
-    ``diagonal_deg`` diagonal FOV."""
-    radius = FIELD_RADIUS_FRACTION * math.radians(diagonal_deg) / 2.0
-    return int(_STARS_PER_FIELD * 2.0 / (1.0 - math.cos(radius)))  # 4 pi / field solid angle
-
-
 def band_mag_limit(diagonal_deg: float, sorted_mags: np.ndarray) -> float:
     """Magnitude limit of a band's catalog: about ``_STARS_PER_FIELD`` stars on average in
     a pattern field of the band's widest diagonal FOV, counted in the catalog's own sorted
     magnitudes (rounded up to 0.25 mag, at most ``_MAX_MAG``, 8.5; the whole catalog when it
     is sparser)."""
-    mag = sorted_mags[min(_sky_stars_needed(diagonal_deg), len(sorted_mags) - 1)]
+    radius = FIELD_RADIUS_FRACTION * math.radians(diagonal_deg) / 2.0
+    needed = _STARS_PER_FIELD * 2.0 / (1.0 - math.cos(radius))  # 4 pi / field solid angle
+    mag = sorted_mags[min(int(needed), len(sorted_mags) - 1)]
     return float(min(math.ceil(mag * 4.0) / 4.0, _MAX_MAG))
 
 

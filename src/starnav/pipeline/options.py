@@ -53,10 +53,11 @@ class SolveOptions:
     None: now), ``deep_mag_limit`` (match every point to the catalog down to this magnitude
     after the fit, with a per-star ``match_probability``; None: the field's default, ``"off"``:
     none). The field's defaults, for the embedded Hipparcos through a known camera
-    (``pipeline.fov.known_field_depth``): identification as deep as the FOV search's band of
-    that field, at least Hp 6, and a deep stage to Hp 12 where the pixels are fine enough
-    that a false star rarely lands on a catalog star (a 6° star tracker's); a searched field
-    identifies on its bands' catalogs and runs no deep stage unless told.
+    (``pipeline.fov.known_field_depth``): identification on Hp 6 where that holds 15 stars
+    in an average image (fields of about 12° and wider), else as deep as the FOV search's
+    band of the field, and on those narrower fields a deep stage to Hp 12 where the pixels
+    are fine enough that a false star rarely lands on a catalog star (a 6° star tracker's);
+    a searched field identifies on its bands' catalogs and runs no deep stage unless told.
 
     The identification: ``algorithm`` (``starnav.identify.ALGORITHMS``) and its
     ``algorithm_options``; ``sigma_px`` (1-sigma centroid error, px; None: not known, the

@@ -36,7 +36,7 @@ from starnav.pipeline.solver import Solver
 from starnav.pipeline.stars import known_budget_s, prepare_solver
 from starnav.results import Solution, SolveResult
 from starnav.runtime.budget import Deadline, check_budget
-from starnav.starlist import StarList, check_star_list
+from starnav.starlist import StarList, brightness_of_mag, check_star_list
 
 _log = logging.getLogger(__name__)
 DEFAULT_MAX_GAP_S = 1.0  # track from an attitude at most this old (s)
@@ -215,7 +215,7 @@ def _brightness(obj: dict) -> np.ndarray | None:
     if "brightness" in obj:
         return _numbers(obj["brightness"], "brightness")
     if "mag" in obj:
-        return 10.0 ** (-0.4 * _numbers(obj["mag"], "mag"))  # as a star list's mag column
+        return brightness_of_mag(_numbers(obj["mag"], "mag"))  # as a star list's mag column
     return None
 
 
