@@ -1,7 +1,9 @@
 """What a process loads on each path: ``import starnav`` (and the CLI's parser) loads no heavy
-dependency, and a star-list solve with the field known loads numba (its kernels) but not the
-image stack (astropy, sep, PIL, scipy.ndimage), matplotlib, scipy.optimize or scipy.spatial.
-Times are measured by benchmarks/speed/startup.py, never here."""
+dependency, the drop-ins' help not even numpy, a star-list solve with the field known loads
+numba (its kernels) but not the image stack (astropy, sep, PIL, scipy.ndimage), matplotlib,
+scipy.optimize or scipy.spatial, and a clean frame's detection (the path of a plate solve)
+does not load scipy.ndimage. Times are measured by benchmarks/speed/startup.py and
+benchmarks/speed/dropin_vs_solve_field.py, never here."""
 
 from __future__ import annotations
 
@@ -71,6 +73,44 @@ def star_list(tmp_path_factory):
 def test_import_starnav_and_the_cli_parser_load_no_heavy_dependency():
     code = "import starnav, starnav.cli\nstarnav.cli.build_parser()\n"
     assert _loaded(code, NOT_AT_IMPORT) == set()
+
+
+@pytest.mark.parametrize(
+    ("module", "help_flag"),
+    [("starnav.dropin.solve_field", "--help"), ("starnav.dropin.astap", "-h")],
+)
+def test_a_drop_in_help_loads_no_numerical_library(module, help_flag):
+    """``starnav-solve-field --help`` and ``starnav-astap -h`` import none of numpy, astropy,
+    numba or scipy: the solver is imported when a file is solved."""
+    code = (
+        "import contextlib, io\n"
+        f"import {module} as dropin\n"
+        "with contextlib.redirect_stdout(io.StringIO()) as out, "
+        "contextlib.suppress(SystemExit):\n"
+        f"    dropin.main([{help_flag!r}])\n"
+        "assert 'usage' in out.getvalue(), out.getvalue()\n"
+    )
+    assert _loaded(code, (*NOT_AT_IMPORT, "numpy")) == set()
+
+
+def test_a_clean_frame_is_detected_without_scipy_ndimage():
+    """A star-tracker frame takes detection's fast path (``starnav.detect.tracker``), whose
+    3 x 3 median of the tiles is numpy's: importing scipy.ndimage would cost a plate solve
+    0.2-0.3 s. The plate solver's own imports do not load it either."""
+    code = (
+        "import numpy as np\n"
+        "import starnav.pipeline.plate\n"
+        "from starnav.detect.stars import detect_stars\n"
+        "rng = np.random.default_rng(1)\n"
+        "y, x = np.mgrid[0:384, 0:512]\n"
+        "image = 100.0 + rng.normal(0.0, 5.0, size=x.shape)\n"
+        "for cx, cy, peak in zip(rng.uniform(10, 502, 80), rng.uniform(10, 374, 80),\n"
+        "                        rng.uniform(100, 2000, 80)):\n"
+        "    image += peak * np.exp(-((x - cx) ** 2 + (y - cy) ** 2) / (2 * 1.3**2))\n"
+        "found = detect_stars(image.astype(np.float32))\n"
+        "assert len(found) >= 60, len(found)\n"
+    )
+    assert _loaded(code, ("scipy.ndimage",)) == set()
 
 
 def test_a_star_list_solve_loads_no_image_stack(star_list):

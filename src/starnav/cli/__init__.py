@@ -8,43 +8,17 @@ sets the command's ``run(args) -> int``); the options and output they share are 
 
 from __future__ import annotations
 
-import atexit
-import gc
+import importlib
 import os
 import sys
 
-from starnav.cli import (
-    calibrate,
-    database,
-    demo,
-    evaluate,
-    identify,
-    locate,
-    pointing,
-    render,
-    serve,
-    simulate,
-    solve,
-    track,
-)
-from starnav.cli.common import EXIT_BAD_INPUT, EXIT_OK, Parser
+from starnav.cli.parser import EXIT_BAD_INPUT, EXIT_OK, Parser, freeze_at_exit
 from starnav.errors import StarnavError
 
-# in the order of ``starnav --help``
-COMMAND_MODULES = (
-    identify,
-    simulate,
-    demo,
-    pointing,
-    evaluate,
-    locate,
-    database,
-    solve,
-    render,
-    calibrate,
-    serve,
-    track,
-)
+# in the order of ``starnav --help``; imported by ``build_parser``, so that a program that
+# needs only ``starnav.cli.common`` (the drop-ins) does not import every command
+COMMAND_MODULES = ("identify", "simulate", "demo", "pointing", "evaluate", "locate", "database",
+                   "solve", "render", "calibrate", "serve", "track")  # fmt: skip
 
 
 def build_parser() -> Parser:
@@ -58,8 +32,8 @@ def build_parser() -> Parser:
         "--version", action="version", version=f"%(prog)s {version()}", help="print the version"
     )
     subparsers = parser.add_subparsers(dest="command", required=True, parser_class=Parser)
-    for module in COMMAND_MODULES:
-        module.add_parser(subparsers)
+    for name in COMMAND_MODULES:
+        importlib.import_module(f"starnav.cli.{name}").add_parser(subparsers)
     return parser
 
 
@@ -79,10 +53,7 @@ def version() -> str:
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``starnav`` command."""
-    # The interpreter's last garbage collections at exit walk every object numba made (0.1-0.3 s
-    # of a command that solved); frozen, they are skipped and the system takes the memory back.
-    atexit.unregister(gc.freeze)  # registered once, however often main runs in a process
-    atexit.register(gc.freeze)
+    freeze_at_exit()
     args = build_parser().parse_args(argv)
     try:
         return args.run(args)

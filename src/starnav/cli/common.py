@@ -1,5 +1,6 @@
-"""What the commands share: exit codes, the parser that reports a mistake in one line, the
-argument types and the option groups several commands take (output: ``starnav.cli.output``)."""
+"""What the commands share: exit codes, the parser that reports a mistake in one line (both from
+``starnav.cli.parser``, kept importable from here), the argument types and the option groups
+several commands take (output: ``starnav.cli.output``)."""
 
 from __future__ import annotations
 
@@ -10,6 +11,7 @@ from pathlib import Path
 from typing import Any, Protocol
 
 from starnav.catalog import DEFAULT_MAG_LIMIT
+from starnav.cli.parser import EXIT_BAD_INPUT, EXIT_NOT_SOLVED, EXIT_OK, Parser  # noqa: F401
 from starnav.errors import StarnavError
 from starnav.identify import ALGORITHMS, DEFAULT_ALGORITHM
 from starnav.identify.options import check_algorithm_options
@@ -17,7 +19,6 @@ from starnav.pipeline.deep import DEEP_OFF
 from starnav.pipeline.options import DEFAULT_MAX_FALSE_MATCH_PROBABILITY
 from starnav.runtime.budget import DEFAULTS
 
-EXIT_OK, EXIT_NOT_SOLVED, EXIT_BAD_INPUT = 0, 1, 2
 # --triangle-selection is short for --algorithm-option selection=...: the algorithms that
 # declare a "selection" option (today triangle) get it unless the long form sets it
 SHORTHANDS = {"triangle_selection": "selection"}
@@ -27,13 +28,6 @@ class Subparsers(Protocol):
     """What a command module's ``add_parser`` needs of ``add_subparsers()``."""
 
     def add_parser(self, name: str, **kwargs: Any) -> argparse.ArgumentParser: ...
-
-
-class Parser(argparse.ArgumentParser):
-    """argparse that reports a usage mistake in one line (exit 2), without the usage dump."""
-
-    def error(self, message: str) -> None:  # type: ignore[override]
-        self.exit(EXIT_BAD_INPUT, f"{self.prog}: error: {message} (see --help)\n")
 
 
 def finite(text: str) -> float:

@@ -20,7 +20,6 @@ import warnings
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import ndimage
 
 MESH_PX = 64
 SAMPLE_PX = 256  # the background is estimated on about this many px a side
@@ -133,8 +132,7 @@ def mesh_maps(
     if not np.isfinite(level).any():
         return np.zeros_like(sample), np.zeros_like(sample), 0.0, 0.0
     level, rms = _filled(level), _filled(rms)
-    level = ndimage.median_filter(level, size=3, mode="nearest")
-    rms = ndimage.median_filter(rms, size=3, mode="nearest")
+    level, rms = median_3x3(level), median_3x3(rms)
     return (
         _bilinear(level, bh, bw, sample.shape),
         _bilinear(rms, bh, bw, sample.shape),
@@ -176,11 +174,23 @@ def _cell_planes(cells: np.ndarray, bh: int, bw: int) -> np.ndarray:
     return coef @ terms
 
 
+def median_3x3(mesh: np.ndarray) -> np.ndarray:
+    """The median of each cell's 3 x 3 neighbourhood, the edge cells repeated beyond the
+    mesh: ``scipy.ndimage.median_filter(mesh, size=3, mode="nearest")`` for a mesh of finite
+    values (the same numbers), without importing scipy.ndimage (0.2-0.3 s of a process that
+    solves one image)."""
+    padded = np.pad(mesh, 1, mode="edge")
+    windows = np.lib.stride_tricks.sliding_window_view(padded, (3, 3))
+    return np.sort(windows.reshape(*mesh.shape, 9), axis=-1)[..., 4]
+
+
 def _filled(mesh: np.ndarray) -> np.ndarray:
     """The mesh with its NaN cells set to the nearest finite cell's value."""
     bad = ~np.isfinite(mesh)
     if not bad.any():
         return mesh
+    from scipy import ndimage  # here: a mesh without gaps (most) does not import it
+
     _, (iy, ix) = ndimage.distance_transform_edt(bad, return_indices=True)
     return mesh[iy, ix]
 
@@ -212,6 +222,8 @@ def fine_background(data: np.ndarray, mask: np.ndarray | None, sources: np.ndarr
     Estimated on every ``step``-th pixel (about 384 px a side)."""
     height, width = data.shape
     step = max(1, min(height, width) // FINE_SAMPLE_PX)
+    from scipy import ndimage
+
     keep_out = sources if mask is None else sources | mask
     sample = np.ascontiguousarray(data[::step, ::step])
     out = ndimage.binary_dilation(keep_out[::step, ::step], iterations=max(1, 3 // step))

@@ -17,7 +17,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import ndimage
 
 _REDUCED_PX = 256
 _OUTLIER_REDUCED_PX = 3.0
@@ -47,6 +46,8 @@ def find_image_circle(image: np.ndarray) -> ImageCircle | None:
     """The bright disc of a circular fisheye in a 2-D image (row 0 at the top), or None when
     the image has no dark frame around a disc of radius at least a quarter of its shorter
     side."""
+    from scipy import ndimage  # here: a pinhole image's solve does not import scipy.ndimage
+
     data = np.asarray(image, dtype=np.float32)
     height, width = data.shape
     step = max(1, math.ceil(max(height, width) / _REDUCED_PX))

@@ -36,8 +36,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import ndimage
 
+from starnav.detect.background import median_3x3
 from starnav.detect.hot import clean_hot_pixels
 from starnav.detect.photometry import misshapen, zones
 from starnav.detect.psf import DEFAULT_SIGMA_PX, psf_samples, psf_sigma_from
@@ -114,8 +114,7 @@ def tracker_sources(
     if not _smooth_white_sky(level, rms, white) or at_low >= _CLIPPED_FRACTION * samples:
         return None
     # both median-filtered over 3 x 3 tiles, as the real-sky mesh
-    level = ndimage.median_filter(level, size=3, mode="nearest")
-    rms = ndimage.median_filter(rms, size=3, mode="nearest")
+    level, rms = median_3x3(level), median_3x3(rms)
     sky, noise = float(np.median(level)), float(np.median(rms))
     residual = kernels.background_subtracted(data, level, TILE_PX)
     # one threshold on a noise within 25 % of uniform, as the real-sky path; else a map
@@ -158,7 +157,7 @@ def _smooth_white_sky(level: np.ndarray, rms: np.ndarray, white: np.ndarray) -> 
     typical = np.median(rms)
     if rms.max() > _RMS_ABOVE * typical or rms.min() < typical / _RMS_BELOW:
         return False
-    around = ndimage.median_filter(level, size=3, mode="nearest")
+    around = median_3x3(level)
     return bool(np.all(np.abs(level - around) <= _STEP_RMS * rms))
 
 

@@ -31,15 +31,17 @@ import sys
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-import numpy as np
-from astropy.io import fits
-from astropy.wcs import WCS
-
-from starnav.cli.common import EXIT_BAD_INPUT, Parser
+from starnav.cli.parser import EXIT_BAD_INPUT, Parser, freeze_at_exit
 from starnav.errors import CatalogError, ImageError, StarnavError
-from starnav.pipeline.image import MIN_DETECTIONS
-from starnav.pipeline.plate import Plate, PlateHints, PlateResult, fov_range_from_scale, solve_plate
+
+if TYPE_CHECKING:  # numpy, astropy and the solver are imported when a file is solved: -h needs none
+    import numpy as np
+    from astropy.io import fits
+    from astropy.wcs import WCS
+
+    from starnav.pipeline.plate import Plate, PlateHints, PlateResult
 
 PROG = "starnav-astap"
 EXIT_SOLVED, EXIT_NO_SOLUTION, EXIT_NOT_ENOUGH_STARS = 0, 1, 2
@@ -75,6 +77,8 @@ class AstapSolution:
     @classmethod
     def from_plate(cls, plate: Plate) -> AstapSolution:
         """The centred TAN solution of a plate (module docstring)."""
+        import numpy as np
+
         tan = plate.wcs  # TAN, CRPIX at the centre (``pipeline.image.solution_wcs``)
         cd = np.array(tan.wcs.cd, dtype=float)
         f = -1.0 if np.linalg.det(cd) < 0 else 1.0
@@ -146,6 +150,7 @@ def build_parser() -> Parser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run ASTAP's command line; ASTAP's exit code."""
+    freeze_at_exit()
     program = sys.argv[0] if argv is None else PROG  # ASTAP's CMDLINE starts with its path
     argv = list(sys.argv[1:] if argv is None else argv)
     parser = build_parser()
@@ -186,6 +191,9 @@ def _with_suffix(base: Path, suffix: str) -> Path:
 
 
 def _run(args, base: Path, cmdline: str, log: list[str]) -> int:
+    from starnav.pipeline.image import MIN_DETECTIONS
+    from starnav.pipeline.plate import solve_plate
+
     image = Path(args.f)
     ini, wcs_path = _with_suffix(base, ".ini"), _with_suffix(base, ".wcs")
     if wcs_path.exists():
@@ -235,6 +243,8 @@ def _run(args, base: Path, cmdline: str, log: list[str]) -> int:
 def _hints(args, width: int, height: int) -> PlateHints:
     """starnav's hints of ASTAP's options: -fov (the height) to a width range of ±10 %;
     -ra/-spd with -r below 180 to a position; -z to a downsampling factor."""
+    from starnav.pipeline.plate import PlateHints, fov_range_from_scale
+
     fov_range = None
     if args.fov is not None and args.fov < 0:
         raise StarnavError(f"-fov must be 0 (unknown) or a height in degrees, got {args.fov}")
@@ -302,6 +312,8 @@ def wcs_header(
 ) -> fits.Header:
     """The .wcs header: SIMPLE, BITPIX 8, NAXIS 0, a FITS image's own cards (its size and WCS
     cards left out), then the solution (``AstapSolution.cards``), ASTAP's comments."""
+    from astropy.io import fits
+
     from starnav.detect.header import is_fits
 
     header = fits.Header([("SIMPLE", True), ("BITPIX", 8), ("NAXIS", 0)])
@@ -328,6 +340,8 @@ def wcs_header(
 def update_input(image: Path, result: PlateResult, solution: AstapSolution) -> None:
     """ASTAP's -update: the solution added to a FITS file's header, or for another format a
     new FITS file of the image (input path, extension .fits) with it."""
+    from astropy.io import fits
+
     from starnav.detect.header import is_fits
     from starnav.pipeline.plate import write_plate_files
 

@@ -23,23 +23,15 @@ import sys
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-import numpy as np
-
-from starnav.cli.common import EXIT_BAD_INPUT, Parser
+from starnav.cli.parser import EXIT_BAD_INPUT, Parser, freeze_at_exit
 from starnav.errors import StarnavError
-from starnav.pipeline.plate import (
-    Plate,
-    PlateHints,
-    PlateResult,
-    XYList,
-    dec_deg_from_text,
-    fov_range_from_scale,
-    parity_from_nova,
-    ra_deg_from_text,
-    solve_plate,
-    write_plate_files,
-)
+
+if TYPE_CHECKING:  # numpy and the solver are imported when a file is solved: --help needs neither
+    import numpy as np
+
+    from starnav.pipeline.plate import Plate, PlateHints, PlateResult, XYList
 
 PROG = "starnav-solve-field"
 EXIT_OK = 0  # solve-field exits 0 whether or not the field solved
@@ -152,6 +144,7 @@ def build_parser() -> Parser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run solve-field's command line; the exit status."""
+    freeze_at_exit()
     args = build_parser().parse_args(_joined_values(sys.argv[1:] if argv is None else argv))
     try:
         hints_common = _hints(args)
@@ -182,6 +175,8 @@ def _joined_values(argv: Sequence[str]) -> list[str]:
 
 def _hints(args) -> dict:
     """The hints that do not depend on the image (the scale needs its width)."""
+    from starnav.pipeline.plate import dec_deg_from_text, parity_from_nova, ra_deg_from_text
+
     out: dict = {"parity": parity_from_nova(args.parity), "crpix_center": args.crpix_center}
     if (args.ra is None) != (args.dec is None):
         raise StarnavError("--ra and --dec go together")
@@ -227,7 +222,10 @@ def read_xylist(path: Path, args) -> XYList | None:
 
     if not is_fits(path):
         return None
+    import numpy as np
     from astropy.io import fits
+
+    from starnav.pipeline.plate import XYList
 
     try:
         with fits.open(path, memmap=False) as hdul:
@@ -251,6 +249,8 @@ def read_xylist(path: Path, args) -> XYList | None:
 
 
 def _solve_one(infile: Path, number: int, count: int, args, common: dict) -> None:
+    from starnav.pipeline.plate import PlateHints, solve_plate
+
     if not infile.is_file():
         raise StarnavError(f"input file {str(infile)!r} does not exist")
     paths = output_paths(infile, args)
@@ -284,6 +284,8 @@ def _fov_range(args, width: int) -> tuple[float, float] | None:
     low = args.scale_low if args.scale_low is not None else args.scale_high
     high = args.scale_high if args.scale_high is not None else args.scale_low
     units = SCALE_UNIT_NAMES[args.scale_units.lower()]
+    from starnav.pipeline.plate import fov_range_from_scale
+
     return fov_range_from_scale(units, low, high, width)
 
 
@@ -296,6 +298,8 @@ def print_result(result: PlateResult, field: str, paths: OutputPaths, *, image: 
         print("Did not solve (or no WCS file was written).")
         return
     source = None if result.image is None else field
+    from starnav.pipeline.plate import write_plate_files
+
     write_plate_files(result, source, wcs=paths.wcs,
                       new_fits=paths.new_fits if image else None)  # fmt: skip
     print("Field 1: solved with index starnav (Hipparcos).")
@@ -363,6 +367,8 @@ def _sexagesimal(sign: str, a: int, m: int, s: float) -> str:
 def field_size(plate: Plate) -> tuple[float, float, str]:
     """Width and height through the middle of the image, in arcseconds, arcminutes or degrees
     as solve-field chooses (``util/sip-utils.c``, ``sip_get_field_size``)."""
+    import numpy as np
+
     w, h = plate.width, plate.height
     mid_x, mid_y = (0.5 + w + 0.5) / 2.0, (0.5 + h + 0.5) / 2.0
     across = [(0.5, mid_y), (mid_x, mid_y), (w + 0.5, mid_y)]
@@ -376,6 +382,8 @@ def field_size(plate: Plate) -> tuple[float, float, str]:
 
 
 def _path_arcsec(radec_deg: np.ndarray) -> float:
+    import numpy as np
+
     from starnav.geometry import radec_to_unit
 
     v = radec_to_unit(np.radians(radec_deg[:, 0]), np.radians(radec_deg[:, 1]))
