@@ -31,11 +31,13 @@ import math
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
-
-from astropy.time import Time
+from typing import TYPE_CHECKING
 
 from starnav.detect.read import FITS_MAGIC, FITS_SUFFIXES
 from starnav.errors import ImageError, StarnavError
+
+if TYPE_CHECKING:  # astropy.time (0.25 s) is imported where a time is read: a solve reads none
+    from astropy.time import Time
 
 _EXIF_IFD = 0x8769
 _DATE_TIME_ORIGINAL = 36867
@@ -217,6 +219,8 @@ def _fits_time(path: Path, headers: list) -> ImageTime | None:
         )
     if scale != "utc":
         source += f" ({scale.upper()})"
+    from astropy.time import Time
+
     try:
         t = Time(date.removesuffix("Z"), format="isot", scale=scale).utc
     except ValueError:
@@ -241,6 +245,8 @@ def _exif_time(path: Path) -> ImageTime | None:
     subsec = str(exif.get(_SUBSEC_TIME_ORIGINAL, "")).strip().rstrip("\x00")
     date, _, clock = text.partition(" ")
     iso = f"{date.replace(':', '-')}T{clock}" + (f".{subsec}" if subsec.isdigit() else "")
+    from astropy.time import Time
+
     try:
         t = Time(iso, format="isot", scale="utc")
     except ValueError:
