@@ -21,7 +21,7 @@ from __future__ import annotations
 import math
 import sys
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -50,29 +50,48 @@ IGNORED_FLAGS = (
     "--no-delete-temp", "--fits-image", "--timestamp", "--temp-axy", "--verbose",
 )  # fmt: skip
 IGNORED_VALUES = (
-    "--uniformize", "--objs", "--depth", "--temp-dir", "--keep-xylist", "--corr", "--match",
-    "--rdls", "--index-xyls", "--axy", "--config", "--backend-config", "--tweak-order",
+    "--uniformize", "--objs", "--depth", "--temp-dir", "--config", "--backend-config",
+    "--tweak-order",
     "--sigma", "--nsigma", "--plot-scale", "--plot-bg", "--extension", "--code-tolerance",
-    "--index-dir", "--index-file", "--kmz", "--scamp", "--scamp-config",
+    "--index-dir", "--index-file", "--scamp", "--scamp-config",
     "--sort-column", "--pnm", "--cancel", "--solved-in",
 )  # fmt: skip
 SHORT_IGNORED = {"--tweak-order": "-t", "--depth": "-d", "--temp-dir": "-m",
-                 "--keep-xylist": "-k", "--corr": "-B", "--match": "-M", "--rdls": "-R",
-                 "--index-xyls": "-U", "--backend-config": "-b", "--objs": None}  # fmt: skip
+                 "--backend-config": "-b", "--objs": None}  # fmt: skip
+# the side files' options (``output_paths``): (option, short letter or None, default
+# path with "%s" for BASE or None, help); an option here is written, not ignored
+# (solver/solve-field.c: .axy, .corr, .match, .rdls, -indx.xyls by default, "none" disables
+# them but .axy, which --temp-axy drops; --keep-xylist and --kmz only when given)
+SIDE_FILE_OPTIONS: tuple[tuple[str, str | None, str | None, str], ...] = (
+    ("--axy", None, "%s.axy", "augmented xylist: sources and solver keywords (default BASE.axy)"),
+    ("--corr", "-B", "%s.corr", "matched field and catalog stars (default BASE.corr)"),
+    ("--match", "-M", "%s.match", "the match's summary, MatchObj (default BASE.match)"),
+    ("--rdls", "-R", "%s.rdls", "RA, Dec of the catalog stars in the field (default BASE.rdls)"),
+    ("--index-xyls", "-U", "%s-indx.xyls", "x, y of those stars (default BASE-indx.xyls)"),
+    ("--keep-xylist", "-k", None, "the sources, unaugmented xylist (not written by default)"),
+    ("--kmz", "-Z", None, "a KML ground overlay of the image, zipped (not written by default)"),
+)
 
 
 @dataclass(frozen=True)
 class OutputPaths:
-    """Where one input's files go (None: not written): ``wcs``, ``new_fits``, ``solved``."""
+    """Where one input's files go (None: not written): ``wcs``, ``new_fits``, ``solved`` and
+    the side files by ``write_plate_files``'s kind (``side``: axy, corr, match, rdls,
+    index_xyls, xyls, kmz)."""
 
     base: Path
     wcs: Path | None
     new_fits: Path | None
     solved: Path | None
+    side: dict[str, Path] = field(default_factory=dict)
+
+    def outputs(self) -> list[Path]:
+        """Every file this input's solve writes."""
+        return [p for p in (self.wcs, self.new_fits, self.solved, *self.side.values()) if p]
 
     def existing(self) -> list[Path]:
         """The outputs that exist already."""
-        return [p for p in (self.wcs, self.new_fits, self.solved) if p is not None and p.exists()]
+        return [p for p in self.outputs() if p.exists()]
 
 
 def build_parser() -> Parser:
@@ -128,6 +147,8 @@ def build_parser() -> Parser:
     p.add_argument("-Y", "--y-column", default="Y", help="xylist: y column (default Y)")
     p.add_argument("-w", "--width", type=int, help="xylist: image width (px)")
     p.add_argument("-e", "--height", type=int, help="xylist: image height (px)")
+    for flag, short, _, text in SIDE_FILE_OPTIONS:
+        p.add_argument(*(n for n in (short, flag) if n), metavar="FILE", help=text)
     for flag in IGNORED_FLAGS:
         p.add_argument(flag, action="store_true", help="accepted and ignored (docs/dropin.md)")
     for flag in IGNORED_VALUES:
@@ -198,7 +219,9 @@ def _hints(args) -> dict:
 def output_paths(infile: Path, args) -> OutputPaths:
     """solve-field's names (``solver/solve-field.c``): BASE is ``--dir`` (else the input's
     directory) / ``--out`` (else the input's name without .gz/.bz2 and a 2-4 letter suffix);
-    ``-W``, ``--new-fits``, ``--solved`` replace a file's path ("%s" in them: BASE)."""
+    ``-W``, ``--new-fits``, ``--solved`` and the side files' options (``SIDE_FILE_OPTIONS``)
+    replace a file's path ("%s" in them: BASE; "none": not written, as solve-field reads it for
+    every file but .axy, which ``--temp-axy`` drops)."""
     name = args.out or infile.name
     for packed in (".gz", ".bz2"):
         name = name.removesuffix(packed)
@@ -207,11 +230,24 @@ def output_paths(infile: Path, args) -> OutputPaths:
         name = name[:dot]
     base = Path(args.dir) / name if args.dir else infile.parent / name
 
-    def path(option: str | None, suffix: str) -> Path:
+    def path(option: str | None, suffix: str) -> Path | None:
+        if option is not None and option.lower() == "none":
+            return None  # solve-field's none_is_null: the file is not written
         return Path(option.replace("%s", str(base))) if option else Path(f"{base}{suffix}")
 
-    new_fits = None if (args.new_fits or "").lower() == "none" else path(args.new_fits, ".new")
-    return OutputPaths(base, path(args.wcs, ".wcs"), new_fits, path(args.solved, ".solved"))
+    new_fits = path(args.new_fits, ".new")
+    side = {}
+    for flag, _, default, _ in SIDE_FILE_OPTIONS:
+        given = getattr(args, flag[2:].replace("-", "_"), None) or default
+        if given and given.lower() != "none":
+            side[_SIDE_KIND.get(flag, flag[2:])] = Path(given.replace("%s", str(base)))
+    if getattr(args, "temp_axy", False):
+        side.pop("axy", None)  # solve-field keeps it in its temporary directory
+    return OutputPaths(base, path(args.wcs, ".wcs"), new_fits, path(args.solved, ".solved"),
+                       side)  # fmt: skip
+
+
+_SIDE_KIND = {"--index-xyls": "index_xyls", "--keep-xylist": "xyls"}
 
 
 def read_xylist(path: Path, args) -> XYList | None:
@@ -271,7 +307,7 @@ def _solve_one(infile: Path, number: int, count: int, args, common: dict) -> Non
 
     print("Solving...", flush=True)
     result = solve_plate(source, hints, time_budget_s=args.cpulimit)
-    for p in (paths.wcs, paths.new_fits, paths.solved):
+    for p in paths.outputs():
         if p is not None and p.exists():
             p.unlink()  # a stale file must not read as this run's answer
     print_result(result, str(infile), paths, image=xylist is None)
@@ -291,17 +327,20 @@ def _fov_range(args, width: int) -> tuple[float, float] | None:
 
 def print_result(result: PlateResult, field: str, paths: OutputPaths, *, image: bool) -> None:
     """Write the files and print solve-field's lines for one solve."""
+    from starnav.pipeline.plate import write_plate_files
+
     plate = result.plate
+    source = None if result.image is None else field
+    sources_only = {k: v for k, v in paths.side.items() if k in ("axy", "xyls")}
     if plate is None:
+        write_plate_files(result, source, **sources_only)  # solve-field writes them first
         print(f"Field 1 did not solve ({result.reason}).")
         print(f"Field: {field}")
         print("Did not solve (or no WCS file was written).")
         return
-    source = None if result.image is None else field
-    from starnav.pipeline.plate import write_plate_files
-
+    side = {k: v for k, v in paths.side.items() if image or k != "kmz"}
     write_plate_files(result, source, wcs=paths.wcs,
-                      new_fits=paths.new_fits if image else None)  # fmt: skip
+                      new_fits=paths.new_fits if image else None, **side)  # fmt: skip
     print("Field 1: solved with index starnav (Hipparcos).")
     if paths.solved is not None:
         print(f"Field 1 solved: writing to file {paths.solved} to indicate this.")

@@ -244,7 +244,6 @@ def wcs_from_attitude(
     _check_order(sip_order)
     code = projection(camera)
     z = R[2]
-    ra_rad, dec_rad = unit_to_radec(z)
     north, east = north_east(z)
     # intermediate world coordinates of a direction s at θ from the axis: R_θ (s.E, s.N) / sin θ
     # (toward East, North), R_θ = (180/π) g(θ); with c = R s and s = R^T c (R orthogonal,
@@ -254,38 +253,287 @@ def wcs_from_attitude(
         [[R[0] @ east, R[1] @ east], [R[0] @ north, R[1] @ north]]
     )
     distorted = camera.distorted
-    suffix = "-SIP" if distorted else ""
+    header = _celestial_header(
+        code + ("-SIP" if distorted else ""),
+        (float(camera.cx) + 0.5, float(camera.cy) + 0.5),
+        z,
+        cd,
+        date_obs,
+        ("principal point x (FITS: first pixel centre 1)", "RA of the camera z axis (deg)"),
+    )
+    if distorted:
+        sip = fit_sip(camera, order=sip_order)
+        _add_sip(header, sip.order, sip.a, sip.b, sip.ap, sip.bp)
+    wcs = WCS(header)
+    wcs.pixel_shape = (camera.width, camera.height)
+    return wcs
+
+
+def _celestial_header(
+    ctype: str,
+    crpix_fits: tuple[float, float],
+    reference: np.ndarray,
+    cd: np.ndarray,
+    date_obs,
+    notes: tuple[str, str] = ("reference pixel x (FITS: first pixel centre 1)", "RA (deg)"),
+) -> fits.Header:
+    """The cards of a zenithal celestial WCS: projection ``ctype`` ("TAN", "TAN-SIP", ...),
+    CRPIX (FITS pixels), CRVAL the sky direction ``reference`` (unit vector), the CD matrix
+    (deg/px), DATE-OBS / MJD-OBS when ``date_obs`` is given."""
+    ra_rad, dec_rad = unit_to_radec(reference)
     header = fits.Header()
     header["WCSAXES"] = 2
-    header["CTYPE1"] = f"RA---{code}{suffix}"
-    header["CTYPE2"] = f"DEC--{code}{suffix}"
+    header["CTYPE1"] = f"RA---{ctype}"
+    header["CTYPE2"] = f"DEC--{ctype}"
     header["CUNIT1"] = "deg"
     header["CUNIT2"] = "deg"
-    header["CRPIX1"] = (float(camera.cx) + 0.5, "principal point x (FITS: first pixel centre 1)")
-    header["CRPIX2"] = (float(camera.cy) + 0.5, "principal point y")
-    header["CRVAL1"] = (float(np.degrees(ra_rad)), "RA of the camera z axis (deg)")
-    header["CRVAL2"] = (float(np.degrees(dec_rad)), "Dec of the camera z axis (deg)")
+    header["CRPIX1"] = (float(crpix_fits[0]), notes[0])
+    header["CRPIX2"] = (float(crpix_fits[1]), notes[0].split(" x")[0] + " y")
+    header["CRVAL1"] = (float(np.degrees(ra_rad)), notes[1])
+    header["CRVAL2"] = (float(np.degrees(dec_rad)), notes[1].replace("RA", "Dec", 1))
     for i in range(2):
         for j in range(2):
             header[f"CD{i + 1}_{j + 1}"] = float(cd[i, j])
-    # 180 is the zenithal default except at Dec = +90 exactly, where the CD matrix above
-    # (East and North taken at RA = CRVAL1) still needs it; every projection here is zenithal
+    # 180 is the zenithal default except at Dec = +90 exactly, where the CD matrix (East and
+    # North taken at RA = CRVAL1) still needs it; every projection here is zenithal
     header["LONPOLE"] = 180.0
     header["RADESYS"] = "ICRS"
     if date_obs is not None:
         when = _date_obs(date_obs)
         header["DATE-OBS"] = (when.isot, "UTC")
         header["MJD-OBS"] = float(when.mjd)
-    if distorted:
-        sip = fit_sip(camera, order=sip_order)
-        polynomials = (("A", sip.a), ("B", sip.b), ("AP", sip.ap), ("BP", sip.bp))
-        for name, coef in polynomials:
-            header[f"{name}_ORDER"] = sip.order
-            for p, q in zip(*np.nonzero(coef), strict=True):
-                header[f"{name}_{p}_{q}"] = float(coef[p, q])  # absent terms are 0
+    return header
+
+
+def _add_sip(header: fits.Header, order: int, a, b, ap, bp, inverse_order: int | None = None):
+    polynomials = (("A", a, order), ("B", b, order))
+    polynomials += (("AP", ap, inverse_order or order), ("BP", bp, inverse_order or order))
+    for name, coef, n in polynomials:
+        header[f"{name}_ORDER"] = n
+        for p, q in zip(*np.nonzero(coef), strict=True):
+            header[f"{name}_{p}_{q}"] = float(coef[p, q])  # absent terms are 0
+
+
+@dataclass(frozen=True, eq=False)
+class StarFitWcs:
+    """A TAN or TAN-SIP WCS fitted to matched stars (``fit_wcs_to_stars``).
+
+    ``wcs``: the WCS (astropy; ``pixel_shape`` (width, height)); ``order``: its polynomial
+    order, 1 for a plain TAN (no SIP terms were measurable), 2..4 for TAN-SIP;
+    ``inverse_order``: that of AP/BP; ``n_stars``: the stars fitted; ``residual_px``: (n, 2)
+    each star's catalog position through the WCS (sky to pixel, the forward polynomials
+    inverted by Newton's method) minus its measured one, starnav px; ``rms_px``: their rms
+    length; ``p_values``: the F-test's p-value of each order tried beyond the one before it
+    (order: p), the test that chose ``order``; ``max_inverse_error_px``: the largest error of
+    AP/BP over the image.
+    """
+
+    wcs: WCS
+    order: int
+    inverse_order: int
+    n_stars: int
+    residual_px: np.ndarray
+    rms_px: float
+    p_values: dict
+    max_inverse_error_px: float
+
+
+STAR_FIT_MAX_ORDER = 4
+STAR_FIT_P_VALUE = 0.001  # an order's extra terms are kept when chance would do as well this rarely
+STAR_FIT_STARS_PER_TERM = 2  # stars per polynomial term of one axis, at least
+_TANGENT_ITERATIONS = 8
+
+
+def _n_terms(order: int) -> int:
+    """Terms of one axis's polynomial of degrees 0..order (the constant is CRVAL's)."""
+    return (order + 1) * (order + 2) // 2
+
+
+def _gnomonic_deg(vectors: np.ndarray, reference: np.ndarray) -> np.ndarray:
+    """Intermediate world coordinates (n, 2), degrees toward East and North, of unit vectors
+    in the TAN projection about ``reference``; NaN for a direction 90° or more away."""
+    north, east = north_east(reference)
+    depth = vectors @ reference
+    with np.errstate(divide="ignore", invalid="ignore"):
+        out = np.degrees(np.column_stack([vectors @ east, vectors @ north]) / depth[:, None])
+    out[depth <= 0] = np.nan
+    return out
+
+
+def _moved(reference: np.ndarray, offset_deg: np.ndarray) -> np.ndarray:
+    """The direction at TAN coordinates ``offset_deg`` (East, North) about ``reference``."""
+    north, east = north_east(reference)
+    xi, eta = np.radians(offset_deg)
+    v = reference + xi * east + eta * north
+    return v / np.linalg.norm(v)
+
+
+def _star_poly(uv: np.ndarray, world: np.ndarray, order: int, scale: float, vectors, reference):
+    """Least squares of world (TAN, deg) on pixel offsets, degrees 0..order, the tangent point
+    moved until the constant term vanishes: (reference, coefficients (terms, 2) of degrees
+    1..order in scaled units, residual sum of squares in deg²)."""
+    terms = _terms(order, 1)
+    design = _design(uv, terms, scale)
+    with_constant = np.column_stack([np.ones(len(uv)), design])
+    for _ in range(_TANGENT_ITERATIONS):
+        coef, *_ = np.linalg.lstsq(with_constant, world, rcond=None)
+        if np.max(np.abs(coef[0])) < 1e-12:
+            break
+        reference = _moved(reference, coef[0])
+        world = _gnomonic_deg(vectors, reference)
+    coef, *_ = np.linalg.lstsq(design, world, rcond=None)
+    rss = float(np.sum((design @ coef - world) ** 2))
+    return reference, coef, rss
+
+
+def _sip_arrays(coef: np.ndarray, terms, order: int, scale: float, cd_inv: np.ndarray):
+    """SIP A, B arrays (order + 1, order + 1) from the world polynomial's terms of degree 2
+    and up (scaled units): CD^-1 times them, in pixels."""
+    a = np.zeros((2, order + 1, order + 1))
+    for (p, q), c in zip(terms, coef, strict=True):
+        if p + q >= 2:
+            a[:, p, q] = cd_inv @ c / scale ** (p + q)
+    return a[0], a[1]
+
+
+def _sip_eval(a: np.ndarray, uv: np.ndarray) -> np.ndarray:
+    u, v = uv[:, 0], uv[:, 1]
+    n = a.shape[0]
+    return sum(a[p, q] * u**p * v**q for p in range(n) for q in range(n - p) if a[p, q])
+
+
+def _sip_jacobian(a: np.ndarray, b: np.ndarray, uv: np.ndarray) -> np.ndarray:
+    u, v = uv[:, 0], uv[:, 1]
+    jac = np.zeros((len(uv), 2, 2))
+    jac[:, 0, 0] = jac[:, 1, 1] = 1.0
+    n = a.shape[0]
+    for p in range(n):
+        for q in range(n - p):
+            du = p * u ** max(p - 1, 0) * v**q
+            dv = q * u**p * v ** max(q - 1, 0)
+            jac[:, 0, 0] += a[p, q] * du
+            jac[:, 0, 1] += a[p, q] * dv
+            jac[:, 1, 0] += b[p, q] * du
+            jac[:, 1, 1] += b[p, q] * dv
+    return jac
+
+
+def _invert_sip(a, b, target: np.ndarray, start: np.ndarray) -> np.ndarray:
+    """Pixel offsets uv with uv + (A, B)(uv) = ``target`` (Newton from ``start``)."""
+    uv = start.astype(float).copy()
+    for _ in range(50):
+        gap = uv + np.column_stack([_sip_eval(a, uv), _sip_eval(b, uv)]) - target
+        step = np.linalg.solve(_sip_jacobian(a, b, uv), gap[..., None])[..., 0]
+        uv -= step
+        if np.max(np.abs(step)) < 1e-10:
+            break
+    return uv
+
+
+def fit_wcs_to_stars(
+    xy_px: np.ndarray,
+    vectors_icrs: np.ndarray,
+    width: int,
+    height: int,
+    *,
+    crpix_px: tuple[float, float] | None = None,
+    start: np.ndarray | None = None,
+    max_order: int = STAR_FIT_MAX_ORDER,
+    date_obs: str | _dt.datetime | Time | None = None,
+) -> StarFitWcs:
+    """A TAN or TAN-SIP WCS fitted to matched stars, as astrometry.net's tweak does.
+
+    ``xy_px``: (n, 2) measured positions (starnav px: origin at the top-left corner);
+    ``vectors_icrs``: (n, 3) the catalog unit vectors of the same stars; ``width``,
+    ``height``: the image (px); ``crpix_px``: the reference pixel (starnav px; None: the
+    image centre); ``start``: a unit vector near the field (None: the stars' mean).
+
+    The stars' TAN coordinates about CRVAL are fitted by polynomials in their pixel offsets
+    from CRPIX (least squares, pixel offsets scaled to ~1), CRVAL moved until the constant term
+    vanishes (it is the sky at CRPIX): the linear terms are the CD matrix, the higher ones CD
+    times SIP's A and B. The order (1 = plain TAN, up to ``max_order``) is chosen by F-tests on
+    the residual sums of squares: an order is tried when there are at least
+    ``STAR_FIT_STARS_PER_TERM`` stars per term of one axis, and kept when its extra terms
+    lower the residuals more than chance would with p < ``STAR_FIT_P_VALUE`` against the order
+    kept before it. AP/BP (the inverse, order + 1, or more until good to 0.01 px, at most
+    ``MAX_SIP_ORDER``) are fitted on a grid over the whole image, corners included. At least
+    3 stars are needed (``StarnavError``).
+    """
+    xy = np.asarray(xy_px, dtype=float).reshape(-1, 2)
+    vectors = np.asarray(vectors_icrs, dtype=float).reshape(-1, 3)
+    if len(xy) != len(vectors):
+        raise StarnavError(f"{len(xy)} star positions but {len(vectors)} catalog vectors")
+    if len(xy) < 3 or not (np.isfinite(xy).all() and np.isfinite(vectors).all()):
+        raise StarnavError(f"a WCS fit needs at least 3 stars with finite positions, got {len(xy)}")
+    vectors = vectors / np.linalg.norm(vectors, axis=1, keepdims=True)
+    crpix = np.array((width / 2.0, height / 2.0) if crpix_px is None else crpix_px, dtype=float)
+    uv = xy - crpix
+    scale = max(width, height) / 2.0
+    reference = vectors.mean(axis=0) if start is None else np.asarray(start, dtype=float)
+    reference = reference / np.linalg.norm(reference)
+    world = _gnomonic_deg(vectors, reference)
+    if not np.isfinite(world).all():
+        raise StarnavError("the stars of a WCS fit must lie within 90° of the field centre")
+    n = len(xy)
+    from scipy.special import fdtrc  # survival function of the F distribution
+
+    order = 1
+    best = _star_poly(uv, world, 1, scale, vectors, reference)
+    p_values: dict[int, float] = {}
+    for candidate in range(2, max_order + 1):
+        if n < STAR_FIT_STARS_PER_TERM * _n_terms(candidate):
+            break
+        trial = _star_poly(uv, world, candidate, scale, vectors, best[0])
+        extra = 2 * (_n_terms(candidate) - _n_terms(order))
+        dof = 2 * (n - _n_terms(candidate))
+        if trial[2] <= 0.0:
+            p = 0.0
+        else:
+            statistic = ((best[2] - trial[2]) / extra) / (trial[2] / dof)
+            p = float(fdtrc(extra, dof, statistic))
+        p_values[candidate] = p
+        if p < STAR_FIT_P_VALUE:
+            order, best = candidate, trial
+    reference, coef, _ = best
+    terms = _terms(order, 1)
+    cd = (coef[:2] / scale).T  # rows: world axes; columns: u, v
+    cd_inv = np.linalg.inv(cd)
+    a, b = _sip_arrays(coef, terms, order, scale, cd_inv)
+    inverse_order, ap, bp, inverse_error = order, np.zeros_like(a), np.zeros_like(b), 0.0
+    if order >= 2:
+        inverse_order, ap, bp, inverse_error = _fit_inverse(a, b, order, crpix, width, height)
+    ctype = "TAN-SIP" if order >= 2 else "TAN"
+    header = _celestial_header(ctype, tuple(crpix + 0.5), reference, cd, date_obs)
+    if order >= 2:
+        _add_sip(header, order, a, b, ap, bp, inverse_order)
     wcs = WCS(header)
-    wcs.pixel_shape = (camera.width, camera.height)
-    return wcs
+    wcs.pixel_shape = (int(width), int(height))
+    # the residuals as a reader of the file sees them: sky -> pixel, A/B inverted exactly
+    target = (cd_inv @ _gnomonic_deg(vectors, reference).T).T
+    fitted = _invert_sip(a, b, target, uv) + crpix
+    residual = fitted - xy
+    rms = float(np.sqrt(np.mean(np.sum(residual**2, axis=1))))
+    return StarFitWcs(wcs, order, inverse_order, n, residual, rms, p_values, inverse_error)
+
+
+def _fit_inverse(a, b, order: int, crpix: np.ndarray, width: int, height: int):
+    """AP/BP for A/B over a grid on the image (corners included): the lowest order from
+    order + 1 whose largest error is under ``SIP_GOOD_ENOUGH_PX`` (at most ``MAX_SIP_ORDER``):
+    (order, ap, bp, largest error px)."""
+    gx, gy = np.meshgrid(
+        np.linspace(0.0, width, SIP_GRID_POINTS), np.linspace(0.0, height, SIP_GRID_POINTS)
+    )
+    uv = np.column_stack([gx.ravel(), gy.ravel()]) - crpix
+    undistorted = uv + np.column_stack([_sip_eval(a, uv), _sip_eval(b, uv)])
+    scale = float(np.max(np.abs(undistorted))) or 1.0
+    best = None
+    for inverse_order in range(min(order + 1, MAX_SIP_ORDER), MAX_SIP_ORDER + 1):
+        ap, bp, error = _fit(undistorted, uv - undistorted, inverse_order, 1, scale)
+        if best is None or error < best[3]:
+            best = (inverse_order, ap, bp, error)
+        if error <= SIP_GOOD_ENOUGH_PX:
+            break
+    return best
 
 
 def _fits_image(image: np.ndarray, wcs: WCS) -> np.ndarray:

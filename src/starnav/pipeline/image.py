@@ -382,7 +382,7 @@ def write_outputs(
     wcs=None,
 ) -> dict[str, str]:
     """Write what ``paths`` asks for (a kind's path None: not written): "wcs", a FITS WCS
-    header of the fitted camera (``solution_wcs``; solved only; ``wcs``: that WCS, when the
+    header fitted to the matched stars (``fitted_wcs``; solved only; ``wcs``: that WCS, when the
     caller has it already); "new_fits", the image as FITS with that WCS in its header, like
     astrometry.net's ``.new`` (solved only; a FITS ``source`` keeps its own 2-D data and header
     cards, others get the luminance that was solved); "annotate", the picture
@@ -393,7 +393,7 @@ def write_outputs(
         from starnav.output.wcs import write_wcs
 
         if wcs is None:
-            wcs = solution_wcs(s.R_cam_from_icrs, result.camera)
+            wcs = fitted_wcs(s, result.catalog)
         if paths.get("wcs"):
             write_wcs(paths["wcs"], wcs)
             written["wcs"] = str(paths["wcs"])
@@ -415,6 +415,36 @@ def solution_wcs(R_cam_from_icrs: np.ndarray, camera: CameraModel):
     from starnav.output.wcs import choose_sip_order, wcs_from_attitude
 
     return wcs_from_attitude(R_cam_from_icrs, camera, sip_order=choose_sip_order(camera))
+
+
+def fitted_wcs(solution: Solution, catalog: Catalog | None, *, crpix_px=None):
+    """The WCS (astropy) written for a solved image: TAN-SIP fitted to the matched stars
+    (``starnav.output.wcs.fit_wcs_to_stars``: the order its F-tests find measurable) when the
+    camera is a pinhole without distortion terms of its own and either SIP terms are
+    measurable or ``crpix_px`` (starnav px) asks for a reference pixel away from the principal
+    point; else the camera's own (``solution_wcs``: the attitude's TAN, or the lens model's
+    projection and SIP). The matched stars are looked up in ``catalog`` (those it lacks are
+    left out of the fit)."""
+    from starnav.output.wcs import fit_wcs_to_stars
+
+    camera = solution.camera
+    at_principal = crpix_px is None or np.allclose(crpix_px, (camera.cx, camera.cy))
+    own = getattr(camera, "fits_projection", "") != "TAN" or camera.distorted
+    if catalog is None or own:
+        return solution_wcs(solution.R_cam_from_icrs, camera)
+    table = solution.star_table
+    matched = table.catalog_id >= 0
+    rows = catalog.rows(table.catalog_id[matched], missing=-1)
+    found = rows >= 0
+    if found.sum() < 3:
+        return solution_wcs(solution.R_cam_from_icrs, camera)
+    crpix = (camera.cx, camera.cy) if crpix_px is None else crpix_px
+    fit = fit_wcs_to_stars(table.xy[matched][found], catalog.vectors[rows[found]],
+                           camera.width, camera.height, crpix_px=crpix,
+                           start=solution.R_cam_from_icrs[2])  # fmt: skip
+    if fit.order == 1 and at_principal:
+        return solution_wcs(solution.R_cam_from_icrs, camera)
+    return fit.wcs
 
 
 def _source_fits(source: str | Path | None, pixels: np.ndarray):

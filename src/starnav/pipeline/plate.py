@@ -32,7 +32,7 @@ from starnav.pipeline.fov import FOV_LIMITS_DEG
 from starnav.pipeline.image import (
     ImageSolveResult,
     annotate_solution,
-    solution_wcs,
+    fitted_wcs,
     solve_image,
     write_outputs,
 )
@@ -55,8 +55,9 @@ class PlateHints:
     as seen with y down, astrometry.net's "neg"; None: both); ``downsample``: stars detected on
     the image binned by this factor (None: to at most 4.2 MP); ``positional_error_px``:
     centroid 1-sigma (px; None: 1); ``crpix_center``: the WCS's reference pixel at the image
-    centre (always so: a plate solve has no camera file, so the principal point, CRPIX, is
-    the centre).
+    centre (always so unless ``crpix_fits`` says otherwise: a plate solve has no camera file,
+    so the principal point is the centre); ``crpix_fits``: the WCS's reference pixel (FITS
+    pixels, 1-based, as solve-field's ``--crpix-x``/``--crpix-y``; None: the centre).
     """
 
     fov_range_deg: tuple[float, float] | None = None
@@ -67,6 +68,7 @@ class PlateHints:
     downsample: int | None = None
     positional_error_px: float | None = None
     crpix_center: bool = False
+    crpix_fits: tuple[float, float] | None = None
 
 
 def width_deg_from_scale(units: str, value: float, width_px: float) -> float:
@@ -282,8 +284,8 @@ def solve_plate(
     """Solve an image file (FITS, PNG, JPEG, TIFF) or a source list with a client's ``hints``
     (``PlateHints``, or a function of the image's width and height in px giving them, for
     scales in arcsec per pixel; they win over the FITS header's). ``time_budget_s``: the solve's
-    (``starnav.runtime.budget`` defaults). The WCS is that of the fitted camera
-    (``starnav.pipeline.image.solution_wcs``)."""
+    (``starnav.runtime.budget`` defaults). The WCS is fitted to the matched stars
+    (``starnav.pipeline.image.fitted_wcs``)."""
     if isinstance(source, XYList):
         return _solve_plate(source, None, hints, time_budget_s)
     from starnav.detect.read import read_image
@@ -322,7 +324,7 @@ def _solve_plate(source, pixels, hints, time_budget_s) -> PlateResult:
         sol = res.solution
         cam = None if sol is None else sol.camera
         return _result(sol, cam, res.reason, source.width, source.height, res.time_ms,
-                       xy=source.xy, catalog=res.catalog)  # fmt: skip
+                       hints.crpix_fits, xy=source.xy, catalog=res.catalog)  # fmt: skip
     path = source
     header = fits_hints(path)
     if hints.ra_deg is not None:
@@ -331,15 +333,22 @@ def _solve_plate(source, pixels, hints, time_budget_s) -> PlateResult:
     res = solve_image(pixels, hints=header, downsample=hints.downsample, **options)
     height, width = pixels.shape
     return _result(res.solution, res.camera, res.reason, width, height, res.total_ms,
-                   pixels=pixels, image=res, xy=res.detections.xy,
+                   hints.crpix_fits, pixels=pixels, image=res, xy=res.detections.xy,
                    jpeglike=not is_fits(path), catalog=res.catalog)  # fmt: skip
 
 
-def _result(sol, camera, reason, width, height, time_ms, **kw) -> PlateResult:
+def _result(sol, camera, reason, width, height, time_ms, crpix_fits, **kw) -> PlateResult:
+    """The plate of a solve: its WCS fitted to the matched stars (``fitted_wcs``: TAN-SIP
+    when the distortion is measurable), CRPIX at ``crpix_fits`` (FITS px; None: centre)."""
     plate = None
     if sol is not None:
-        plate = Plate.from_wcs(solution_wcs(sol.R_cam_from_icrs, camera), width, height)
+        crpix = None if crpix_fits is None else tuple(float(c) - 0.5 for c in crpix_fits)
+        wcs = fitted_wcs(sol, kw.get("catalog"), crpix_px=crpix)
+        plate = Plate.from_wcs(wcs, width, height)
     return PlateResult(plate, reason, sol, width, height, time_ms, **kw)
+
+
+SIDE_FILES = ("axy", "xyls", "rdls", "index_xyls", "corr", "match", "kmz")
 
 
 def write_plate_files(
@@ -349,20 +358,28 @@ def write_plate_files(
     wcs: str | Path | None = None,
     new_fits: str | Path | None = None,
     annotate: str | Path | None = None,
+    **side: str | Path | None,
 ) -> dict[str, str]:
     """Write a plate solve's files (each None: not written): ``wcs``, the WCS header
     (astrometry.net's ``.wcs``); ``new_fits``, the image with it (``.new``; a FITS ``source``
     keeps its data and header cards); ``annotate``, a PNG (solved or not; a source list is
-    drawn on a black frame). Returns the paths written, by kind (``starnav.pipeline.image
-    .write_outputs``)."""
+    drawn on a black frame); and solve-field's side files by ``SIDE_FILES`` name
+    (``starnav.output.sidefiles``): ``axy`` and ``xyls`` (the sources; written solved or not),
+    ``rdls``, ``index_xyls``, ``corr``, ``match``, ``kmz`` (solved only; ``kmz`` for an image
+    only). Returns the paths written, by kind (``starnav.pipeline.image.write_outputs``)."""
+    unknown = set(side) - set(SIDE_FILES)
+    if unknown:
+        raise StarnavError(f"unknown plate file kinds: {', '.join(sorted(unknown))}")
     paths = {"wcs": wcs, "new_fits": new_fits, "annotate": annotate}
     paths = {k: Path(v) for k, v in paths.items() if v is not None}
     plate_wcs_ = None if result.plate is None else result.plate.wcs
+    side_paths = {k: Path(v) for k, v in side.items() if v is not None}
+    written = _write_side_files(result, side_paths, source)
     if result.image is not None:
-        return write_outputs(paths, source, result.pixels, result.image, wcs=plate_wcs_)
+        return {**write_outputs(paths, source, result.pixels, result.image, wcs=plate_wcs_),
+                **written}  # fmt: skip
     from starnav.output.wcs import write_wcs
 
-    written: dict[str, str] = {}
     if plate_wcs_ is not None and "wcs" in paths:
         write_wcs(paths["wcs"], plate_wcs_)
         written["wcs"] = str(paths["wcs"])
@@ -370,6 +387,131 @@ def write_plate_files(
         _annotate_list(paths["annotate"], result)
         written["annotate"] = str(paths["annotate"])
     return written
+
+
+def _sources(result: PlateResult) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
+    """The field's sources as solve-field lists them: FITS px (n, 2), flux and background
+    (None for a source list: not known)."""
+    if result.image is not None:
+        found = result.image.detections
+        background = np.full(len(found.xy), float(found.background))
+        return found.xy + 0.5, np.asarray(found.flux, dtype=float), background
+    xy = np.empty((0, 2)) if result.xy is None else np.asarray(result.xy, dtype=float)
+    return xy + 0.5, None, None
+
+
+def _field_stars(result: PlateResult, matched_ids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Catalog rows inside the solved image (brightest first), the matched ones added when
+    outside, and their FITS pixels through the WCS."""
+    plate, cat = result.plate, result.catalog
+    from starnav.geometry import radec_to_unit
+
+    centre = radec_to_unit(math.radians(plate.ra_deg), math.radians(plate.dec_deg))
+    near = np.flatnonzero(cat.vectors @ centre >= math.cos(math.radians(plate.radius_deg * 1.1)))
+    extra = cat.rows(matched_ids, missing=-1)
+    rows = np.concatenate([near[np.argsort(cat.mag[near], kind="stable")], extra[extra >= 0]])
+    xy = plate.wcs.all_world2pix(np.column_stack([cat.ra_deg[rows], cat.dec_deg[rows]]), 1,
+                                 quiet=True)  # fmt: skip
+    w, h = result.width, result.height
+    inside = (xy[:, 0] >= 0.5) & (xy[:, 0] <= w + 0.5) & (xy[:, 1] >= 0.5) & (xy[:, 1] <= h + 0.5)
+    inside[len(near) :] = True
+    rows, first = np.unique(rows[inside], return_index=True)
+    order = np.argsort(first)
+    return rows[order], xy[inside][first][order]
+
+
+def _write_side_files(result: PlateResult, paths: dict[str, Path], source) -> dict[str, str]:
+    from starnav.output import sidefiles
+
+    written: dict[str, str] = {}
+    xy, flux, background = _sources(result)
+    w, h = result.width, result.height
+    if "axy" in paths:
+        keywords = {f"AN{k.upper()}": (str(v), f"{k} output file")
+                    for k, v in paths.items() if k in ("match", "rdls", "corr")}  # fmt: skip
+        sidefiles.write_axy(paths["axy"], xy[:, 0], xy[:, 1], w, h, flux=flux,
+                            background=background, keywords=keywords)  # fmt: skip
+    if "xyls" in paths:
+        zeros = np.zeros(len(xy))
+        sidefiles.write_xyls(paths["xyls"], xy[:, 0], xy[:, 1], w, h,
+                             flux=zeros if flux is None else flux,
+                             background=zeros if background is None else background)  # fmt: skip
+    written.update({k: str(paths[k]) for k in ("axy", "xyls") if k in paths})
+    sol, plate, cat = result.solution, result.plate, result.catalog
+    if sol is None or plate is None or cat is None:
+        return written
+    table = sol.star_table
+    matched = np.flatnonzero(table.catalog_id >= 0)
+    ids = table.catalog_id[matched]
+    rows, index_xy = _field_stars(result, ids)
+    if "rdls" in paths:
+        sidefiles.write_rdls(paths["rdls"], cat.ra_deg[rows], cat.dec_deg[rows])
+        written["rdls"] = str(paths["rdls"])
+    if "index_xyls" in paths:
+        sidefiles.write_xyls(paths["index_xyls"], index_xy[:, 0], index_xy[:, 1], w, h)
+        written["index_xyls"] = str(paths["index_xyls"])
+    if "corr" in paths:
+        position = {int(r): i for i, r in enumerate(rows)}
+        cat_rows = cat.rows(ids, missing=-1)
+        keep = cat_rows >= 0
+        matched, cat_rows = matched[keep], cat_rows[keep]
+        index_id = np.array([position[int(r)] for r in cat_rows], dtype=np.int32)
+        field_xy = table.xy[matched] + 0.5
+        # the field's row of each solved point: the sources are the points solved, in order
+        gap = np.linalg.norm(xy[None, : len(table.xy)] - (table.xy + 0.5)[:, None], axis=2)
+        field_id = np.argmin(gap, axis=1)[matched] if len(xy) else np.zeros(0, dtype=int)
+        sky = plate.wcs.all_pix2world(field_xy, 1) if len(field_xy) else np.empty((0, 2))
+        weight = np.ones(len(matched))
+        if table.match_probability is not None:
+            weight = np.nan_to_num(table.match_probability[matched], nan=1.0)
+        n = len(matched)
+        sidefiles.write_corr(paths["corr"], {
+            "field_x": field_xy[:, 0], "field_y": field_xy[:, 1],
+            "field_ra": sky[:, 0] % 360.0, "field_dec": sky[:, 1],
+            "index_x": index_xy[index_id, 0], "index_y": index_xy[index_id, 1],
+            "index_ra": cat.ra_deg[cat_rows], "index_dec": cat.dec_deg[cat_rows],
+            "index_id": index_id, "field_id": field_id.astype(np.int32),
+            "match_weight": weight,
+            "FLUX": np.zeros(n) if flux is None else flux[field_id],
+            "BACKGROUND": np.zeros(n) if background is None else background[field_id],
+        })  # fmt: skip
+        written["corr"] = str(paths["corr"])
+    if "match" in paths:
+        p_false = min(max(float(sol.false_match_probability), 1e-300), 0.5)
+        from starnav.geometry import radec_to_unit
+
+        centre = radec_to_unit(math.radians(plate.ra_deg), math.radians(plate.dec_deg))
+        name = "" if source is None else Path(source).name[:31]
+        sidefiles.write_match(paths["match"], {
+            "CENTERXYZ": centre, "RADIUS": plate.radius_deg, "NMATCH": len(matched),
+            "NDISTRACT": int(len(table.xy) - len(matched)), "NCONFLICT": 0,
+            "NFIELD": len(xy), "NINDEX": len(rows),
+            "CRVAL": plate.wcs.wcs.crval, "CRPIX": plate.wcs.wcs.crpix,
+            "CD": plate.wcs.pixel_scale_matrix.ravel(), "WCS_VALID": True, "FIELDNUM": 1,
+            "FIELDID": 0, "FIELDNAME": name, "PARITY": plate.parity > 0,
+            "TIMEUSED": result.time_ms / 1e3, "LOGODDS": math.log((1.0 - p_false) / p_false),
+        })  # fmt: skip
+        written["match"] = str(paths["match"])
+    if "kmz" in paths and result.pixels is not None:
+        corners = np.array([[0.5, h + 0.5], [w + 0.5, h + 0.5], [w + 0.5, 0.5], [0.5, 0.5]])
+        sky = plate.wcs.all_pix2world(corners, 1)
+        name = "starnav solve" if source is None else Path(source).name
+        sidefiles.write_kmz(paths["kmz"], sky, _png(result.pixels), name)
+        written["kmz"] = str(paths["kmz"])
+    return written
+
+
+def _png(pixels: np.ndarray) -> bytes:
+    """The image as an 8-bit grey PNG, stretched between its 0.5 and 99.5 percentiles."""
+    import io
+
+    from matplotlib.image import imsave
+
+    lo, hi = np.nanpercentile(pixels, [0.5, 99.5])
+    grey = np.clip((np.asarray(pixels, dtype=float) - lo) / max(hi - lo, 1e-12), 0.0, 1.0)
+    out = io.BytesIO()
+    imsave(out, grey, cmap="gray", vmin=0.0, vmax=1.0, format="png")
+    return out.getvalue()
 
 
 def _annotate_list(path_out: Path, result: PlateResult) -> None:

@@ -5,7 +5,9 @@ Routes (GET and POST alike, with or without a trailing slash, as nova's ``net/ur
 (a ``url``, or ``x``/``y`` with ``image_width``/``image_height``), ``api/submissions/N``,
 ``api/myjobs``, ``api/jobs/N`` and its ``calibration``, ``info``, ``annotations``, ``tags``,
 ``machine_tags``, ``objects_in_field``; ``wcs_file/N``, ``new_fits_file/N``,
-``annotated_display/N`` and ``annotated_full/N``. starnav's own: ``api/jobs/N/starnav`` (the
+``corr_file/N``, ``rdls_file/N``, ``axy_file/N``, ``kml_file/N`` (solve-field's side files,
+``starnav.output.sidefiles``; the KMZ for images only), ``annotated_display/N`` and
+``annotated_full/N``. starnav's own: ``api/jobs/N/starnav`` (the
 whole solution: uncertainties, every star), ``json_file/N`` (the same as a download),
 ``api/status`` (queue and workers), and the web page at ``/``.
 
@@ -424,6 +426,12 @@ class NovaApi:
             f"/wcs_file/{job}": files(OUTPUTS["wcs"], "application/fits", "wcs-{}.fits"),
             f"/new_fits_file/{job}": files(
                 OUTPUTS["new_fits"], "application/fits", "new-image-{}.fits"
+            ),
+            f"/corr_file/{job}": files(OUTPUTS["corr"], "application/fits", "corr-{}.fits"),
+            f"/rdls_file/{job}": files(OUTPUTS["rdls"], "application/fits", "rdls-{}.fits"),
+            f"/axy_file/{job}": files(OUTPUTS["axy"], "application/fits", "axy-{}.fits"),
+            f"/kml_file/{job}": files(
+                OUTPUTS["kmz"], "application/x-zip-compressed", "image-{}.kmz"
             ),
             f"/annotated_display/{job}": files(OUTPUTS["annotate"], "image/png", None),
             f"/annotated_full/{job}": files(OUTPUTS["annotate"], "image/png", None),

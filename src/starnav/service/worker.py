@@ -29,7 +29,16 @@ MAGIC = (
     (b"\xff\xd8\xff", "input.jpg"),
     *((magic, "input.tif") for magic in TIFF_MAGICS),
 )
-OUTPUTS = {"wcs": "wcs.fits", "new_fits": "new.fits", "annotate": "annotated.png"}
+OUTPUTS = {
+    "wcs": "wcs.fits",
+    "new_fits": "new.fits",
+    "annotate": "annotated.png",
+    "axy": "axy.fits",
+    "corr": "corr.fits",
+    "rdls": "rdls.fits",
+    "kmz": "image.kmz",
+}
+IMAGE_ONLY = ("new_fits", "kmz")  # files a source list has no picture for
 
 
 def input_name(head: bytes) -> str:
@@ -89,7 +98,8 @@ def _solve(tmp: Path, data, xy, request, budget_s) -> dict:
     res = solve_plate(source, hints, time_budget_s=budget_s)
     targets = {k: tmp / name for k, name in OUTPUTS.items()}
     if path is None:
-        targets.pop("new_fits")
+        for kind in IMAGE_ONLY:
+            targets.pop(kind)
     written = write_plate_files(res, path, **targets)
     files = {k: Path(p).read_bytes() for k, p in written.items()}
     result = _result_json(res)

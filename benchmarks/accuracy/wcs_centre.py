@@ -1,0 +1,191 @@
+"""The WCS starnav writes against astrometry.net's on the real-image corpus: docs/wcs.md.
+
+    nice python benchmarks/accuracy/wcs_centre.py [--rows rows.jsonl] [--from-rows rows.jsonl]
+        [--out docs/wcs.md | -] [FILE ...]
+
+Every photograph of ``tests/data/real/reference.json`` that astrometry.net solved (its answer
+passing the catalog check) and whose WCS has its reference pixel at the image centre
+(``solve-field --crpix-center``: CRVAL is then the sky at the centre, exactly, SIP or not) is
+solved as ``starnav-solve-field IMG`` solves it (``starnav.pipeline.plate.solve_plate``, no
+hint); the files are read from ``$STARNAV_REAL_CORPUS``, else ``../shared/data/real``.
+
+For each image solved by both, the sky at the image centre (FITS pixel ((W+1)/2, (H+1)/2))
+of two WCSs of the same solution is compared with astrometry.net's CRVAL:
+
+* before: the attitude's own WCS (``starnav.pipeline.image.solution_wcs``: TAN of the fitted
+  pinhole camera, what starnav wrote before the WCS was fitted to the stars);
+* after: the WCS written now (``fitted_wcs``: TAN-SIP fitted to the matched stars when the
+  F-tests find SIP terms measurable, else the attitude's TAN).
+
+Offsets in arcseconds (great-circle) and in pixels (divided by astrometry.net's pixel scale,
+sqrt |det CD|), by the reference's horizontal field width. ``--rows`` keeps one JSON line per
+image; ``--from-rows`` writes the table from such a file without solving.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
+
+import argparse
+import json
+import os
+import time
+
+import numpy as np
+
+from benchmarks.harness import machine, replace_block, table_head, table_row
+
+ROOT = Path(__file__).resolve().parents[2]
+REFERENCE = ROOT / "tests" / "data" / "real" / "reference.json"
+DOC = ROOT / "docs" / "wcs.md"
+BANDS_DEG = ((0.0, 3.0), (3.0, 10.0), (10.0, 30.0), (30.0, 180.0))
+
+
+def corpus_dir() -> Path:
+    return Path(os.environ.get("STARNAV_REAL_CORPUS") or ROOT.parent / "shared" / "data" / "real")
+
+
+def references(names: list[str]) -> dict[str, dict]:
+    images = json.loads(REFERENCE.read_text())["images"]
+    keep = {}
+    for name, ref in images.items():
+        an = ref.get("astrometry_net") or {}
+        if names and name not in names:
+            continue
+        if ref.get("solved_by_reference") and an.get("crpix_at_centre"):
+            keep[name] = ref
+    return keep
+
+
+def _separation_arcsec(ra1, dec1, ra2, dec2) -> float:
+    from starnav.geometry import radec_to_unit
+
+    a = radec_to_unit(np.radians(ra1), np.radians(dec1))
+    b = radec_to_unit(np.radians(ra2), np.radians(dec2))
+    return float(np.degrees(np.arctan2(np.linalg.norm(np.cross(a, b)), a @ b)) * 3600.0)
+
+
+def measure(name: str, ref: dict, folder: Path) -> dict:
+    from starnav.pipeline.image import solution_wcs
+    from starnav.pipeline.plate import PlateHints, solve_plate
+
+    an = ref["astrometry_net"]["wcs"]
+    cd = np.array([[an["CD1_1"], an["CD1_2"]], [an["CD2_1"], an["CD2_2"]]])
+    scale_arcsec = float(np.sqrt(abs(np.linalg.det(cd))) * 3600.0)
+    row = {"image": name, "fov_deg": ref["fov_deg"], "scale_arcsec": scale_arcsec}
+    path = folder / name
+    if not path.is_file():
+        return {**row, "status": "absent"}
+    t0 = time.perf_counter()
+    res = solve_plate(path, PlateHints())
+    row["seconds"] = time.perf_counter() - t0
+    if res.plate is None:
+        return {**row, "status": "not solved", "reason": res.reason}
+    s = res.solution
+    centre = [[(res.width + 1) / 2.0, (res.height + 1) / 2.0]]
+    before = solution_wcs(s.R_cam_from_icrs, s.camera)
+    for label, wcs in (("before", before), ("after", res.plate.wcs)):
+        ra, dec = wcs.all_pix2world(centre, 1)[0]
+        off = _separation_arcsec(ra, dec, an["CRVAL1"], an["CRVAL2"])
+        row[f"{label}_arcsec"] = off
+        row[f"{label}_px"] = off / scale_arcsec
+    header = res.plate.wcs.to_header(relax=True)
+    row.update(status="solved", n_matched=s.n_matched, rms_px=s.rms_px,
+               sip_order=int(header.get("A_ORDER", 1)))  # fmt: skip
+    return row
+
+
+def _stats(values: list[float]) -> str:
+    if not values:
+        return "-"
+    v = np.asarray(values)
+    return f"{np.median(v):.3g} / {np.percentile(v, 90):.3g} / {v.max():.3g}"
+
+
+def table(rows: list[dict]) -> str:
+    solved = [r for r in rows if r["status"] == "solved"]
+    lines = table_head(
+        "field width",
+        "images",
+        "solved by both",
+        "SIP order 1/2/3/4",
+        "before: px (median / 90 % / max)",
+        "after: px",
+        "before: arcsec",
+        "after: arcsec",
+        "after within 0.2 px",
+    )
+    for lo, hi in (*BANDS_DEG, (0.0, 180.0)):
+        band = [r for r in rows if lo <= r["fov_deg"] < hi]
+        got = [r for r in solved if lo <= r["fov_deg"] < hi]
+        orders = "/".join(str(sum(r["sip_order"] == k for r in got)) for k in (1, 2, 3, 4))
+        label = "all" if (lo, hi) == (0.0, 180.0) else f"{lo:g}-{hi:g}°"
+        within = sum(r["after_px"] <= 0.2 for r in got)
+        lines.append(
+            table_row(
+                label,
+                len(band),
+                len(got),
+                orders,
+                _stats([r["before_px"] for r in got]),
+                _stats([r["after_px"] for r in got]),
+                _stats([r["before_arcsec"] for r in got]),
+                _stats([r["after_arcsec"] for r in got]),
+                f"{within} of {len(got)}",
+            )
+        )
+    worst = sorted(solved, key=lambda r: -r["after_px"])[:8]
+    lines += ["", "Largest offsets after:", ""]
+    lines += table_head("image", "width °", "matched", "solution rms px", "SIP order", "before px",
+                        "after px")  # fmt: skip
+    for r in worst:
+        cells = (r["image"], f"{r['fov_deg']:.2f}", r["n_matched"], f"{r['rms_px']:.2f}",
+                 r["sip_order"], f"{r['before_px']:.3f}", f"{r['after_px']:.3f}")  # fmt: skip
+        lines.append(table_row(*cells))
+    absent = sum(r["status"] == "absent" for r in rows)
+    unsolved = sum(r["status"] == "not solved" for r in rows)
+    lines += ["", f"{len(rows)} reference images: {len(solved)} solved by starnav, {unsolved} "
+              f"not solved, {absent} files absent from the corpus folder."]  # fmt: skip
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("files", nargs="*", help="image names of reference.json (default: all)")
+    p.add_argument("--rows", help="write one JSON line per image here")
+    p.add_argument("--from-rows", help="the table from these rows, nothing solved")
+    p.add_argument("--out", default=str(DOC), help="markdown file (its block wcs-centre) or -")
+    args = p.parse_args(argv)
+    if args.from_rows:
+        rows = [json.loads(line) for line in Path(args.from_rows).read_text().splitlines()]
+        header = f"From {args.from_rows}."
+    else:
+        folder = corpus_dir()
+        refs = references(args.files)
+        rows = []
+        sink = open(args.rows, "w") if args.rows else None
+        for i, (name, ref) in enumerate(refs.items(), start=1):
+            row = measure(name, ref, folder)
+            rows.append(row)
+            print(f"{i}/{len(refs)} {name}: {row['status']} "
+                  f"{row.get('before_px', float('nan')):.3f} -> "
+                  f"{row.get('after_px', float('nan')):.3f} px", file=sys.stderr)  # fmt: skip
+            if sink:
+                sink.write(json.dumps(row) + "\n")
+                sink.flush()
+        if sink:
+            sink.close()
+        header = f"Corpus folder {folder}; {machine()}."
+    text = header + "\n\n" + table(rows)
+    if args.out == "-":
+        print(text)
+    else:
+        replace_block(args.out, "wcs-centre", text)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
