@@ -14,7 +14,7 @@ from starnav.cli import main
 from starnav.errors import CameraError, StarnavError
 from starnav.geometry import attitude_difference_deg, attitude_from_radec_roll
 from starnav.identify.pattern4 import catalog_nbytes
-from starnav.pipeline.fov import FOV_LIMITS_DEG, band_grid, band_stars_per_field, load_bands
+from starnav.pipeline.fov import band_grid, band_stars_per_field, load_bands
 from starnav.pipeline.image import solve_image
 from starnav.pipeline.options import DEFAULT_FOV_RANGE_DEG
 from starnav.simulate import simulate_frame
@@ -253,7 +253,7 @@ def test_a_3_degree_rendered_field_is_solved_with_the_fov_unknown():
     R = attitude_from_radec_roll(84.0, -2.0, 30.0)  # Orion, galactic latitude -17°
     settings = RenderSettings(exposure_s=0.5, seed=3)
     frame = render_frame(load_catalog(None, mag_limit=9.5), camera, R, settings)
-    res = solve_image(frame.image, fov_range_deg=(FOV_LIMITS_DEG[0], 3.5))
+    res = solve_image(frame.image, fov_range_deg=(3.0, 3.5))
     s = res.solution
     assert s is not None, res.reason
     bore, roll = attitude_difference_deg(s.R_cam_from_icrs, R)
@@ -263,13 +263,14 @@ def test_a_3_degree_rendered_field_is_solved_with_the_fov_unknown():
 
 
 def test_a_field_below_the_limit_is_a_one_line_error_saying_why(capsys):
-    code = main(["identify", MAP1, "--width", "512", "--fov-range", "2", "10"])
+    code = main(["identify", MAP1, "--width", "512", "--fov-range", "0.5", "10"])
     err = capsys.readouterr().err
     assert code == 2 and err.count("\n") == 1, err
-    assert "narrower than 3°" in err and "Hipparcos" in err
+    assert "narrower than 1°" not in err and "a 1° field holds about 8 stars" in err
+    assert "Gaia DR3" in err
     xy = np.zeros((5, 2)) + 10
-    for fov in ({"fov_range_deg": (2.9, 10)}, {"fov_deg": 2.5}):
-        with pytest.raises(StarnavError, match="too few stars of the embedded Hipparcos"):
+    for fov in ({"fov_range_deg": (0.9, 10)}, {"fov_deg": 0.7}):
+        with pytest.raises(StarnavError, match="stars of the embedded Gaia DR3 catalog"):
             solve_stars(xy, fov_exact=False, width=100, **fov)
 
 

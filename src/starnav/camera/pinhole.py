@@ -50,10 +50,9 @@ class Camera(Lens):
     # solved without a --fov-range, in the time the default range left (searching 3-70° at
     # once took twice the time on the frames the default holds, and lost one to the budget)
     extended_fov_ranges_deg = ((40.0, 70.0), (3.0, 5.0))
-    # the narrowest horizontal field searched: a 3° field holds about 12 Hipparcos stars to the
-    # deepest band catalog (Hp 8.5; ~8 towards the galactic poles), narrower ones too few to
-    # identify and verify on (README, "Field range")
-    fov_limits_deg = (3.0, 100.0)
+    # the narrowest horizontal field searched: 1°, where the embedded Gaia DR3 (G <= 10)
+    # holds about 8 stars in a 3:2 image (fields under ~3° are cut from it: pipeline.fov)
+    fov_limits_deg = (1.0, 100.0)
     fits_projection = "TAN"  # TAN-SIP with distortion
     sip_max_order = 7
 

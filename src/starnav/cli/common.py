@@ -146,7 +146,12 @@ def add_attitude(p: argparse.ArgumentParser) -> None:
 
 def add_catalog(p: argparse.ArgumentParser) -> None:
     """--catalog, --mag-limit, --epoch."""
-    p.add_argument("--catalog", help="CSV catalog id,ra_deg,dec_deg,mag (default: Hipparcos)")
+    p.add_argument(
+        "--catalog",
+        help='"gaia" (the embedded Gaia DR3, G <= 10), or a CSV or FITS table of RA, Dec '
+        "(degrees) and a magnitude, id optional (id,ra_deg,dec_deg,mag or Gaia / VizieR "
+        "names); default: the embedded Hipparcos, and Gaia DR3 for fields under ~3°",
+    )
     p.add_argument(
         "--mag-limit",
         type=finite,

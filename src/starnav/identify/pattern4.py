@@ -181,17 +181,25 @@ def _key_dtype(bins: int) -> type:
 
 
 def _field_patterns(
-    database: PairDatabase, stars_per_field: int, field_radius_rad: float, oversampling: float
+    database: PairDatabase,
+    stars_per_field: int,
+    field_radius_rad: float,
+    oversampling: float,
+    region: tuple[np.ndarray, float] | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The distinct 4-subsets of the brightest ``stars_per_field`` stars of every lattice
-    field of radius ``field_radius_rad``: the fields (f, stars_per_field), catalog rows
-    ascending, padded with the catalog size; and for each distinct pattern one field holding
-    it and its subset number (a row of ``breadth_first_combinations(stars_per_field)``)."""
+    field of radius ``field_radius_rad`` (centred within ``region``, a unit vector and a
+    radius in rad, when given): the fields (f, stars_per_field), catalog rows ascending,
+    padded with the catalog size; and for each distinct pattern one field holding it and its
+    subset number (a row of ``breadth_first_combinations(stars_per_field)``)."""
     catalog = database.catalog
     n_cat = len(catalog)
     # the number of fields: ``oversampling`` times the number of field-sized squares on the sky
     n_fields = max(1, math.ceil(oversampling * 4.0 * np.pi / (2.0 * field_radius_rad) ** 2))
     centres = fibonacci_lattice(n_fields)
+    if region is not None:
+        centres = centres[centres @ region[0] >= math.cos(region[1])]
+        n_fields = len(centres)
     rank = np.empty(n_cat, dtype=np.intp)
     rank[np.argsort(catalog.mag, kind="stable")] = np.arange(n_cat)
     sets = []
@@ -301,14 +309,18 @@ def build_pattern_table(
     oversampling: float = 100.0,
     bins: int = 50,
     use_cache: bool = True,
+    region: tuple[np.ndarray, float] | None = None,
 ) -> PatternTable:
     """The pattern table for ``database``'s catalog and field (its ``max_angle_rad`` is the
     field diagonal). Lattice fields have a radius of ``field_radius_fraction`` times half the
     diagonal (0.85: a little larger than the circle inscribed in a square field, 0.71).
+    ``region``: (unit vector, radius in rad): only the lattice fields centred within it (a
+    table of the sky near a position hint; never cached).
 
     Kept in memory per (catalog, angle, options) and cached on disk next to the pair
     databases.
     """
+    use_cache = use_cache and region is None
     catalog = database.catalog
     options = (stars_per_field, round(field_radius_fraction, 6), round(oversampling, 6), bins)
     mem_key = (catalog.fingerprint, round(float(np.degrees(database.max_angle_rad)), 3), options)
@@ -334,7 +346,9 @@ def build_pattern_table(
         return table
     t0 = time.perf_counter()
     radius = 0.5 * field_radius_fraction * database.max_angle_rad
-    fields, field, subset = _field_patterns(database, stars_per_field, radius, oversampling)
+    fields, field, subset = _field_patterns(
+        database, stars_per_field, radius, oversampling, region
+    )
     keys, codes, largest = _pattern_keys(catalog.vectors, fields, field, subset, bins)
     step = float(largest.max()) / _EDGE_STEPS if len(largest) and largest.max() > 0 else 1.0
     steps = np.rint(largest / step).astype(np.uint16)

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from starnav.camera import Camera
 from starnav.detect.stars import Detections
 
 FEW_STARS = "too few stars"
@@ -98,10 +99,11 @@ def diagnose(
     where = (
         f"in {fov_range_deg[0]:g}-{fov_range_deg[1]:g}°" if fov_range_deg else "at the field given"
     )
+    lo, hi = Camera.fov_limits_deg
     return Failure(
         OUTSIDE,
         f"no pattern of the brightest stars matches the catalog {where}: the field lies "
-        "outside that (give it: --fov-deg, or --fov-range within 3-100° for the pinhole lens; "
-        "narrower than 3° is beyond the embedded catalog), or the brightest points are not "
-        "the brightest stars (a processed or stacked picture, a nebula, noise)",
+        f"outside that (give it: --fov-deg, or --fov-range within {lo:g}-{hi:g}° for the "
+        f"pinhole lens; narrower than {lo:g}° is beyond the embedded catalogs), or the brightest "
+        "points are not the brightest stars (a processed or stacked picture, a nebula, noise)",
     )

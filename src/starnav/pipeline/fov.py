@@ -19,7 +19,14 @@ from pathlib import Path
 import numpy as np
 
 from starnav.camera import Camera, CameraModel, Fisheye, focal_px_from_fov, model_class
-from starnav.catalog import DEFAULT_MAG_LIMIT, Catalog, hipparcos_mags, is_embedded, load_catalog
+from starnav.catalog import (
+    DEFAULT_MAG_LIMIT,
+    GAIA,
+    Catalog,
+    hipparcos_mags,
+    is_embedded,
+    load_catalog,
+)
 from starnav.errors import CatalogError, StarnavError, shown
 from starnav.geometry import radec_to_unit
 from starnav.identify.base import SEARCH_SIGMA_PX, MatchSettings
@@ -41,9 +48,9 @@ from starnav.runtime.budget import (
 from starnav.runtime.caches import process_cache
 from starnav.starlist import StarList, check_star_list
 
-# the narrowest horizontal field searched: a 3° field holds about 12 Hipparcos stars to the
-# deepest band catalog (Hp 8.5; ~8 towards the galactic poles), narrower ones too few to
-# identify and verify on (docs/images.md, "Field range")
+# the narrowest horizontal field searched: 1°, where the embedded Gaia DR3 (G <= 10) holds
+# about 8 stars in a 1° x 0.67° image (docs/narrow_fields.md); the whole-sky pattern tables
+# of narrower bands would take 4x more lattice fields per halving
 FOV_LIMITS_DEG = Camera.fov_limits_deg  # (the lens classes hold the limits: these name them)
 LENS_FOV_LIMITS_DEG = Fisheye.fov_limits_deg  # the focal scan of a fisheye model
 SCAN_STARS = 60  # the focal scan identifies the brightest this many stars,
@@ -56,7 +63,15 @@ FIELD_STARS = 15  # a known field's catalog: at least this many stars in an aver
 # its 56863 stars to Hp 8.5 keep a table's catalog rows 16-bit (below 65536)
 _MAX_MAG = 8.5
 _PATTERN_STARS_PER_FIELD = 10  # brightest stars of a lattice field making its patterns,
-_FEWER_STARS_BELOW_DEG = 10.0  # one fewer per grid step below a 10° table (9, 8, 7)
+_FEWER_STARS_BELOW_DEG = 10.0  # one fewer per grid step below a 10° table (9, 8, 7, 6),
+_MIN_PATTERN_STARS_PER_FIELD = 5  # and never fewer than 5 (5 patterns a field)
+NEAR_STARS_PER_FIELD = 12  # a position hint's own table (``near_bands``): 495 patterns a
+NEAR_OVERSAMPLING = 25.0  # field, on a lattice 4x coarser than a whole-sky table's,
+NEAR_PATTERN_STARS = 25  # searched with patterns of the brightest 25 points (not 15)
+# bands whose tables are built for diagonals under this are cut from the embedded Gaia DR3
+# (G <= 10) instead of Hipparcos: the grid's 3.54° band and narrower, fields under ~3° that
+# Hipparcos to Hp 8.5 fills with ~10 stars per pattern field (Gaia: 40 to G 9.5, 10-20 to G 10)
+GAIA_BELOW_DEG = 3.6
 MAX_DIAGONAL_FOV_DEG = 150.0
 HINT_BUDGET_SHARE = 0.25  # of the time budget, for the search near a position hint
 _SLIVER = 0.05  # a band narrower than this (relative) is merged into the next wider one
@@ -99,12 +114,12 @@ def horizontal_fov_deg(diagonal_deg: float, width: int, height: int) -> float:
 def band_mag_limit(diagonal_deg: float, sorted_mags: np.ndarray) -> float:
     """Magnitude limit of a band's catalog: about ``_STARS_PER_FIELD`` stars on average in
     a pattern field of the band's widest diagonal FOV, counted in the catalog's own sorted
-    magnitudes (rounded up to 0.25 mag, at most ``_MAX_MAG``, 8.5; the whole catalog when it
-    is sparser)."""
+    magnitudes (rounded up to 0.25 mag; the whole catalog when it is sparser: the embedded
+    Hipparcos comes cut at ``_MAX_MAG``, Hp 8.5, by ``search_catalog``)."""
     radius = FIELD_RADIUS_FRACTION * math.radians(diagonal_deg) / 2.0
     needed = _STARS_PER_FIELD * 2.0 / (1.0 - math.cos(radius))  # 4 pi / field solid angle
     mag = sorted_mags[min(int(needed), len(sorted_mags) - 1)]
-    return float(min(math.ceil(mag * 4.0) / 4.0, _MAX_MAG))
+    return float(math.ceil(mag * 4.0) / 4.0)
 
 
 @functools.lru_cache(maxsize=64)
@@ -155,12 +170,14 @@ def known_field_depth(
 def band_stars_per_field(diagonal_deg: float) -> int:
     """Catalog stars per lattice field whose 4-subsets make the patterns of a table built
     for a ``diagonal_deg`` field: 10 down to the 10° table, one fewer per grid step below
-    (9 at 7.07°, 8 at 5°, 7 at 3.54°). Each step halves a field's area and so doubles the
-    fields; C(k, 4) patterns per field falls about as fast (210, 126, 70, 35), which keeps a
-    narrow band's table within 30-50 MB, and its patterns are of the brightest stars, those
-    the Hipparcos catalog holds most completely."""
+    (9 at 7.07°, 8 at 5°, 7 at 3.54°, 6 at 2.5°), at least ``_MIN_PATTERN_STARS_PER_FIELD``
+    (5 at 1.77° and 1.25°). Each step halves a field's area and so doubles the fields; C(k, 4)
+    patterns per field falls about as fast (210, 126, 70, 35, 15, 5), which keeps a narrow
+    band's table within 30-70 MB, and its patterns are of the brightest stars, those the
+    catalogs hold most completely."""
     steps = math.log(_FEWER_STARS_BELOW_DEG / diagonal_deg) / math.log(BAND_FACTOR)
-    return _PATTERN_STARS_PER_FIELD - max(0, math.ceil(steps - 1e-3))  # grid tops: whole steps
+    fewer = max(0, math.ceil(steps - 1e-3))  # grid tops: whole steps
+    return max(_PATTERN_STARS_PER_FIELD - fewer, _MIN_PATTERN_STARS_PER_FIELD)
 
 
 def load_band(table_diagonal_deg: float, lo: float, hi: float, catalog: Catalog) -> Band | None:
@@ -193,6 +210,14 @@ def search_catalog(catalog: Catalog | str | Path | None, epoch_year: float | Non
     return load_catalog(catalog, epoch_year=epoch_year)
 
 
+def band_source(table_diagonal_deg: float, catalog, full: Catalog) -> Catalog:
+    """The catalog a band is cut from: ``full`` (``search_catalog``'s), except for the
+    embedded catalog's bands under ``GAIA_BELOW_DEG``, which take the embedded Gaia DR3."""
+    if is_embedded(catalog) and table_diagonal_deg < GAIA_BELOW_DEG:
+        return load_catalog(GAIA)
+    return full
+
+
 def load_bands(
     lo: float,
     hi: float,
@@ -218,7 +243,7 @@ def load_bands(
             top,
             horizontal_fov_deg(a, width, height),
             horizontal_fov_deg(b, width, height),
-            full,
+            band_source(top, catalog, full),
         )
         for a, b, top in band_grid(diagonal_fov_deg(lo, width, height), diag_hi)
     ]
@@ -230,6 +255,61 @@ def load_bands(
         )
     _BANDS[key] = bands
     return bands
+
+
+def near_bands(
+    lo: float,
+    hi: float,
+    width: int,
+    height: int,
+    catalog: Catalog | str | Path | None,
+    epoch_year: float | None,
+    near: tuple[np.ndarray, float],
+) -> list[Band] | None:
+    """The bands of a horizontal FOV of ``lo``..``hi`` degrees searched first near a position
+    hint (``near``: unit vector, radius in rad), when the range reaches fields cut from the
+    embedded Gaia (``GAIA_BELOW_DEG``; else None: the whole-sky bands are searched near the
+    hint as they are). Each such band gets a table of the sky near the hint only (lattice
+    fields centred within the hint's radius plus half the band's diagonal, the stars within
+    its radius plus the whole diagonal) of the brightest ``NEAR_STARS_PER_FIELD`` (12) stars
+    of each field, not the 5-7 of its whole-sky table: built in well under a second, never
+    cached, it finds the telescope fields whose brightest points are not the catalog's
+    brightest (saturated stars, colour), and the whole-sky tables (a minute each to build)
+    are not needed when it does. The range's wider bands are loaded as ``load_bands`` does."""
+    grid = band_grid(diagonal_fov_deg(lo, width, height), diagonal_fov_deg(hi, width, height))
+    if not is_embedded(catalog) or all(top >= GAIA_BELOW_DEG for _, _, top in grid):
+        return None
+    out = []
+    for a, b, top in grid:
+        a, b = horizontal_fov_deg(a, width, height), horizontal_fov_deg(b, width, height)
+        if top >= GAIA_BELOW_DEG:
+            band = load_band(top, a, b, search_catalog(catalog, epoch_year))
+            out += [] if band is None else [band]
+            continue
+        gaia = load_catalog(GAIA)
+        top_rad = math.radians(top)
+        reach = min(near[1] + top_rad, math.pi)
+        rows = np.flatnonzero(gaia.vectors @ near[0] >= math.cos(reach))
+        if len(rows) < 4:
+            continue
+        local = Catalog(
+            gaia.ids[rows],
+            gaia.ra_deg[rows],
+            gaia.dec_deg[rows],
+            gaia.mag[rows],
+            f"{gaia.name}, within {math.degrees(reach):.3g}° of the position hint",
+        )
+        database = catalog_only(local, top_rad)
+        table = build_pattern_table(
+            database,
+            stars_per_field=NEAR_STARS_PER_FIELD,
+            field_radius_fraction=FIELD_RADIUS_FRACTION,
+            oversampling=NEAR_OVERSAMPLING,
+            region=(near[0], near[1] + 0.5 * top_rad),
+        )
+        if len(table):
+            out.append(Band(a, b, local, database, table))
+    return out or None
 
 
 def check_fov_range(
@@ -257,8 +337,9 @@ def _narrower_why(fov_deg: float, limits_deg: tuple[float, float]) -> str:
     if tuple(limits_deg) != tuple(Camera.fov_limits_deg) or not fov_deg < limits_deg[0]:
         return ""
     return (
-        f" (a field narrower than {limits_deg[0]:g}° holds too few stars of the embedded "
-        "Hipparcos catalog, complete to Hp 7.3-9, to identify)"
+        f" (the narrowest field searched: a {limits_deg[0]:g}° field holds about 8 stars of "
+        "the embedded Gaia DR3 catalog, G <= 10, and whole-sky pattern tables of narrower "
+        "fields would take 4x the lattice fields per halving)"
     )
 
 
@@ -370,8 +451,25 @@ def solve_unknown_field(
     for k, (a, b) in enumerate(ranges):
         # the budget counts once the range's tables are loaded (built on first use); the
         # first range takes what it needs, the others share what it left equally
+        share_s = left_s / max(1, len(ranges) - k) if k else left_s
+        bands_near = None
+        if near is not None:
+            bands_near = near_bands(a, b, base.width, base.height, catalog, epoch_year, near)
+        if bands_near is not None:  # a narrow field near a hint: its own tables first
+            deadline = Deadline.after(HINT_BUDGET_SHARE * share_s)
+            with first_use("solve"):
+                result = _search_and_fit(
+                    stars, base, bands_near, settings, (a, b),
+                    max(options.pattern_stars, NEAR_PATTERN_STARS), deadline, None,
+                )  # fmt: skip
+            share_s -= result.time_ms / 1e3
+            left_s -= result.time_ms / 1e3
+            if result.solution is not None or share_s <= 0:
+                results.append(result)
+                break
+        # the budget counts once the range's tables are loaded (built on first use)
         bands = load_bands(a, b, base.width, base.height, catalog, epoch_year)
-        deadline = Deadline.after(left_s / max(1, len(ranges) - k) if k else left_s)
+        deadline = Deadline.after(share_s)
         with first_use("solve"):
             result = _search_and_fit(
                 stars, base, bands, settings, (a, b), options.pattern_stars, deadline, near

