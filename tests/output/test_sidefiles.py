@@ -9,6 +9,7 @@ from __future__ import annotations
 import shutil
 import subprocess
 import zipfile
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -170,3 +171,39 @@ def test_none_and_temp_axy_disable(tmp_path):
                         "none", "--temp-axy", "-N", "none"])  # fmt: skip
     assert code == 0
     assert sorted(p.name for p in tmp_path.iterdir()) == ["img.jpg", "img.solved", "img.wcs"]
+
+
+@pytest.mark.slow
+def test_same_tables_as_debian_solve_field(solved, tmp_path):
+    """Debian's solve-field on the same image (its Tycho-2 index files installed): our files
+    have its columns and formats (.match: a subset of its MatchObj), and the stars both
+    matched sit at the same pixels in both .corr files."""
+    solve_field_program = _tool("solve-field")
+    if not list(Path("/usr/share/astrometry").glob("index-tycho2-1[5-9]*.fits")):
+        pytest.skip("astrometry.net's Tycho-2 index files 15-19 are not installed "
+                    "(apt-get install astrometry-data-tycho2-10-19)")  # fmt: skip
+    image = tmp_path / "img.jpg"
+    image.write_bytes((solved / "img.jpg").read_bytes())
+    run = subprocess.run([solve_field_program, str(image), "--no-plots", "--overwrite",
+                          "--crpix-center", "--scale-units", "degwidth", "--scale-low", "20",
+                          "--scale-high", "35", "--cpulimit", "60", "--new-fits", "none"],
+                         capture_output=True, text=True, timeout=300)  # fmt: skip
+    if not (tmp_path / "img.solved").exists():
+        pytest.skip(f"solve-field did not solve the image here: {run.stdout[-300:]}")
+    for name in ("img.axy", "img.corr", "img.rdls", "img-indx.xyls"):
+        theirs, ours = _table(tmp_path / name)[2], _table(solved / name)[2]
+        assert [c.name for c in ours] == [c.name for c in theirs], name
+        # same kinds (float / integer); solve-field writes its .axy in single precision
+        assert [c.format[-1] for c in ours] == [c.format[-1] for c in theirs], name
+    theirs_match = {c.name for c in _table(tmp_path / "img.match")[2]}
+    ours_match = {c.name for c in _table(solved / "img.match")[2]}
+    assert ours_match <= theirs_match
+    theirs, ours = _table(tmp_path / "img.corr")[3], _table(solved / "img.corr")[3]
+    gap = np.hypot(theirs["field_x"][:, None] - ours["field_x"][None],
+                   theirs["field_y"][:, None] - ours["field_y"][None])  # fmt: skip
+    i, j = np.nonzero(gap < 1.0)
+    assert len(i) >= 10
+    np.testing.assert_allclose(ours["index_ra"][j], theirs["index_ra"][i], atol=5e-3)
+    index_gap = np.hypot(ours["index_x"][j] - theirs["index_x"][i],
+                         ours["index_y"][j] - theirs["index_y"][i])  # fmt: skip
+    assert np.median(index_gap) < 0.3
