@@ -59,7 +59,9 @@ BLIND_RADIUS_DEG = 180.0  # -r 180: the whole sky (N.I.N.A. sends it when it kno
 # accepted and ignored: they tune ASTAP's own detector, quad matcher or database
 IGNORED = ("-s", "-t", "-m", "-d", "-D", "-speed", "-sqm", "-tofits")
 IGNORED_FLAGS = ("-progress", "-annotate", "-debug")
-REFUSED = ("-analyse", "-extract", "-extract2", "-stack", "-focus1", "-focus2")
+REFUSED = ("-extract", "-extract2", "-stack", "-focus1", "-focus2")
+ANALYSE_SNR_DEFAULT = 30.0  # -analyse 0: ASTAP's default signal-to-noise floor
+HFD_PER_SIGMA = 2.0 * math.sqrt(2.0 * math.log(2.0))  # a Gaussian's half-flux diameter
 
 
 @dataclass(frozen=True)
@@ -143,6 +145,8 @@ def build_parser() -> Parser:
         p.add_argument(flag, metavar="X", help="accepted and ignored (docs/dropin.md)")
     for flag in IGNORED_FLAGS:
         p.add_argument(flag, action="store_true", help="accepted and ignored (docs/dropin.md)")
+    p.add_argument("-analyse", type=float, metavar="SNR_MIN",
+                   help="only report the median HFD and the stars of at least SNR_MIN")  # fmt: skip
     for flag in REFUSED:
         p.add_argument(flag, metavar="X", help="not done by starnav (exit 2)")
     return p
@@ -167,6 +171,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.f is None:
         print(f"{PROG}: -f FILE is needed", file=sys.stderr)
         return EXIT_BAD_INPUT
+    if args.analyse is not None:
+        return _analyse(Path(args.f), args.analyse)
     cmdline = " ".join([program, *argv])
     base = Path(args.o) if args.o else Path(args.f)
     log: list[str] = [cmdline]
@@ -178,6 +184,40 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.log:
         _with_suffix(base, ".log").write_text("\n".join(log) + "\n")
     return code
+
+
+def analyse(image: Path, snr_min: float) -> tuple[float, int]:
+    """ASTAP's -analyse: the median half-flux diameter (px) of the image's stars and how many
+    have a signal-to-noise of at least ``snr_min`` (0: ``ANALYSE_SNR_DEFAULT``). starnav's
+    detection (``starnav.detect.stars.detect_stars``, every star) and its measures: the
+    HFD of the PSF it fits (a Gaussian's, 2 sqrt(2 ln 2) sigma: one PSF for the image), the
+    signal-to-noise of ``Detections.snr`` (ASTAP measures both per star, its own way)."""
+    import numpy as np
+
+    from starnav.detect.read import read_image
+    from starnav.detect.stars import detect_stars
+
+    if not (math.isfinite(snr_min) and snr_min >= 0):
+        raise StarnavError(f"-analyse takes a signal-to-noise floor >= 0, got {snr_min}")
+    found = detect_stars(read_image(image))
+    floor = snr_min or ANALYSE_SNR_DEFAULT
+    return HFD_PER_SIGMA * found.psf_sigma_px, int(np.sum(found.snr >= floor))
+
+
+def _analyse(image: Path, snr_min: float) -> int:
+    """Print -analyse's two lines as ASTAP's command line does; 0, or 16 when the image
+    cannot be read (ASTAP's exit codes on Linux)."""
+    try:
+        hfd, stars = analyse(image, snr_min)
+    except ImageError as exc:
+        print(f"Error reading image file: {exc}", flush=True)
+        return EXIT_IMAGE_ERROR
+    except StarnavError as exc:
+        print(f"{PROG}: {exc}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    print(f"HFD_MEDIAN={hfd:.1f}")
+    print(f"STARS={stars}")
+    return EXIT_SOLVED
 
 
 def _say(log: list[str], line: str) -> None:

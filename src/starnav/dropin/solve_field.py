@@ -13,11 +13,18 @@ the line that completes its four numbers (centre, rotation angle, pixel scale), 
 solve-field's order it never sees the parity line; printed after "Field parity:", the pixel
 scale line lets it read all five. Exit status as solve-field: 0 solved or not (it prints "Did
 not solve"); 2 for bad arguments or an unreadable input (one line on stderr).
-See docs/dropin.md for what each option does here.
+
+The command line is read as solve-field's getopt_long reads it (``getopt_argv``: unique
+prefixes of long options, bundled short flags, values that begin with "-"), over solve-field's
+whole option table. Options that mean something here are honoured (scale, position, parity,
+sort column and order, ``--odds-to-solve`` as a false-match probability, the reference pixel,
+``-T``, ``-C``, SExtractor); the others are accepted and each named once on stderr with the
+reason. See docs/dropin.md for what each option does here.
 """
 
 from __future__ import annotations
 
+import argparse
 import math
 import sys
 from collections.abc import Sequence
@@ -42,22 +49,46 @@ SCALE_UNIT_NAMES = {
     "arcsecperpix": "arcsecperpix", "app": "arcsecperpix",
     "focalmm": "focalmm",
 }  # fmt: skip
-# accepted so that clients' command lines run; they tune astrometry.net's own engine, index
-# files or by-products that starnav does not have (docs/dropin.md says why for each)
+# solve-field's options that starnav accepts and does not apply (docs/dropin.md): the option,
+# its short letter (None: long only) and why. A client's line runs; each one it gives is
+# named once on stderr ("starnav-solve-field: ignored: --uniformize 0 (...)"). Options of
+# solve-field's engine that the real tool has (solver/solve-field.c and the options of
+# solver/augment-xylist.c it keeps) and the side files starnav does not write yet.
+ENGINE = "tunes astrometry.net's engine; starnav verifies with its own false-match probability"
+EXTRACT = "tunes astrometry.net's source extraction; starnav finds and orders stars its own way"
+NO_REUSE = "starnav never reuses a WCS in the input's header"
+ONE_LEVEL = "starnav has one verbosity"
+INDEX = "astrometry.net's index files and engine; starnav uses its own catalog"
+PLOTS = "starnav makes no plots"
+TEMP = "starnav keeps no temporary files"
+SIDE = "a file starnav does not write"
+HEADER = "a FITS header's scale and position are always read"
+VERIFY = "starnav solves every input; it does not verify a given WCS"
+SIP = "starnav chooses the SIP order from the matched stars"
 IGNORED_FLAGS = (
-    "--no-verify", "--no-remove-lines", "--continue", "--no-fits2fits", "--guess-scale",
-    "--resort", "--no-background-subtraction", "--no-tweak", "--invert",
-    "--no-delete-temp", "--fits-image", "--timestamp", "--temp-axy", "--verbose",
+    "--no-verify", "--no-remove-lines", "--no-fits2fits", "--guess-scale", "--resort",
+    "--no-background-subtraction", "--invert", "--no-delete-temp", "--fits-image",
+    "--timestamp", "--verbose", "--no-verify-uniformize", "--no-verify-dedup",
+    "--tag-all", "--dont-augment", "--just-augment", "--batch", "--use-wget",
 )  # fmt: skip
 IGNORED_VALUES = (
-    "--uniformize", "--objs", "--depth", "--temp-dir", "--config", "--backend-config",
-    "--tweak-order",
+    "--uniformize", "--depth", "--temp-dir", "--keep-xylist", "--corr", "--match",
+    "--rdls", "--index-xyls", "--axy", "--config", "--backend-config", "--tweak-order",
     "--sigma", "--nsigma", "--plot-scale", "--plot-bg", "--extension", "--code-tolerance",
-    "--index-dir", "--index-file", "--scamp", "--scamp-config",
-    "--sort-column", "--pnm", "--cancel", "--solved-in",
+    "--index-dir", "--index-file", "--kmz", "--scamp", "--scamp-config", "--pnm",
+    "--solved-in", "--odds-to-tune-up", "--odds-to-reject", "--odds-to-stop-looking",
+    "--quad-size-min", "--quad-size-max", "--sort-rdls", "--tag", "--scamp-ref", "--verify",
+    "--verify-ext", "--predistort", "--xscale", "--fields",
 )  # fmt: skip
 SHORT_IGNORED = {"--tweak-order": "-t", "--depth": "-d", "--temp-dir": "-m",
-                 "--backend-config": "-b", "--objs": None}  # fmt: skip
+                 "--keep-xylist": "-k", "--corr": "-B", "--match": "-M", "--rdls": "-R",
+                 "--index-xyls": "-U", "--backend-config": "-b", "--no-verify": "-y",
+                 "--resort": "-r", "--guess-scale": "-g", "--verbose": "-v",
+                 "--no-delete-temp": "-7", "--no-remove-lines": "-9", "--extension": "-6",
+                 "--code-tolerance": "-c", "--quad-size-min": "-q", "--quad-size-max": "-Q",
+                 "--kmz": "-Z", "--scamp": "-i", "--scamp-config": "-n", "--scamp-ref": "-j",
+                 "--solved-in": "-I", "--pnm": "-P", "--dont-augment": "-A", "--verify": "-V",
+                 "--fields": "-F", "--use-wget": "-G"}  # fmt: skip
 # the side files' options (``output_paths``): (option, short letter or None, default
 # path with "%s" for BASE or None, help); an option here is written, not ignored
 # (solver/solve-field.c: .axy, .corr, .match, .rdls, -indx.xyls by default, "none" disables
@@ -71,6 +102,24 @@ SIDE_FILE_OPTIONS: tuple[tuple[str, str | None, str | None, str], ...] = (
     ("--keep-xylist", "-k", None, "the sources, unaugmented xylist (not written by default)"),
     ("--kmz", "-Z", None, "a KML ground overlay of the image, zipped (not written by default)"),
 )
+IGNORED_WHY = {
+    **dict.fromkeys(("--guess-scale", "--fits-image", "--no-fits2fits"), HEADER),
+    **dict.fromkeys(("--verify", "--verify-ext", "--solved-in"), VERIFY),
+    **dict.fromkeys(("--no-remove-lines", "--resort", "--no-background-subtraction",
+                     "--invert", "--uniformize", "--sigma", "--nsigma", "--extension",
+                     "--predistort", "--xscale", "--fields"), EXTRACT),
+    **dict.fromkeys(("--no-delete-temp", "--timestamp", "--temp-dir", "--dont-augment",
+                     "--just-augment", "--use-wget"), TEMP),
+    **dict.fromkeys(("--no-verify-uniformize", "--no-verify-dedup", "--depth",
+                     "--code-tolerance", "--odds-to-tune-up", "--odds-to-reject",
+                     "--odds-to-stop-looking", "--quad-size-min", "--quad-size-max"), ENGINE),
+    **dict.fromkeys(("--config", "--backend-config", "--index-dir", "--index-file",
+                     "--batch"), INDEX),
+    **dict.fromkeys(("--plot-scale", "--plot-bg", "--pnm"), PLOTS),
+    "--tweak-order": SIP,
+    "--no-verify": NO_REUSE,
+    "--verbose": ONE_LEVEL,
+}  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -95,15 +144,23 @@ class OutputPaths:
 
 
 def build_parser() -> Parser:
-    """solve-field's options (those clients pass; see the module docstring)."""
+    """solve-field's options: those of ``solver/solve-field.c`` and the options of
+    ``solver/augment-xylist.c`` it keeps (see the module docstring and docs/dropin.md)."""
     p = Parser(prog=PROG, description=__doc__.split("\n\n")[0], allow_abbrev=False)
     p.add_argument(
         "inputs",
-        nargs="+",
+        nargs="*",
         metavar="FILE",
         help="image (FITS, PNG, JPEG, TIFF) or xylist (FITS table of x, y)",
     )
+    p.add_argument("--version", action="store_true", help="print the version and exit")
     p.add_argument("-O", "--overwrite", action="store_true", help="overwrite output files")
+    p.add_argument("-K", "--continue", dest="continue_", action="store_true",
+                   help="solve and write over existing output files, as --overwrite")  # fmt: skip
+    p.add_argument("-J", "--skip-solved", action="store_true",
+                   help="skip an input whose 'solved' file exists")  # fmt: skip
+    p.add_argument("-f", "--files-on-stdin", action="store_true",
+                   help="read the input file names on stdin, one a line")  # fmt: skip
     p.add_argument(
         "-p",
         "--no-plots",
@@ -128,6 +185,10 @@ def build_parser() -> Parser:
         action="store_true",
         help="put the WCS reference pixel at the image centre",
     )
+    p.add_argument("--crpix-x", type=float, metavar="PIX",
+                   help="the WCS reference pixel's x (FITS px; default the centre)")  # fmt: skip
+    p.add_argument("--crpix-y", type=float, metavar="PIX",
+                   help="the WCS reference pixel's y (FITS px; default the centre)")  # fmt: skip
     p.add_argument(
         "-8",
         "--parity",
@@ -135,63 +196,180 @@ def build_parser() -> Parser:
         default="both",
         help="solve-field's parity (pos: det CD < 0; normal images are neg)",
     )
-    p.add_argument("--pixel-error", type=float,
+    p.add_argument("-E", "--pixel-error", type=float,
                    help="centroid error (px) of the matching tolerances (default 1)")  # fmt: skip
+    p.add_argument("--odds-to-solve", type=float, metavar="ODDS",
+                   help="accept at a false-match probability of at most 1/(1+ODDS) "
+                   "(at most starnav's default; default 1e9 is stricter than it)")  # fmt: skip
     p.add_argument("-l", "--cpulimit", type=float, help="time budget of the solve (seconds)")
+    p.add_argument("-C", "--cancel", metavar="FILE",
+                   help="stop solving when this file appears")  # fmt: skip
+    p.add_argument("-T", "--no-tweak", action="store_true",
+                   help="a plain TAN WCS (no SIP terms)")  # fmt: skip
     p.add_argument("-W", "--wcs", help="WCS output file (default BASE.wcs)")
     p.add_argument("-N", "--new-fits", help='new FITS file (default BASE.new; "none": not made)')
     p.add_argument("-S", "--solved", help="the 'solved' flag file (default BASE.solved)")
     p.add_argument("-D", "--dir", help="directory of the output files (default: the input's)")
     p.add_argument("-o", "--out", help="base name of the output files (default: the input's)")
-    p.add_argument("-X", "--x-column", default="X", help="xylist: x column (default X)")
-    p.add_argument("-Y", "--y-column", default="Y", help="xylist: y column (default Y)")
-    p.add_argument("-w", "--width", type=int, help="xylist: image width (px)")
-    p.add_argument("-e", "--height", type=int, help="xylist: image height (px)")
+    _add_source_list_options(p)
+    p.add_argument("--temp-axy", action="store_true",
+                   help="the augmented xylist (.axy) is not kept")  # fmt: skip
+    side_flags = {flag for flag, *_ in SIDE_FILE_OPTIONS}
     for flag, short, _, text in SIDE_FILE_OPTIONS:
         p.add_argument(*(n for n in (short, flag) if n), metavar="FILE", help=text)
     for flag in IGNORED_FLAGS:
-        p.add_argument(flag, action="store_true", help="accepted and ignored (docs/dropin.md)")
-    for flag in IGNORED_VALUES:
         short = SHORT_IGNORED.get(flag)
         names = (short, flag) if short else (flag,)
-        p.add_argument(*names, metavar="X", help="accepted and ignored (docs/dropin.md)")
-    p.add_argument("-y", dest="no_verify_short", action="store_true", help="= --no-verify")
-    p.add_argument("-r", dest="resort_short", action="store_true", help="= --resort")
-    p.add_argument("-K", dest="continue_short", action="store_true", help="= --continue")
-    p.add_argument("-g", dest="guess_scale_short", action="store_true", help="= --guess-scale")
-    p.add_argument("-v", dest="verbose_short", action="store_true", help="= --verbose")
+        p.add_argument(*names, action=_Ignored, nargs=0,
+                       help="accepted and ignored (docs/dropin.md)")  # fmt: skip
+    for flag in (f for f in IGNORED_VALUES if f not in side_flags):
+        short = SHORT_IGNORED.get(flag)
+        names = (short, flag) if short else (flag,)
+        p.add_argument(*names, action=_Ignored, metavar="X",
+                       help="accepted and ignored (docs/dropin.md)")  # fmt: skip
+    p.set_defaults(ignored=[])
     return p
+
+
+def _add_source_list_options(p: Parser) -> None:
+    """The options of an xylist input and of SExtractor's source lists."""
+    p.add_argument("-X", "--x-column", default="X", help="xylist: x column (default X)")
+    p.add_argument("-Y", "--y-column", default="Y", help="xylist: y column (default Y)")
+    p.add_argument("-s", "--sort-column", metavar="COLUMN",
+                   help="xylist: sort the sources by this column (default: FLUX, FLUX_AUTO "
+                   "or MAG_AUTO when there is one, else as given)")  # fmt: skip
+    p.add_argument("-a", "--sort-ascending", action="store_true",
+                   help="xylist: sort smallest first (a magnitude); default largest")  # fmt: skip
+    p.add_argument("--objs", type=int, metavar="N",
+                   help="xylist: solve the first (brightest) N sources")  # fmt: skip
+    p.add_argument("-w", "--width", type=int, help="xylist: image width (px)")
+    p.add_argument("-e", "--height", type=int, help="xylist: image height (px)")
+    p.add_argument("--use-source-extractor", action="store_true",
+                   help="find the sources with SExtractor (source-extractor) instead")  # fmt: skip
+    p.add_argument("--source-extractor-path", metavar="PATH",
+                   help="SExtractor's program (and arguments); implies the above")  # fmt: skip
+    p.add_argument("--source-extractor-config", metavar="FILE",
+                   help="SExtractor's config file; implies --use-source-extractor")  # fmt: skip
+
+
+class _Ignored(argparse.Action):
+    """An option starnav accepts and does not apply: kept as (option, value) in
+    ``ignored``, to be named once on stderr (``IGNORED_WHY`` says why)."""
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        long_name = next(o for o in self.option_strings if o.startswith("--"))
+        namespace.ignored = [*namespace.ignored, (long_name, values)]
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run solve-field's command line; the exit status."""
     freeze_at_exit()
-    args = build_parser().parse_args(_joined_values(sys.argv[1:] if argv is None else argv))
+    parser = build_parser()
+    args = parser.parse_args(getopt_argv(parser, sys.argv[1:] if argv is None else argv))
+    if args.version:
+        from starnav.cli import version
+
+        print(f"starnav {version()} (solve-field's command line)")
+        return EXIT_OK
     try:
+        inputs = list(args.inputs)
+        if args.files_on_stdin:
+            inputs += [line.strip() for line in sys.stdin if line.strip()]
+        if not inputs:
+            raise StarnavError("no input file (FILE, or names on stdin with --files-on-stdin)")
         hints_common = _hints(args)
-        for i, infile in enumerate(args.inputs, start=1):
-            _solve_one(Path(infile), i, len(args.inputs), args, hints_common)
+        _report_ignored(args.ignored)
+        for i, infile in enumerate(inputs, start=1):
+            _solve_one(Path(infile), i, len(inputs), args, hints_common)
     except (StarnavError, OSError) as exc:
         print(f"{PROG}: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
     return EXIT_OK
 
 
-def _joined_values(argv: Sequence[str]) -> list[str]:
-    """ "--dec -30:00:00" as "--dec=-30:00:00": getopt takes a value that starts with "-",
-    argparse would take it for an option."""
+def getopt_argv(parser: argparse.ArgumentParser, argv: Sequence[str]) -> list[str]:
+    """``argv`` as getopt_long reads it (``util/an-opts.c``), written out for argparse: a
+    long option may be any unique prefix of its name (an exact name wins; a prefix of
+    several is an error, exit 2), a required value is the next word whatever it starts with
+    ("--dec -30:00:00"), short flags may be bundled ("-pO") and a short option's value
+    attached ("-L60"). Options come out as "--name=value" or a flag, then "--" and the
+    input files (getopt takes files anywhere on the line)."""
+    longs: dict[str, argparse.Action] = {}
+    shorts: dict[str, argparse.Action] = {}
+    for action in parser._actions:
+        for name in action.option_strings:
+            (longs if name.startswith("--") else shorts)[name] = action
     out: list[str] = []
-    names = {"-3": "--ra", "-4": "--dec", "--ra": "--ra", "--dec": "--dec"}
+    files: list[str] = []
     items = list(argv)
     i = 0
+
+    def value_after(j: int, name: str) -> str:
+        if j >= len(items):
+            parser.error(f"option {name!r} requires an argument")
+        return items[j]
+
     while i < len(items):
-        if items[i] in names and i + 1 < len(items) and items[i + 1].startswith("-"):
-            out.append(f"{names[items[i]]}={items[i + 1]}")
-            i += 2
-            continue
-        out.append(items[i])
+        word = items[i]
         i += 1
-    return out
+        if word == "--":
+            files += items[i:]
+            break
+        if word.startswith("--"):
+            name, eq, value = word.partition("=")
+            full = _long_name(parser, longs, name)
+            takes = longs[full].nargs != 0
+            if takes and not eq:
+                value = value_after(i, full)
+                i += 1
+            if eq and not takes:
+                parser.error(f"option {full!r} doesn't allow an argument")
+            out.append(f"{full}={value}" if takes else full)
+        elif word.startswith("-") and len(word) > 1:
+            for k, letter in enumerate(word[1:], start=1):
+                action = shorts.get(f"-{letter}")
+                if action is None:
+                    parser.error(f"invalid option -- {letter!r}")
+                full = next((o for o in action.option_strings if o.startswith("--")), f"-{letter}")
+                if action.nargs == 0:
+                    out.append(full)
+                    continue
+                value = word[k + 1 :]
+                if not value:
+                    value = value_after(i, f"-{letter}")
+                    i += 1
+                out.append(f"{full}={value}")
+                break
+        else:
+            files.append(word)
+    return [*out, "--", *files]
+
+
+def _long_name(parser, longs: dict, name: str) -> str:
+    """getopt_long's reading of a long option ``name``: the option itself, else the one
+    option it is a prefix of (exit 2 when none or several)."""
+    if name in longs:
+        return name
+    matches = sorted({longs[o].option_strings[-1] for o in longs if o.startswith(name)})
+    if len(matches) == 1:
+        return matches[0]
+    if not matches:
+        parser.error(f"unrecognized option {name!r}")
+    parser.error(f"option {name!r} is ambiguous; possibilities: {' '.join(matches)}")
+    raise AssertionError  # parser.error exits
+
+
+def _report_ignored(ignored: list[tuple[str, object]]) -> None:
+    """Name each option given that starnav does not apply, once, on stderr; solve-field's
+    "none" (a side file not written) is what starnav does anyway."""
+    seen: set[str] = set()
+    for option, value in ignored:
+        if option in seen or (isinstance(value, str) and value.lower() == "none"):
+            continue
+        seen.add(option)
+        shown = option if not isinstance(value, str) else f"{option} {value}"
+        why = IGNORED_WHY.get(option, SIDE)
+        print(f"{PROG}: ignored: {shown} ({why})", file=sys.stderr)
 
 
 def _hints(args) -> dict:
@@ -213,7 +391,27 @@ def _hints(args) -> dict:
                            f"{', '.join(SCALE_UNIT_NAMES)}")  # fmt: skip
     if args.cpulimit is not None and not (math.isfinite(args.cpulimit) and args.cpulimit > 0):
         raise StarnavError(f"--cpulimit must be a positive number of seconds, got {args.cpulimit}")
+    if args.odds_to_solve is not None:
+        out["max_false_match_probability"] = false_match_of_odds(args.odds_to_solve)
+    for name in ("crpix_x", "crpix_y"):
+        value = getattr(args, name)
+        if value is not None and not math.isfinite(value):
+            raise StarnavError(f"--{name.replace('_', '-')} must be a number, got {value}")
+    if args.objs is not None and args.objs < 1:
+        raise StarnavError(f"--objs must be at least 1, got {args.objs}")
     return out
+
+
+def false_match_of_odds(odds: float) -> float:
+    """starnav's acceptance of astrometry.net's ``--odds-to-solve``: a false-match probability
+    of at most 1 / (1 + odds) (the odds ratio of a true match against a false one), never
+    looser than starnav's default (``DEFAULT_MAX_FALSE_MATCH_PROBABILITY``): odds of 1e9,
+    solve-field's default, accept at 1e-9; odds under 1e4 keep the default 1e-4."""
+    from starnav.pipeline.options import DEFAULT_MAX_FALSE_MATCH_PROBABILITY
+
+    if not (math.isfinite(odds) and odds > 0):
+        raise StarnavError(f"--odds-to-solve must be a positive number, got {odds}")
+    return min(1.0 / (1.0 + odds), DEFAULT_MAX_FALSE_MATCH_PROBABILITY)
 
 
 def output_paths(infile: Path, args) -> OutputPaths:
@@ -251,37 +449,13 @@ _SIDE_KIND = {"--index-xyls": "index_xyls", "--keep-xylist": "xyls"}
 
 
 def read_xylist(path: Path, args) -> XYList | None:
-    """The source list of an xylist file (a FITS file whose first table has the ``--x-column``,
-    ``--y-column`` columns, FITS pixels), None for an image. The image size: ``--width``,
-    ``--height``, else the header's IMAGEW, IMAGEH, else the largest x, y rounded up."""
-    from starnav.detect.header import is_fits
+    """The source list of an xylist file (``starnav.pipeline.plate.read_xylist`` with the
+    columns, sort order, size and ``--objs`` of the command line), None for an image."""
+    from starnav.pipeline.plate import read_xylist as read
 
-    if not is_fits(path):
-        return None
-    import numpy as np
-    from astropy.io import fits
-
-    from starnav.pipeline.plate import XYList
-
-    try:
-        with fits.open(path, memmap=False) as hdul:
-            table = next((h for h in hdul if isinstance(h, fits.BinTableHDU | fits.TableHDU)),
-                         None)  # fmt: skip
-            if table is None or hdul[0].data is not None:
-                return None
-            names = {n.upper(): n for n in table.columns.names}
-            missing = [c for c in (args.x_column, args.y_column) if c.upper() not in names]
-            if missing:
-                raise StarnavError(f"xylist {str(path)!r} has no column {missing[0]!r} "
-                                   f"(columns: {', '.join(table.columns.names)})")  # fmt: skip
-            x = np.asarray(table.data[names[args.x_column.upper()]], dtype=float)
-            y = np.asarray(table.data[names[args.y_column.upper()]], dtype=float)
-            header = hdul[0].header + table.header
-    except OSError as exc:
-        raise StarnavError(f"cannot read {str(path)!r} as FITS: {exc}") from None
-    width = args.width or header.get("IMAGEW") or math.ceil(float(np.max(x, initial=1.0)))
-    height = args.height or header.get("IMAGEH") or math.ceil(float(np.max(y, initial=1.0)))
-    return XYList.make(x, y, width, height)
+    return read(path, x_column=args.x_column, y_column=args.y_column,
+                sort_column=args.sort_column, sort_ascending=args.sort_ascending,
+                width=args.width, height=args.height, max_sources=args.objs)  # fmt: skip
 
 
 def _solve_one(infile: Path, number: int, count: int, args, common: dict) -> None:
@@ -291,27 +465,58 @@ def _solve_one(infile: Path, number: int, count: int, args, common: dict) -> Non
         raise StarnavError(f"input file {str(infile)!r} does not exist")
     paths = output_paths(infile, args)
     paths.base.parent.mkdir(parents=True, exist_ok=True)  # solve-field makes --dir
+    if args.skip_solved and paths.solved is not None and paths.solved.exists():
+        print(f'Solved file exists: "{paths.solved}"; skipping input file "{infile}".')
+        return
     existing = paths.existing()
-    if existing and not args.overwrite:
+    if existing and not (args.overwrite or args.continue_):
         print(f'Output file already exists: "{existing[0]}".\n'
               "Use the --overwrite flag to overwrite existing files,\n"
               " or the --continue  flag to not overwrite existing files but still try solving.\n"
               "Continuing to next input file.")  # fmt: skip
         return
     print(f'Reading input file {number} of {count}: "{infile}"...', flush=True)
-    xylist = read_xylist(infile, args)
-    source: Path | XYList = xylist if xylist is not None else infile
 
-    def hints(width: int, height: int) -> PlateHints:  # the scale needs the image's width
-        return PlateHints(fov_range_deg=_fov_range(args, width), **common)
+    def hints(width: int, height: int) -> PlateHints:  # the scale needs the width
+        return PlateHints(fov_range_deg=_fov_range(args, width),
+                          crpix_fits=_crpix(args, width, height), **common)  # fmt: skip
 
-    print("Solving...", flush=True)
-    result = solve_plate(source, hints, time_budget_s=args.cpulimit)
+    xylist, result = None, None
+    cancel = CancelWatch(args.cancel)
+    try:
+        with cancel:
+            if not cancel.requested():
+                xylist = _source_list(infile, args)
+                source: Path | XYList = xylist if xylist is not None else infile
+                print("Solving...", flush=True)
+                result = solve_plate(source, hints, time_budget_s=args.cpulimit)
+    except KeyboardInterrupt:
+        if not cancel.requested():
+            raise
+        result = None
     for p in paths.outputs():
         if p is not None and p.exists():
             p.unlink()  # a stale file must not read as this run's answer
-    print_result(result, str(infile), paths, image=xylist is None)
+    if result is None:
+        print(f'Field 1 did not solve (cancel file "{args.cancel}" exists).')
+        print(f"Field: {infile}")
+        print("Did not solve (or no WCS file was written).")
+    else:
+        if args.no_tweak and result.plate is not None:
+            result = _without_sip(result)
+        image = xylist is None and not _extracts(args)
+        print_result(result, str(infile), paths, image=image)
     sys.stdout.flush()
+
+
+def _crpix(args, width: int, height: int) -> tuple[float, float] | None:
+    """The WCS reference pixel of --crpix-x / --crpix-y (FITS px; the one not given: the
+    centre's), None for the centre (as --crpix-center, which wins, as in solve-field)."""
+    if args.crpix_center or (args.crpix_x is None and args.crpix_y is None):
+        return None
+    x = (width + 1) / 2.0 if args.crpix_x is None else args.crpix_x
+    y = (height + 1) / 2.0 if args.crpix_y is None else args.crpix_y
+    return (x, y)
 
 
 def _fov_range(args, width: int) -> tuple[float, float] | None:
@@ -323,6 +528,151 @@ def _fov_range(args, width: int) -> tuple[float, float] | None:
     from starnav.pipeline.plate import fov_range_from_scale
 
     return fov_range_from_scale(units, low, high, width)
+
+
+def _extracts(args) -> bool:
+    """Whether SExtractor finds the sources (--use-source-extractor or its path or config)."""
+    return bool(
+        args.use_source_extractor or args.source_extractor_path or args.source_extractor_config
+    )
+
+
+def _source_list(infile: Path, args) -> XYList | None:
+    """The source list solved: the xylist an input is, else SExtractor's of the image when
+    asked (``source_extractor_list``), else None (starnav detects the image's stars)."""
+    xylist = read_xylist(infile, args)
+    if xylist is not None or not _extracts(args):
+        return xylist
+    return source_extractor_list(infile, args)
+
+
+# solve-field's SExtractor parameters and filter when no config is given (augment-xylist.c):
+# the columns it reads, and a 5 x 5 Gaussian of 2 px FWHM, written out by its numbers
+SEXTRACTOR_PARAMS = "X_IMAGE\nY_IMAGE\nMAG_AUTO\nFLUX_AUTO\n"
+SEXTRACTOR_FILTER_FWHM_PX = 2.0
+
+
+def _gaussian_filter_text(fwhm_px: float, size: int = 5) -> str:
+    """SExtractor's convolution filter file: a normalised-by-SExtractor Gaussian PSF."""
+    import numpy as np
+
+    sigma = fwhm_px / (2.0 * math.sqrt(2.0 * math.log(2.0)))
+    r = np.arange(size) - size // 2
+    g = np.exp(-(r[:, None] ** 2 + r[None, :] ** 2) / (2.0 * sigma**2))
+    rows = "\n".join(" ".join(f"{v:.6f}" for v in row) for row in g)
+    return f"CONV NORM\n# {size}x{size} Gaussian PSF, FWHM {fwhm_px:g} px\n{rows}\n"
+
+
+def source_extractor_list(image: Path, args) -> XYList:
+    """The sources SExtractor finds in ``image``, as solve-field asks for them: without
+    --source-extractor-config, the parameters X_IMAGE, Y_IMAGE, MAG_AUTO, FLUX_AUTO and a
+    2 px Gaussian filter, sorted by MAG_AUTO, brightest first; with one, its catalog's
+    --x-column, --y-column and --sort-column. A non-FITS image is handed over as FITS
+    (the rows as starnav reads them, row 0 = FITS y = 1). ``StarnavError`` when SExtractor
+    cannot run or fails."""
+    import shlex
+    import subprocess
+    import tempfile
+
+    from starnav.detect.header import is_fits
+    from starnav.pipeline.plate import read_xylist as read
+
+    command = shlex.split(args.source_extractor_path or "source-extractor")
+    with tempfile.TemporaryDirectory(prefix="starnav-sextractor-") as tmp:
+        work = Path(tmp)
+        fits_image = image
+        from starnav.detect.read import read_image
+
+        pixels = read_image(image)
+        if not is_fits(image):
+            from astropy.io import fits
+
+            fits_image = work / "image.fits"
+            fits.PrimaryHDU(pixels.astype("float32")).writeto(fits_image)
+        catalog = work / "sources.fits"
+        x_column, y_column = args.x_column, args.y_column
+        sort_column, ascending = args.sort_column, args.sort_ascending
+        if args.source_extractor_config:
+            command += ["-c", str(Path(args.source_extractor_config).resolve())]
+        else:
+            (work / "sources.param").write_text(SEXTRACTOR_PARAMS)
+            (work / "gauss.conv").write_text(_gaussian_filter_text(SEXTRACTOR_FILTER_FWHM_PX))
+            command += ["-PARAMETERS_NAME", "sources.param", "-FILTER_NAME", "gauss.conv"]
+            x_column, y_column, sort_column, ascending = "X_IMAGE", "Y_IMAGE", "MAG_AUTO", True
+        command += ["-CATALOG_TYPE", "FITS_1.0", "-CATALOG_NAME", str(catalog),
+                    str(Path(fits_image).resolve())]  # fmt: skip
+        try:
+            done = subprocess.run(command, cwd=work, capture_output=True, text=True)
+        except OSError as exc:
+            raise StarnavError(f"cannot run SExtractor {command[0]!r}: {exc}") from None
+        if done.returncode != 0 or not catalog.exists():
+            last = (done.stderr.strip().splitlines() or ["no catalog written"])[-1]
+            raise StarnavError(f"SExtractor failed (exit {done.returncode}): {last}")
+        height, width = pixels.shape
+        found = read(catalog, x_column=x_column, y_column=y_column, sort_column=sort_column,
+                     sort_ascending=ascending, width=width, height=height,
+                     max_sources=args.objs)  # fmt: skip
+    if found is None:
+        raise StarnavError("SExtractor's catalog holds no table of sources")
+    return found
+
+
+def _without_sip(result: PlateResult) -> PlateResult:
+    """-T/--no-tweak: the plate's WCS as a plain TAN (its linear part, SIP terms dropped)."""
+    from dataclasses import replace
+
+    from starnav.pipeline.plate import Plate
+
+    plate = result.plate
+    if plate.wcs.sip is None:
+        return result
+    tan = plate.wcs.deepcopy()
+    tan.sip = None
+    tan.wcs.ctype = [c.replace("-SIP", "") for c in tan.wcs.ctype]
+    return replace(result, plate=Plate.from_wcs(tan, plate.width, plate.height))
+
+
+class CancelWatch:
+    """solve-field's --cancel FILE: the solve stops when the file appears (looked for every
+    ``POLL_S`` seconds by a thread, which interrupts the solve as Ctrl-C would). A file
+    there before the solve starts stops it at once, as in solve-field's engine."""
+
+    POLL_S = 0.1
+
+    def __init__(self, path: str | None) -> None:
+        self.path = None if path is None else Path(path)
+        self._seen = False
+        self._done = None
+        self._thread = None
+
+    def requested(self) -> bool:
+        """Whether the cancel file has appeared."""
+        if self.path is not None and not self._seen and self.path.exists():
+            self._seen = True
+        return self._seen
+
+    def __enter__(self) -> CancelWatch:
+        if self.path is None or self.requested():
+            return self
+        import threading
+
+        self._done = threading.Event()
+        self._thread = threading.Thread(target=self._watch, daemon=True)
+        self._thread.start()
+        return self
+
+    def _watch(self) -> None:
+        import _thread
+
+        while not self._done.wait(self.POLL_S):
+            if self.requested():
+                _thread.interrupt_main()
+                return
+
+    def __exit__(self, *exc) -> None:
+        if self._done is not None:
+            self._done.set()
+            self._thread.join()  # an interrupt it sent arrives inside the caller's try
 
 
 def print_result(result: PlateResult, field: str, paths: OutputPaths, *, image: bool) -> None:

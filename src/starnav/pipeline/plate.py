@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -57,7 +57,9 @@ class PlateHints:
     centroid 1-sigma (px; None: 1); ``crpix_center``: the WCS's reference pixel at the image
     centre (always so unless ``crpix_fits`` says otherwise: a plate solve has no camera file,
     so the principal point is the centre); ``crpix_fits``: the WCS's reference pixel (FITS
-    pixels, 1-based, as solve-field's ``--crpix-x``/``--crpix-y``; None: the centre).
+    pixels, 1-based, as solve-field's ``--crpix-x``/``--crpix-y``; None: the centre);
+    ``max_false_match_probability``: accept an answer only as sure as this (None: starnav's
+    default; solve-field's ``--odds-to-solve``).
     """
 
     fov_range_deg: tuple[float, float] | None = None
@@ -69,6 +71,7 @@ class PlateHints:
     positional_error_px: float | None = None
     crpix_center: bool = False
     crpix_fits: tuple[float, float] | None = None
+    max_false_match_probability: float | None = None
 
 
 def width_deg_from_scale(units: str, value: float, width_px: float) -> float:
@@ -154,19 +157,48 @@ def _positive(value, what: str) -> float:
     return v
 
 
+# a source list's brightness columns when none is named (``read_xylist``), in this order:
+# (name, ascending); astrometry.net's image2xy writes FLUX, SExtractor FLUX_AUTO / MAG_AUTO
+BRIGHTNESS_COLUMNS = (("FLUX", False), ("FLUX_AUTO", False), ("FLUX_ISO", False),
+                      ("FLUX_APER", False), ("MAG_AUTO", True), ("MAG_ISO", True),
+                      ("MAG_APER", True), ("MAG", True))  # fmt: skip
+# a list whose consecutive rows step the same way in y (or x) this often was written in
+# detection order (a scan of the image), not by brightness
+DETECTION_ORDER_FRACTION = 0.9
+
+
 @dataclass(frozen=True)
 class XYList:
-    """A source list: FITS pixel coordinates (1-based) of stars, brightest first, in an image
-    ``width`` x ``height`` px (astrometry.net's xylist)."""
+    """A source list: FITS pixel coordinates (1-based) of stars in an image ``width`` x
+    ``height`` px (astrometry.net's xylist). ``ordered``: whether the rows are brightest first
+    (sorted by a brightness column, or given so); when False the solve weighs no brightness
+    and takes the points spread over the image (``uniform_order``). ``sorted_by``: the column
+    the rows were sorted by (None: as given)."""
 
     x: np.ndarray
     y: np.ndarray
     width: int
     height: int
+    ordered: bool = True
+    sorted_by: str | None = None
 
     @classmethod
-    def make(cls, x: Sequence[float], y: Sequence[float], width, height) -> XYList:
-        """Checked: same lengths, finite numbers, a positive size. ``StarnavError`` else."""
+    def make(
+        cls,
+        x: Sequence[float],
+        y: Sequence[float],
+        width,
+        height,
+        *,
+        sort_values: Sequence[float] | None = None,
+        ascending: bool = False,
+        sort_name: str | None = None,
+    ) -> XYList:
+        """Checked: same lengths, finite numbers, a positive size. ``StarnavError`` else.
+        ``sort_values``: a brightness per row (a flux, largest first, or with ``ascending`` a
+        magnitude, smallest first; NaN last), the rows are sorted by it (stable), named
+        ``sort_name``; None: the rows stay as given, taken as brightest first unless they
+        are in detection order (``in_detection_order``)."""
         try:
             xs, ys = (np.asarray([float(v) for v in a], dtype=float) for a in (x, y))
         except (TypeError, ValueError):
@@ -177,12 +209,125 @@ class XYList:
             raise StarnavError("x and y must be finite numbers")
         w, h = (int(_positive(v, what)) for v, what in ((width, "image_width"),
                                                         (height, "image_height")))  # fmt: skip
-        return cls(xs, ys, w, h)
+        if sort_values is None:
+            return cls(xs, ys, w, h, ordered=not in_detection_order(xs, ys))
+        order = brightness_order(sort_values, ascending=ascending, count=len(xs))
+        return cls(xs[order], ys[order], w, h, ordered=True, sorted_by=sort_name or "brightness")
 
     @property
     def xy(self) -> np.ndarray:
         """Our pixel coordinates (top-left corner origin): FITS - 0.5."""
         return np.column_stack([self.x, self.y]) - 0.5
+
+    def solve_order(self) -> np.ndarray:
+        """The rows in the order they are solved: as they are when ordered by brightness,
+        else spread over the image (``uniform_order``)."""
+        if self.ordered:
+            return np.arange(len(self.x))
+        return uniform_order(self.xy, self.width, self.height)
+
+
+def brightness_order(values: Sequence[float], *, ascending: bool, count: int) -> np.ndarray:
+    """Rows brightest first by a column's ``values`` (descending, as solve-field sorts a flux;
+    ``ascending`` for a magnitude); rows whose value is not a number go last, in their order.
+    ``StarnavError`` for a column of another length or not of numbers."""
+    try:
+        v = np.asarray(values, dtype=float).reshape(-1)
+    except (TypeError, ValueError):
+        raise StarnavError("the sort column must hold numbers") from None
+    if len(v) != count:
+        raise StarnavError(f"the sort column has {len(v)} values for {count} sources")
+    key = np.where(np.isfinite(v), v if ascending else -v, np.inf)
+    return np.argsort(key, kind="stable")
+
+
+def in_detection_order(x: np.ndarray, y: np.ndarray) -> bool:
+    """Whether a list's rows were written in detection order, as image2xy and SExtractor
+    write them (a scan of the image: y, or x, steps one way from row to row at least
+    ``DETECTION_ORDER_FRACTION`` of the time), rather than by brightness."""
+    if len(x) < 8:
+        return False
+    for v in (y, x):
+        steps = np.diff(v)
+        if max((steps >= 0).mean(), (steps <= 0).mean()) >= DETECTION_ORDER_FRACTION:
+            return True
+    return False
+
+
+def uniform_order(xy: np.ndarray, width: float, height: float, boxes: int = 10) -> np.ndarray:
+    """The rows of a list whose order says nothing of brightness, spread over the image: about
+    ``boxes`` cells (astrometry.net's ``--uniformize``), their points taken in turn, one
+    from each cell, in the list's order within a cell, so the first points solved cover
+    the image rather than a strip of it."""
+    nx = max(1, round(math.sqrt(boxes * width / height)))
+    ny = max(1, round(boxes / nx))
+    col = np.clip((xy[:, 0] / width * nx).astype(int), 0, nx - 1)
+    row = np.clip((xy[:, 1] / height * ny).astype(int), 0, ny - 1)
+    cell = row * nx + col
+    turn = np.empty(len(xy), dtype=np.int64)
+    for c in np.unique(cell):
+        members = np.flatnonzero(cell == c)
+        turn[members] = np.arange(len(members))
+    return np.lexsort((cell, turn))
+
+
+def read_xylist(
+    path: str | Path,
+    *,
+    x_column: str = "X",
+    y_column: str = "Y",
+    sort_column: str | None = None,
+    sort_ascending: bool = False,
+    width: int | None = None,
+    height: int | None = None,
+    max_sources: int | None = None,
+) -> XYList | None:
+    """The source list of an xylist file: a FITS file whose primary HDU holds no image and
+    whose first table has the ``x_column``, ``y_column`` columns (FITS pixels; names in any
+    case); None for anything else (an image). Sorted by ``sort_column`` (descending, or
+    ``sort_ascending``) when named (``StarnavError`` when the table lacks it), else by the
+    first of ``BRIGHTNESS_COLUMNS`` it has, else as given (``XYList.make``). The size:
+    ``width``, ``height``, else the header's IMAGEW, IMAGEH, else the largest x, y rounded up.
+    ``max_sources``: only the first (brightest) this many (solve-field's ``--objs``)."""
+    path = Path(path)
+    if not is_fits(path):
+        return None
+    from astropy.io import fits
+
+    try:
+        with fits.open(path, memmap=False) as hdul:
+            table = next((h for h in hdul if isinstance(h, fits.BinTableHDU | fits.TableHDU)),
+                         None)  # fmt: skip
+            if table is None or hdul[0].data is not None:
+                return None
+            names = {n.upper(): n for n in table.columns.names}
+
+            def column(name: str) -> np.ndarray:
+                if name.upper() not in names:
+                    raise StarnavError(f"xylist {str(path)!r} has no column {name!r} "
+                                       f"(columns: {', '.join(table.columns.names)})")  # fmt: skip
+                return np.asarray(table.data[names[name.upper()]], dtype=float).reshape(-1)
+
+            x, y = column(x_column), column(y_column)
+            values, ascending, name = None, sort_ascending, sort_column
+            if sort_column is not None:
+                values = column(sort_column)
+            else:
+                name, ascending = next(((n, a) for n, a in BRIGHTNESS_COLUMNS if n in names),
+                                       (None, False))  # fmt: skip
+                values = None if name is None else column(name)
+            header = hdul[0].header + table.header
+    except OSError as exc:
+        raise StarnavError(f"cannot read {str(path)!r} as FITS: {exc}") from None
+    width = width or header.get("IMAGEW") or math.ceil(float(np.max(x, initial=1.0)))
+    height = height or header.get("IMAGEH") or math.ceil(float(np.max(y, initial=1.0)))
+    xylist = XYList.make(x, y, width, height, sort_values=values, ascending=ascending,
+                         sort_name=name)  # fmt: skip
+    if max_sources is not None:
+        if max_sources < 1:
+            raise StarnavError(f"the number of sources kept must be at least 1, got {max_sources}")
+        xylist = replace(xylist, x=xylist.x[:max_sources], y=xylist.y[:max_sources])
+    return xylist
 
 
 @dataclass(frozen=True, eq=False)
@@ -303,6 +448,8 @@ def _solve_plate(source, pixels, hints, time_budget_s) -> PlateResult:
         options["fov_range_deg"] = tuple(hints.fov_range_deg)
     if hints.positional_error_px is not None:
         options["sigma_px"] = _positive(hints.positional_error_px, "positional_error")
+    if hints.max_false_match_probability is not None:
+        options["max_false_match_probability"] = hints.max_false_match_probability
     if (hints.ra_deg is None) != (hints.dec_deg is None):
         raise StarnavError("a position hint needs both RA and Dec")
     if hints.ra_deg is not None:
@@ -313,8 +460,9 @@ def _solve_plate(source, pixels, hints, time_budget_s) -> PlateResult:
         position = None
         if hints.ra_deg is not None:
             position = (float(hints.ra_deg), float(hints.dec_deg))
+        xy = source.xy[source.solve_order()]  # the result's rows are these
         res = solve_stars(
-            source.xy,
+            xy,
             SolveOptions(fov_exact=False, **options),
             width=source.width,
             height=source.height,
@@ -323,8 +471,14 @@ def _solve_plate(source, pixels, hints, time_budget_s) -> PlateResult:
         )
         sol = res.solution
         cam = None if sol is None else sol.camera
-        return _result(sol, cam, res.reason, source.width, source.height, res.time_ms,
-                       hints.crpix_fits, xy=source.xy, catalog=res.catalog)  # fmt: skip
+        reason = res.reason
+        if sol is None and not source.ordered:
+            reason += (
+                " (the list is in detection order with no brightness column: solved "
+                "without brightness; name its flux or magnitude column to sort it)"
+            )
+        return _result(sol, cam, reason, source.width, source.height, res.time_ms,
+                       hints.crpix_fits, xy=xy, catalog=res.catalog)  # fmt: skip
     path = source
     header = fits_hints(path)
     if hints.ra_deg is not None:

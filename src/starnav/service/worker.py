@@ -18,7 +18,7 @@ from pathlib import Path
 from starnav.catalog.names import star_names
 from starnav.detect.read import FITS_MAGIC, GZIP_MAGIC, TIFF_MAGICS
 from starnav.errors import StarnavError
-from starnav.pipeline.plate import XYList, solve_plate, write_plate_files
+from starnav.pipeline.plate import XYList, read_xylist, solve_plate, write_plate_files
 from starnav.service.nova import plate_hints
 
 # magic bytes -> the name the input gets in the job's directory (never the client's name)
@@ -90,7 +90,9 @@ def _solve(tmp: Path, data, xy, request, budget_s) -> dict:
     else:
         path = tmp / input_name(data[:16])
         path.write_bytes(data)
-        source = path
+        # an xylist file (a FITS table of X, Y, sorted by its FLUX or magnitude column when
+        # it has one), as nova takes one; else an image
+        source = read_xylist(path) or path
 
     def hints(width: int, height: int):  # the width converts arcsec per pixel
         return plate_hints(request, width)
