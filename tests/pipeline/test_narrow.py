@@ -56,10 +56,10 @@ def test_a_users_catalog_reads_as_fits_or_csv_with_gaia_and_vizier_names(tmp_pat
         load_catalog(no_mag)
 
 
-def test_bands_under_3_6_degrees_are_cut_from_gaia_the_wider_from_hipparcos():
+def test_bands_of_5_degrees_and_under_are_cut_from_gaia_the_wider_from_hipparcos():
     full = fov.search_catalog(None, None)
-    assert fov.band_source(3.54, None, full).name.startswith("Gaia DR3")
-    assert fov.band_source(5.0, None, full) is full
+    assert fov.band_source(5.0, None, full).name.startswith("Gaia DR3")
+    assert fov.band_source(7.07, None, full) is full
     mine = load_catalog(None, mag_limit=7.0)
     assert fov.band_source(2.5, mine, full) is full  # a user's catalog is used whole
     assert fov.band_stars_per_field(1.25) == 5 and fov.band_stars_per_field(2.5) == 6
@@ -124,3 +124,21 @@ def test_a_field_under_1_degree_is_refused_in_one_line_naming_the_limit():
     with pytest.raises(Exception, match="a 1° field holds about 8 stars") as info:
         solve_image(np.zeros((100, 150)), fov_range_deg=(0.5, 0.8))
     assert "\n" not in str(info.value)
+
+
+@pytest.mark.slow
+def test_a_sparse_field_near_a_hint_says_the_catalog_is_too_shallow_and_what_to_give():
+    """At the north galactic pole a 1° x 0.67° field holds ~5 stars to G 10: not solved, and
+    the reason says so and names the way out (a deeper catalog)."""
+    camera = Camera.from_fov(1.0, 1200, 800)
+    R = attitude_from_radec_roll(192.86, 27.13, 10.0)
+    frame = render_frame(load_gaia(), camera, R, RenderSettings(exposure_s=1.0, seed=5))
+    res = solve_image(frame.image, fov_range_deg=(1.0, 1.1),
+                      position_hint_deg=(193.5, 28.0), position_radius_deg=5.0)  # fmt: skip
+    assert res.solution is None
+    assert re.search(
+        r"holds about \d stars \(G <= 10\) in a [\d.]+° x [\d.]+° field near the "
+        "position hint",
+        res.reason,
+    ), res.reason
+    assert "give a deeper catalog (--catalog FILE" in res.reason

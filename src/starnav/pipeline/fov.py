@@ -69,9 +69,10 @@ NEAR_STARS_PER_FIELD = 12  # a position hint's own table (``near_bands``): 495 p
 NEAR_OVERSAMPLING = 25.0  # field, on a lattice 4x coarser than a whole-sky table's,
 NEAR_PATTERN_STARS = 25  # searched with patterns of the brightest 25 points (not 15)
 # bands whose tables are built for diagonals under this are cut from the embedded Gaia DR3
-# (G <= 10) instead of Hipparcos: the grid's 3.54° band and narrower, fields under ~3° that
-# Hipparcos to Hp 8.5 fills with ~10 stars per pattern field (Gaia: 40 to G 9.5, 10-20 to G 10)
-GAIA_BELOW_DEG = 3.6
+# (G <= 10) instead of Hipparcos: the grid's 5° band and narrower (fields under ~4°), where
+# Hipparcos to Hp 8.5 holds 20 stars per pattern field or fewer, half the depth rule's 40
+# (at 7.07°: 39), and a telescope's frame shows many stars it lacks
+GAIA_BELOW_DEG = 5.1
 MAX_DIAGONAL_FOV_DEG = 150.0
 HINT_BUDGET_SHARE = 0.25  # of the time budget, for the search near a position hint
 _SLIVER = 0.05  # a band narrower than this (relative) is merged into the next wider one
@@ -478,7 +479,32 @@ def solve_unknown_field(
         left_s -= result.time_ms / 1e3
         if result.solution is not None or left_s <= 0:
             break
-    return _searched(results, ranges)
+    result = _searched(results, ranges)
+    if result.solution is None and near is not None and is_embedded(catalog):
+        result = replace(result, reason=result.reason + _sparse_near(near, base, lo, hi))
+    return result
+
+
+def _sparse_near(near: tuple[np.ndarray, float], base: Camera, lo: float, hi: float) -> str:
+    """Why an unsolved field near a position hint may be beyond the embedded catalogs, or ""
+    when they hold ``FIELD_STARS`` stars in such a field there: the Gaia DR3 stars within the
+    hint's radius, scaled to the image's solid angle at the middle of the FOV range."""
+    if diagonal_fov_deg(lo, base.width, base.height) >= GAIA_BELOW_DEG:
+        return ""
+    gaia = load_catalog(GAIA)
+    n = int(np.count_nonzero(gaia.vectors @ near[0] >= math.cos(near[1])))
+    fov = 0.5 * (lo + hi)
+    height = fov * base.height / base.width
+    image_sr = math.radians(fov) * math.radians(height)
+    stars = n * image_sr / (2.0 * math.pi * (1.0 - math.cos(near[1])))
+    if stars >= FIELD_STARS:
+        return ""
+    return (
+        f"; the embedded Gaia DR3 holds about {stars:.0f} stars (G <= 10) in a {fov:.2g}° x "
+        f"{height:.2g}° field near the position hint, too few to identify surely: give a deeper "
+        "catalog (--catalog FILE: a CSV or FITS table of RA, Dec and magnitude, such as a Gaia "
+        "or Tycho-2 extract)"
+    )
 
 
 def _searched(results: list[SolveResult], ranges: list[tuple[float, float]]) -> SolveResult:
