@@ -147,7 +147,8 @@ def test_cancel_file_created_while_solving(tmp_path):
     plain_xylist(tmp_path / "IMG.xyls")
     cmd = [sys.executable, "-m", "starnav.dropin.solve_field", "-C", "stop", "-p", "-O",
            "-l", "30", "IMG.xyls"]  # fmt: skip
-    proc = subprocess.Popen(cmd, cwd=tmp_path, stdout=subprocess.PIPE, text=True, env=_env())
+    proc = subprocess.Popen(cmd, cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, env=_env())  # fmt: skip
     try:
         for line in proc.stdout:
             if line.startswith("Solving"):
@@ -156,7 +157,7 @@ def test_cancel_file_created_while_solving(tmp_path):
         (tmp_path / "stop").touch()
         t0 = time.monotonic()
         out = proc.stdout.read()
-        assert proc.wait(timeout=30) == 0
+        assert proc.wait(timeout=30) == 0, proc.stderr.read()
         assert time.monotonic() - t0 < 5.0
     finally:
         proc.kill()

@@ -482,31 +482,35 @@ def _solve_one(infile: Path, number: int, count: int, args, common: dict) -> Non
                           crpix_fits=_crpix(args, width, height), **common)  # fmt: skip
 
     xylist, result = None, None
-    cancel = CancelWatch(args.cancel)
-    try:
-        with cancel:
-            if not cancel.requested():
-                xylist = _source_list(infile, args)
-                source: Path | XYList = xylist if xylist is not None else infile
-                print("Solving...", flush=True)
-                result = solve_plate(source, hints, time_budget_s=args.cpulimit)
-    except KeyboardInterrupt:
+    with CancelWatch(args.cancel, on_cancel=lambda: _cancelled(infile, args, paths)) as cancel:
         if not cancel.requested():
-            raise
-        result = None
+            xylist = _source_list(infile, args)
+            source: Path | XYList = xylist if xylist is not None else infile
+            print("Solving...", flush=True)
+            result = solve_plate(source, hints, time_budget_s=args.cpulimit)
+    if result is None:
+        _cancelled(infile, args, paths)
+        return
+    _remove_stale(paths)
+    if args.no_tweak and result.plate is not None:
+        result = _without_sip(result)
+    image = xylist is None and not _extracts(args)
+    print_result(result, str(infile), paths, image=image)
+    sys.stdout.flush()
+
+
+def _remove_stale(paths: OutputPaths) -> None:
     for p in paths.outputs():
         if p is not None and p.exists():
             p.unlink()  # a stale file must not read as this run's answer
-    if result is None:
-        print(f'Field 1 did not solve (cancel file "{args.cancel}" exists).')
-        print(f"Field: {infile}")
-        print("Did not solve (or no WCS file was written).")
-    else:
-        if args.no_tweak and result.plate is not None:
-            result = _without_sip(result)
-        image = xylist is None and not _extracts(args)
-        print_result(result, str(infile), paths, image=image)
-    sys.stdout.flush()
+
+
+def _cancelled(infile: Path, args, paths: OutputPaths) -> None:
+    """solve-field's lines for a field whose cancel file appeared; no output files."""
+    _remove_stale(paths)
+    print(f'Field 1 did not solve (cancel file "{args.cancel}" exists).')
+    print(f"Field: {infile}")
+    print("Did not solve (or no WCS file was written).", flush=True)
 
 
 def _crpix(args, width: int, height: int) -> tuple[float, float] | None:
@@ -633,16 +637,21 @@ def _without_sip(result: PlateResult) -> PlateResult:
 
 
 class CancelWatch:
-    """solve-field's --cancel FILE: the solve stops when the file appears (looked for every
-    ``POLL_S`` seconds by a thread, which interrupts the solve as Ctrl-C would). A file
-    there before the solve starts stops it at once, as in solve-field's engine."""
+    """solve-field's --cancel FILE around one solve: a file there before the solve starts
+    stops it at once (``requested``), as in solve-field's engine; one that appears while it
+    runs (looked for every ``POLL_S`` seconds by a thread) ends it: the thread calls
+    ``on_cancel`` (the field's "did not solve" lines) and ends the process, exit 0, as
+    solve-field ends a cancelled run. Nothing is written before a solve ends, and the lock
+    keeps the thread from acting once it has: no file is left half written."""
 
     POLL_S = 0.1
 
-    def __init__(self, path: str | None) -> None:
+    def __init__(self, path: str | None, on_cancel=None) -> None:
         self.path = None if path is None else Path(path)
+        self.on_cancel = on_cancel
         self._seen = False
         self._done = None
+        self._lock = None
         self._thread = None
 
     def requested(self) -> bool:
@@ -656,23 +665,28 @@ class CancelWatch:
             return self
         import threading
 
-        self._done = threading.Event()
+        self._done, self._lock = threading.Event(), threading.Lock()
         self._thread = threading.Thread(target=self._watch, daemon=True)
         self._thread.start()
         return self
 
     def _watch(self) -> None:
-        import _thread
-
         while not self._done.wait(self.POLL_S):
             if self.requested():
-                _thread.interrupt_main()
-                return
+                with self._lock:
+                    if self._done.is_set():
+                        return  # the solve ended first: its answer stands
+                    if self.on_cancel is not None:
+                        self.on_cancel()
+                    import os
+
+                    os._exit(EXIT_OK)
 
     def __exit__(self, *exc) -> None:
         if self._done is not None:
-            self._done.set()
-            self._thread.join()  # an interrupt it sent arrives inside the caller's try
+            with self._lock:
+                self._done.set()
+            self._thread.join()
 
 
 def print_result(result: PlateResult, field: str, paths: OutputPaths, *, image: bool) -> None:
