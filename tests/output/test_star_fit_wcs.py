@@ -138,3 +138,11 @@ def test_real_lens_centre_and_residuals(name, tmp_path):
     through = back.all_world2pix(np.column_stack([ra, dec]), 0) + 0.5
     np.testing.assert_allclose(through - table.xy[matched], fit.residual_px, atol=1e-4)
     assert fit.rms_px < res.solution.rms_px
+
+
+def test_stars_on_a_line_are_refused():
+    xy = np.column_stack([np.linspace(100, 900, 6), np.linspace(100, 700, 6)])
+    camera = Camera(W, H, focal_px=2000.0)
+    vectors = camera.pixels_to_bearings(xy)
+    with pytest.raises(StarnavError, match="on a line"):
+        fit_wcs_to_stars(xy, vectors, W, H)

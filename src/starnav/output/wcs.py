@@ -342,6 +342,9 @@ STAR_FIT_MAX_ORDER = 4
 STAR_FIT_P_VALUE = 0.001  # an order's extra terms are kept when chance would do as well this rarely
 STAR_FIT_STARS_PER_TERM = 2  # stars per polynomial term of one axis, at least
 _TANGENT_ITERATIONS = 8
+# per image axis: the grid AP/BP are fitted on (441 points for at most 55 terms of order 9;
+# the 41 x 41 grid of a lens model's fit took ~10 ms a least-squares solve here)
+INVERSE_GRID_POINTS = 21
 
 
 def _n_terms(order: int) -> int:
@@ -457,7 +460,7 @@ def fit_wcs_to_stars(
     lower the residuals more than chance would with p < ``STAR_FIT_P_VALUE`` against the order
     kept before it. AP/BP (the inverse, order + 1, or more until good to 0.01 px, at most
     ``MAX_SIP_ORDER``) are fitted on a grid over the whole image, corners included. At least
-    3 stars are needed (``StarnavError``).
+    3 stars not on a line are needed (``StarnavError``).
     """
     xy = np.asarray(xy_px, dtype=float).reshape(-1, 2)
     vectors = np.asarray(vectors_icrs, dtype=float).reshape(-1, 3)
@@ -497,6 +500,8 @@ def fit_wcs_to_stars(
     reference, coef, _ = best
     terms = _terms(order, 1)
     cd = (coef[:2] / scale).T  # rows: world axes; columns: u, v
+    if not abs(np.linalg.det(cd)) > 1e-6 * np.sum(cd**2):
+        raise StarnavError("the stars of a WCS fit lie on a line: no CD matrix follows")
     cd_inv = np.linalg.inv(cd)
     a, b = _sip_arrays(coef, terms, order, scale, cd_inv)
     inverse_order, ap, bp, inverse_error = order, np.zeros_like(a), np.zeros_like(b), 0.0
@@ -510,7 +515,10 @@ def fit_wcs_to_stars(
     wcs.pixel_shape = (int(width), int(height))
     # the residuals as a reader of the file sees them: sky -> pixel, A/B inverted exactly
     target = (cd_inv @ _gnomonic_deg(vectors, reference).T).T
-    fitted = _invert_sip(a, b, target, uv) + crpix
+    try:
+        fitted = _invert_sip(a, b, target, uv) + crpix
+    except np.linalg.LinAlgError:
+        raise StarnavError("the fitted SIP polynomials cannot be inverted at the stars") from None
     residual = fitted - xy
     rms = float(np.sqrt(np.mean(np.sum(residual**2, axis=1))))
     return StarFitWcs(wcs, order, inverse_order, n, residual, rms, p_values, inverse_error)
@@ -521,7 +529,7 @@ def _fit_inverse(a, b, order: int, crpix: np.ndarray, width: int, height: int):
     order + 1 whose largest error is under ``SIP_GOOD_ENOUGH_PX`` (at most ``MAX_SIP_ORDER``):
     (order, ap, bp, largest error px)."""
     gx, gy = np.meshgrid(
-        np.linspace(0.0, width, SIP_GRID_POINTS), np.linspace(0.0, height, SIP_GRID_POINTS)
+        np.linspace(0.0, width, INVERSE_GRID_POINTS), np.linspace(0.0, height, INVERSE_GRID_POINTS)
     )
     uv = np.column_stack([gx.ravel(), gy.ravel()]) - crpix
     undistorted = uv + np.column_stack([_sip_eval(a, uv), _sip_eval(b, uv)])

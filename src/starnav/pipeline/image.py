@@ -24,7 +24,7 @@ from starnav.detect.circle import find_image_circle
 from starnav.detect.header import ImageHints, fits_hints, is_fits
 from starnav.detect.read import read_image
 from starnav.detect.stars import Detections, detect_stars
-from starnav.errors import CameraError, ImageError
+from starnav.errors import CameraError, ImageError, StarnavError
 from starnav.pipeline.diagnose import Failure, diagnose
 from starnav.pipeline.fov import diagonal_fov_deg, search_range
 from starnav.pipeline.options import (
@@ -439,9 +439,12 @@ def fitted_wcs(solution: Solution, catalog: Catalog | None, *, crpix_px=None):
     if found.sum() < 3:
         return solution_wcs(solution.R_cam_from_icrs, camera)
     crpix = (camera.cx, camera.cy) if crpix_px is None else crpix_px
-    fit = fit_wcs_to_stars(table.xy[matched][found], catalog.vectors[rows[found]],
-                           camera.width, camera.height, crpix_px=crpix,
-                           start=solution.R_cam_from_icrs[2])  # fmt: skip
+    try:
+        fit = fit_wcs_to_stars(table.xy[matched][found], catalog.vectors[rows[found]],
+                               camera.width, camera.height, crpix_px=crpix,
+                               start=solution.R_cam_from_icrs[2])  # fmt: skip
+    except StarnavError:  # stars on a line: the attitude's own WCS still holds
+        return solution_wcs(solution.R_cam_from_icrs, camera)
     if fit.order == 1 and at_principal:
         return solution_wcs(solution.R_cam_from_icrs, camera)
     return fit.wcs
