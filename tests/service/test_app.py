@@ -101,7 +101,8 @@ def test_image_solved_with_nova_answers(server, lyra_png):
     sep = angular_separation(*np.radians([cal["ra"], cal["dec"], ref["ra_deg"], ref["dec_deg"]]))
     assert np.degrees(sep) * 3600 < 60
     # nova reports a PNG's orientation as displayed: (180 - raw) mod 360, raw = roll - 180
-    assert (cal["orientation"] - (360 - ref["roll_deg"])) % 360 == pytest.approx(0, abs=0.1)
+    turn = (cal["orientation"] - (360 - ref["roll_deg"]) + 180) % 360 - 180  # either side of 0
+    assert turn == pytest.approx(0, abs=0.1)
     info = server.post(f"/api/jobs/{job_id}/info").json()  # POST like client.py
     assert info["status"] == "success" and info["original_filename"] == "img.png"
     assert info["calibration"]["ra"] == cal["ra"]
