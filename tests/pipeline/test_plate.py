@@ -83,7 +83,8 @@ def test_fov_range_is_clipped_to_what_starnav_searches():
     assert fov_range_from_scale("degwidth", 50, 70, 1000) == (50.0, 70.0)  # outside the default
     assert fov_range_from_scale("focalmm", 50, 100, 1000)[1] == pytest.approx(39.5977, abs=1e-4)
     with pytest.raises(StarnavError, match="outside the fields starnav solves"):
-        fov_range_from_scale("arcminwidth", 10, 60, 1000)  # 0.17-1°
+        fov_range_from_scale("arcminwidth", 10, 50, 1000)  # 0.17-0.83°
+    assert fov_range_from_scale("arcminwidth", 10, 60, 1000) == (1.0, 1.05)  # 0.17-1°
 
 
 def test_parity_words():

@@ -101,8 +101,8 @@ def fov_range_from_scale(
     for lo, hi in (DEFAULT_FOV_RANGE_DEG, FOV_LIMITS_DEG):
         clipped = (max(ends[0], lo), min(ends[1], hi))
         if clipped[0] <= clipped[1]:
-            if clipped[0] == clipped[1]:  # one value: search around it
-                clipped = (clipped[0] * 0.95, clipped[1] * 1.05)
+            if clipped[0] == clipped[1]:  # one value: search around it, within the limits
+                clipped = (max(clipped[0] * 0.95, lo), min(clipped[1] * 1.05, hi))
             return clipped
     raise StarnavError(
         f"the scale range {ends[0]:.3g}-{ends[1]:.3g}° wide is outside the fields starnav "
