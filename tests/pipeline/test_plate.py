@@ -81,6 +81,7 @@ def test_fov_range_is_clipped_to_what_starnav_searches():
     assert fov_range_from_scale("degwidth", 0.1, 180, 1000) == (5.0, 40.0)  # a catch-all
     assert fov_range_from_scale("degwidth", 10, 12, 1000) == (10.0, 12.0)
     assert fov_range_from_scale("degwidth", 50, 70, 1000) == (50.0, 70.0)  # outside the default
+    assert fov_range_from_scale("degwidth", 4.3, 5.3, 1000) == (4.3, 5.3)  # not cut at 5°
     assert fov_range_from_scale("focalmm", 50, 100, 1000)[1] == pytest.approx(39.5977, abs=1e-4)
     with pytest.raises(StarnavError, match="outside the fields starnav solves"):
         fov_range_from_scale("arcminwidth", 10, 50, 1000)  # 0.17-0.83°

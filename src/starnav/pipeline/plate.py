@@ -94,16 +94,19 @@ def fov_range_from_scale(
     units: str, lower: float, upper: float, width_px: float
 ) -> tuple[float, float]:
     """The horizontal FOV range (degrees) of a scale range (``width_deg_from_scale``), clipped
-    to where starnav searches: the part inside its default range when the two overlap (a
+    to where starnav searches: the default range when the scale range holds all of it (a
     client's catch-all 0.1-180° searches what the default search does), else the part inside
-    ``FOV_LIMITS_DEG``. ``StarnavError`` when nothing is left."""
+    ``FOV_LIMITS_DEG`` (a 4.3-5.3° hint is searched whole, not cut at the default's 5°).
+    ``StarnavError`` when nothing is left."""
     ends = sorted(width_deg_from_scale(units, v, width_px) for v in (lower, upper))
-    for lo, hi in (DEFAULT_FOV_RANGE_DEG, FOV_LIMITS_DEG):
-        clipped = (max(ends[0], lo), min(ends[1], hi))
-        if clipped[0] <= clipped[1]:
-            if clipped[0] == clipped[1]:  # one value: search around it, within the limits
-                clipped = (max(clipped[0] * 0.95, lo), min(clipped[1] * 1.05, hi))
-            return clipped
+    if ends[0] <= DEFAULT_FOV_RANGE_DEG[0] and ends[1] >= DEFAULT_FOV_RANGE_DEG[1]:
+        return DEFAULT_FOV_RANGE_DEG
+    lo, hi = FOV_LIMITS_DEG
+    clipped = (max(ends[0], lo), min(ends[1], hi))
+    if clipped[0] <= clipped[1]:
+        if clipped[0] == clipped[1]:  # one value: search around it, within the limits
+            clipped = (max(clipped[0] * 0.95, lo), min(clipped[1] * 1.05, hi))
+        return clipped
     raise StarnavError(
         f"the scale range {ends[0]:.3g}-{ends[1]:.3g}° wide is outside the fields starnav "
         f"solves ({FOV_LIMITS_DEG[0]:g}-{FOV_LIMITS_DEG[1]:g}°)"
