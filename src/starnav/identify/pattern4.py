@@ -346,9 +346,7 @@ def build_pattern_table(
         return table
     t0 = time.perf_counter()
     radius = 0.5 * field_radius_fraction * database.max_angle_rad
-    fields, field, subset = _field_patterns(
-        database, stars_per_field, radius, oversampling, region
-    )
+    fields, field, subset = _field_patterns(database, stars_per_field, radius, oversampling, region)
     keys, codes, largest = _pattern_keys(catalog.vectors, fields, field, subset, bins)
     step = float(largest.max()) / _EDGE_STEPS if len(largest) and largest.max() > 0 else 1.0
     steps = np.rint(largest / step).astype(np.uint16)
