@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from starnav.camera import CameraModel, model_class
+from starnav.camera import Camera, CameraModel, model_class
 from starnav.catalog import Catalog
 from starnav.detect.circle import find_image_circle
 from starnav.detect.header import ImageHints, fits_hints, is_fits
@@ -114,7 +114,7 @@ def solve_image(
     not made: the dark frame around an all-sky camera's disc often holds burned-in text.
     ``hints``: what the file's header says (``starnav.detect.header.fits_hints``; read from
     a FITS file when None, none for an array): its FOV is searched (±5 %) when neither
-    ``fov_deg``, ``camera`` nor another range is given and it lies within the default range,
+    ``fov_deg``, ``camera`` nor another range is given and it is within the pinhole's 1-100°,
     its epoch used when ``epoch_year`` is not, its position searched first; a solve that
     fails with the hinted FOV is tried again without it. ``position_hint_deg``: (RA, Dec)
     of the boresight, roughly (wins over the header's). ``prior``: the previous frame's
@@ -254,9 +254,9 @@ def _default_budget_s(options: SolveOptions, pixels: np.ndarray) -> float:
 def _solve_hinted(xy, size, options: SolveOptions, hints: ImageHints, budget_s, position, prior):
     """The detections ``xy`` of an image of ``size`` (width, height px) solved
     (``pipeline.stars.solve_stars``) with the ``hints`` of a pinhole search: the position
-    searched first (unless ``position`` is given); the FOV, when in the default range
-    searched, tried first and, if that fails, the whole range on what is left of the
-    budget."""
+    searched first (unless ``position`` is given); the FOV, when the default range is searched
+    and the FOV lies within the pinhole's limits (1-100°: a telescope's 1.5° too), tried first
+    and, if that fails, the whole range on what is left of the budget."""
     if position is None and hints.ra_deg is not None and hints.dec_deg is not None:
         position = (hints.ra_deg, hints.dec_deg)
     width, height = size
@@ -273,7 +273,7 @@ def _solve_hinted(xy, size, options: SolveOptions, hints: ImageHints, budget_s, 
         )
 
     hinted = None
-    lo, hi = DEFAULT_FOV_RANGE_DEG
+    lo, hi = Camera.fov_limits_deg
     if options.fov_range_deg in (None, DEFAULT_FOV_RANGE_DEG) and hints.fov_deg:
         if lo <= hints.fov_deg <= hi:
             hinted = hints.fov_deg  # else ignored: outside what the search is for
