@@ -63,8 +63,9 @@ def solve_status() -> dict:
 
 
 def cmd_solve(args) -> None:
-    """solve-field on each listed file not run before (``--again``: on all); two processes
-    can share the work (``--status solve2.json --reverse``)."""
+    """solve-field on each file not run before (``--again``: run again; ``only``: these
+    files); processes can share the work (``--status solve2.json --reverse``). A later
+    status file's answer for a file replaces an earlier one's."""
     WORK.mkdir(parents=True, exist_ok=True)
     status_file = WORK / args.status
     status = json.loads(status_file.read_text()) if status_file.exists() else {}
@@ -152,7 +153,7 @@ def cmd_reference(args) -> None:
         ):
             entry.pop(key, None)
         solved = status.get(name)
-        wcs, header = wcs_of(name, WORK) if solved else (None, None)
+        wcs, header = wcs_of(name, WORK) if solved and solved["solved"] else (None, None)
         if wcs is None:
             entry["in_set"] = False
             entry["why_not"] = "not run" if solved is None else "astrometry.net did not solve it"
