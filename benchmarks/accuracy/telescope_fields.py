@@ -128,7 +128,7 @@ def real_frames() -> list[dict]:
     held = json.loads((REAL / "narrow_heldback.json").read_text())
     for f in held["files"]:
         r = f.get("reference") or {}
-        if r.get("solved_by_reference") and r.get("R_cam_from_icrs"):
+        if f.get("in_set") and r.get("R_cam_from_icrs"):  # solved by astrometry.net, in band
             out.append(
                 {
                     "set": "held back",
