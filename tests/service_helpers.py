@@ -273,3 +273,17 @@ def _checked(url: str, job: LoadJob, job_id: int, status: str, latency: float) -
         from_input = all((round(s["x"] + 0.5, 6), round(s["y"] + 0.5, 6)) in points
                          for s in result["stars"])  # fmt: skip
     return LoadOutcome(job, job_id, status, latency, offset, from_input, **times)
+
+
+JOB_WAIT_S = 180.0  # a fresh worker process loads the catalog and tables first
+
+
+def wait_for_job(client, job_id: int, wait_s: float = JOB_WAIT_S) -> dict:
+    """A job's starnav answer once nova's status is success or failure (``client``: a
+    Starlette TestClient or anything with ``get``); AssertionError after ``wait_s``."""
+    t0 = time.monotonic()
+    while time.monotonic() - t0 < wait_s:
+        if client.get(f"/api/jobs/{job_id}").json()["status"] in ("success", "failure"):
+            return client.get(f"/api/jobs/{job_id}/starnav").json()
+        time.sleep(0.2)
+    raise AssertionError(f"job {job_id} did not finish in {wait_s} s")

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import io
 import json
-import time
 from pathlib import Path
 
 import numpy as np
@@ -15,6 +14,7 @@ pytest.importorskip("starlette", reason="the serve extra is not installed: pip i
 from PIL import Image
 from starlette.testclient import TestClient
 
+from service_helpers import wait_for_job
 from shared_data import LYRA, PEER_REFERENCE, as_png, peer_image
 from starnav.cli import main as cli_main
 from starnav.errors import StarnavError
@@ -23,8 +23,6 @@ from starnav.service.app import ServiceConfig, create_app
 from starnav.service.store import INTERRUPTED, JobStore
 
 pytestmark = pytest.mark.service
-
-WAIT_S = 180.0  # a fresh worker process loads the catalog and tables first
 
 
 @pytest.fixture(scope="module")
@@ -60,15 +58,6 @@ def _upload(client, data: bytes, name: str = "img.png", **hints) -> int:
     return r.json()["subid"]
 
 
-def _wait(client, job_id: int) -> dict:
-    t0 = time.monotonic()
-    while time.monotonic() - t0 < WAIT_S:
-        if client.get(f"/api/jobs/{job_id}").json()["status"] in ("success", "failure"):
-            return client.get(f"/api/jobs/{job_id}/starnav").json()
-        time.sleep(0.2)
-    raise AssertionError(f"job {job_id} did not finish in {WAIT_S} s")
-
-
 def test_login_and_sessions(server):
     assert _post(server, "/api/login", {}) == {"status": "error", "errormessage": 'need "apikey"'}
     r = server.post("/api/login")
@@ -87,7 +76,7 @@ def test_image_solved_with_nova_answers(server, lyra_png):
     shapes, the centre within 60″ of the peers' reference."""
     job_id = _upload(server, lyra_png.read_bytes(), scale_units="degwidth", scale_lower=10,
                      scale_upper=13)  # fmt: skip
-    job = _wait(server, job_id)
+    job = wait_for_job(server, job_id)
     assert job["status"] == "success", job["reason"]
     sub = server.get(f"/api/submissions/{job_id}").json()
     assert sub["jobs"] == [job_id] and sub["job_calibrations"] == [[job_id, job_id]]
@@ -124,7 +113,7 @@ def test_source_list_solved(server):
     args = {"session": _session(server), "x": xy[:, 0].tolist(), "y": xy[:, 1].tolist(),
             "image_width": 1024, "image_height": 768}  # fmt: skip
     job_id = _post(server, "/api/url_upload", args)["subid"]
-    job = _wait(server, job_id)
+    job = wait_for_job(server, job_id)
     assert job["status"] == "success", job["reason"]
     assert server.get(f"/new_fits_file/{job_id}").status_code == 404  # no image to write
     assert server.get(f"/wcs_file/{job_id}").status_code == 200
@@ -155,7 +144,7 @@ def _png(width: int, height: int) -> bytes:
 def test_bad_input_fails_the_job_not_the_server(server, lyra_png, data, hints, reason):
     """``data``: the upload made from the Lyra PNG's bytes."""
     job_id = _upload(server, data(lyra_png.read_bytes()), **hints)
-    job = _wait(server, job_id)
+    job = wait_for_job(server, job_id)
     assert job["status"] == "failure"
     assert reason in job["reason"]
     assert server.get("/api/status").json()["status"] == "success"  # still serving
@@ -166,7 +155,7 @@ def test_upload_limit_and_names(server):
                     files={"file": ("big.fits", b"\0" * 3_100_000)})  # fmt: skip
     assert r.status_code == 413 and "limit of 3 MB" in r.json()["errormessage"]
     job_id = _upload(server, b"junk", name="../../../../tmp/starnav-escape.png")
-    _wait(server, job_id)
+    wait_for_job(server, job_id)
     assert not Path("/tmp/starnav-escape.png").exists()
     files = {p.name for p in (server.data_dir / "jobs" / str(job_id)).iterdir()}
     assert files == {"input.bin"}  # the service's own name, never the client's
@@ -231,6 +220,6 @@ def test_jobs_on_a_dask_cluster(tmp_path):
     with TestClient(create_app(config)) as client:
         args = {"session": _session(client), "x": xy[:, 0].tolist(), "y": xy[:, 1].tolist(),
                 "image_width": 1024, "image_height": 768}  # fmt: skip
-        job = _wait(client, _post(client, "/api/url_upload", args)["subid"])
+        job = wait_for_job(client, _post(client, "/api/url_upload", args)["subid"])
         assert job["status"] == "success", job["reason"]
         assert client.get(f"/wcs_file/{job['id']}").status_code == 200

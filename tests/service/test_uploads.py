@@ -7,7 +7,6 @@ Pleiades frame's stars (``source_lists``). A solved answer must put the image ce
 from __future__ import annotations
 
 import json
-import time
 
 import numpy as np
 import pytest
@@ -15,6 +14,7 @@ import pytest
 pytest.importorskip("starlette", reason="the serve extra is not installed: pip install '.[serve]'")
 from starlette.testclient import TestClient
 
+from service_helpers import wait_for_job
 from source_lists import (
     PLEIADES,
     REAL_REFERENCE,
@@ -27,7 +27,6 @@ from starnav.service.app import ServiceConfig, create_app
 
 pytestmark = [pytest.mark.service, pytest.mark.slow]
 
-WAIT_S = 180.0
 SCALE = REAL_REFERENCE[PLEIADES]["scale_arcsec_per_px"]
 HINTS = {"scale_units": "arcsecperpix", "scale_type": "ul", "scale_lower": 0.9 * SCALE,
          "scale_upper": 1.1 * SCALE}  # fmt: skip
@@ -53,15 +52,6 @@ def _submit(client, args: dict, file: tuple | None = None) -> int:
     return r.json()["subid"]
 
 
-def _wait(client, job_id: int) -> dict:
-    t0 = time.monotonic()
-    while time.monotonic() - t0 < WAIT_S:
-        if client.get(f"/api/jobs/{job_id}").json()["status"] in ("success", "failure"):
-            return client.get(f"/api/jobs/{job_id}/starnav").json()
-        time.sleep(0.2)
-    raise AssertionError(f"job {job_id} did not finish in {WAIT_S} s")
-
-
 def _calibration(client, job_id: int) -> dict:
     return client.get(f"/api/jobs/{job_id}/calibration").json()
 
@@ -75,7 +65,7 @@ def _xy_args(order: np.ndarray) -> dict:
 def test_xy_list_brightest_first_solves(server):
     _, _, flux, _, _ = pleiades_sources()
     job = _submit(server, _xy_args(np.argsort(-flux, kind="stable")))
-    answer = _wait(server, job)
+    answer = wait_for_job(server, job)
     assert answer["status"] == "success", answer["reason"]
     cal = _calibration(server, job)
     assert centre_offset_arcmin(cal["ra"], cal["dec"]) < 3.0
@@ -85,7 +75,7 @@ def test_xylist_file_is_sorted_by_its_flux(server, tmp_path):
     """Siril's xylist in detection order, uploaded as the file: sorted by FLUX, solved."""
     data = siril_xylist(tmp_path / "stars.xyls").read_bytes()
     job = _submit(server, HINTS, ("stars.xyls", data, "application/octet-stream"))
-    answer = _wait(server, job)
+    answer = wait_for_job(server, job)
     assert answer["status"] == "success", answer["reason"]
     cal = _calibration(server, job)
     assert centre_offset_arcmin(cal["ra"], cal["dec"]) < 3.0
@@ -100,7 +90,7 @@ def test_xy_list_in_detection_order_is_refused_with_the_reason(server, tmp_path)
     for job in (_submit(server, _xy_args(np.arange(len(x)))),
                 _submit(server, HINTS, ("plain.xyls", plain_xylist(tmp_path / "p.xyls")
                                         .read_bytes(), "application/octet-stream"))):  # fmt: skip
-        answer = _wait(server, job)
+        answer = wait_for_job(server, job)
         if answer["status"] == "success":  # never wrong: solved means the right field
             cal = _calibration(server, job)
             assert centre_offset_arcmin(cal["ra"], cal["dec"]) < 3.0
@@ -113,5 +103,5 @@ def test_xy_list_in_detection_order_is_refused_with_the_reason(server, tmp_path)
                    "this frame; a catalog as deep as its points is needed")  # fmt: skip
 def test_xy_list_in_detection_order_solves_as_the_sorted_one(server):
     x, _, _, _, _ = pleiades_sources()
-    answer = _wait(server, _submit(server, _xy_args(np.arange(len(x)))))
+    answer = wait_for_job(server, _submit(server, _xy_args(np.arange(len(x)))))
     assert answer["status"] == "success", answer["reason"]
