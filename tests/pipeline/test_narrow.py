@@ -142,3 +142,15 @@ def test_a_sparse_field_near_a_hint_says_the_catalog_is_too_shallow_and_what_to_
         res.reason,
     ), res.reason
     assert "give a deeper catalog (--catalog FILE" in res.reason
+
+
+def test_a_fits_dated_image_solves_against_a_users_catalog_at_its_own_epoch(tmp_path):
+    """A FITS header's DATE-OBS sets Hipparcos' proper-motion epoch; with a Gaia, CSV or FITS
+    catalog it is not applied (it was an error: "an epoch applies to the embedded Hipparcos
+    catalog only")."""
+    from starnav.detect.header import ImageHints
+
+    dated = ImageHints(epoch_year=2020.4, sources=("FITS DATE-OBS",))
+    for catalog in ("gaia", load_catalog(None, mag_limit=5.0)):
+        res = solve_image(np.zeros((64, 96), np.float32), hints=dated, catalog=catalog)
+        assert res.solution is None and "stars" in res.reason

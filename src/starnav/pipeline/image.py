@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 
 from starnav.camera import Camera, CameraModel, model_class
-from starnav.catalog import Catalog
+from starnav.catalog import Catalog, is_embedded
 from starnav.detect.circle import find_image_circle
 from starnav.detect.header import ImageHints, fits_hints, is_fits
 from starnav.detect.read import read_image
@@ -115,7 +115,8 @@ def solve_image(
     ``hints``: what the file's header says (``starnav.detect.header.fits_hints``; read from
     a FITS file when None, none for an array): its FOV is searched (±5 %) when neither
     ``fov_deg``, ``camera`` nor another range is given and it is within the pinhole's 1-100°,
-    its epoch used when ``epoch_year`` is not, its position searched first; a solve that
+    its epoch used when ``epoch_year`` is not (for the embedded Hipparcos: a Gaia, CSV or
+    FITS catalog is used at its own epoch), its position searched first; a solve that
     fails with the hinted FOV is tried again without it. ``position_hint_deg``: (RA, Dec)
     of the boresight, roughly (wins over the header's). ``prior``: the previous frame's
     attitude (``R_cam_from_icrs``) of a sequence, with its fitted ``camera``: tracking. The
@@ -154,8 +155,8 @@ def solve_image(
             None, failure.explain(reason), found, None, read_ms, detect_ms, 0.0,
             hints=hints, failure=failure.kind,
         )  # fmt: skip
-    if options.epoch_year is None and hints.epoch_year is not None:
-        options = replace(options, epoch_year=hints.epoch_year)
+    if options.epoch_year is None and hints.epoch_year is not None and is_embedded(options.catalog):
+        options = replace(options, epoch_year=hints.epoch_year)  # Hipparcos' proper motion
     searched = not options.field_known and not options.scans_focal
     result = _solve_hinted(
         found.xy,
