@@ -211,7 +211,9 @@ def search_catalog(catalog: Catalog | str | Path | None, epoch_year: float | Non
     return load_catalog(catalog, epoch_year=epoch_year)
 
 
-def band_source(table_diagonal_deg: float, catalog, full: Catalog) -> Catalog:
+def band_source(
+    table_diagonal_deg: float, catalog: Catalog | str | Path | None, full: Catalog
+) -> Catalog:
     """The catalog a band is cut from: ``full`` (``search_catalog``'s), except for the
     embedded catalog's bands under ``GAIA_BELOW_DEG``, which take the embedded Gaia DR3."""
     if is_embedded(catalog) and table_diagonal_deg < GAIA_BELOW_DEG:
@@ -468,7 +470,6 @@ def solve_unknown_field(
             if result.solution is not None or share_s <= 0:
                 results.append(result)
                 break
-        # the budget counts once the range's tables are loaded (built on first use)
         bands = load_bands(a, b, base.width, base.height, catalog, epoch_year)
         deadline = Deadline.after(share_s)
         with first_use("solve"):
