@@ -205,7 +205,7 @@ def load_gaia(*, mag_limit: float | None = None) -> Catalog:
     Positions are ICRS at J2016.0, used as given: the package holds no proper motion (a star
     moving 50 mas/yr is 0.5" off ten years on). Ids are Gaia DR3 ``source_id``s; the ~70
     brightest stars, which Gaia measures poorly, come from Hipparcos with id -HIP. Magnitudes
-    are Gaia G (the Hipparcos ones: their Hp)."""
+    are Gaia G (the Hipparcos stars': as the package lists them)."""
     if mag_limit is not None and not np.isfinite(mag_limit):
         raise CatalogError(f"magnitude limit must be a finite number, got {shown(mag_limit)}")
     table = _gaia_table()
@@ -223,7 +223,7 @@ def load_gaia(*, mag_limit: float | None = None) -> Catalog:
 
 # column names a user's catalog may use (lower case), first match wins: starnav's own, then
 # those of Gaia archive and VizieR extracts (Gaia DR3, Tycho-2, Hipparcos, UCAC4, APASS)
-_ID_NAMES = ("id", "source_id", "tyc", "hip", "ucac4", "recno", "seq")
+_ID_NAMES = ("id", "source_id", "hip", "recno", "seq")  # integer ids (not Tycho "TYC1-2-3")
 _RA_NAMES = ("ra_deg", "ra", "ra_icrs", "raj2000", "_raj2000", "radeg", "ramdeg", "ra_icrs_deg")
 _DEC_NAMES = ("dec_deg", "dec", "de_icrs", "dej2000", "_dej2000", "dedeg", "demdeg", "de",
               "dec_icrs")  # fmt: skip
