@@ -211,6 +211,17 @@ def search_catalog(catalog: Catalog | str | Path | None, epoch_year: float | Non
     return load_catalog(catalog, epoch_year=epoch_year)
 
 
+def range_grid(lo: float, hi: float, width: int, height: int) -> list[tuple[float, float, float]]:
+    """The grid bands (``band_grid``) of a horizontal FOV of ``lo``..``hi`` degrees across an
+    image of ``width`` x ``height`` px: (horizontal lo, horizontal hi, the table's diagonal)."""
+    return [
+        (horizontal_fov_deg(a, width, height), horizontal_fov_deg(b, width, height), top)
+        for a, b, top in band_grid(
+            diagonal_fov_deg(lo, width, height), diagonal_fov_deg(hi, width, height)
+        )
+    ]
+
+
 def band_source(
     table_diagonal_deg: float, catalog: Catalog | str | Path | None, full: Catalog
 ) -> Catalog:
@@ -242,13 +253,8 @@ def load_bands(
     if key in _BANDS:
         return _BANDS[key]
     bands = [
-        load_band(
-            top,
-            horizontal_fov_deg(a, width, height),
-            horizontal_fov_deg(b, width, height),
-            band_source(top, catalog, full),
-        )
-        for a, b, top in band_grid(diagonal_fov_deg(lo, width, height), diag_hi)
+        load_band(top, a, b, band_source(top, catalog, full))
+        for a, b, top in range_grid(lo, hi, width, height)
     ]
     bands = [band for band in bands if band is not None]
     if not bands:
@@ -279,20 +285,21 @@ def near_bands(
     cached, it finds the telescope fields whose brightest points are not the catalog's
     brightest (saturated stars, colour), and the whole-sky tables (a minute each to build)
     are not needed when it does. The range's wider bands are loaded as ``load_bands`` does."""
-    grid = band_grid(diagonal_fov_deg(lo, width, height), diagonal_fov_deg(hi, width, height))
+    grid = range_grid(lo, hi, width, height)
     if not is_embedded(catalog) or all(top >= GAIA_BELOW_DEG for _, _, top in grid):
         return None
+    full = search_catalog(catalog, epoch_year)
+    gaia = load_catalog(GAIA)
+    cos_from_hint = gaia.vectors @ near[0]  # once for every band
     out = []
     for a, b, top in grid:
-        a, b = horizontal_fov_deg(a, width, height), horizontal_fov_deg(b, width, height)
         if top >= GAIA_BELOW_DEG:
-            band = load_band(top, a, b, search_catalog(catalog, epoch_year))
+            band = load_band(top, a, b, band_source(top, catalog, full))
             out += [] if band is None else [band]
             continue
-        gaia = load_catalog(GAIA)
         top_rad = math.radians(top)
         reach = min(near[1] + top_rad, math.pi)
-        rows = np.flatnonzero(gaia.vectors @ near[0] >= math.cos(reach))
+        rows = np.flatnonzero(cos_from_hint >= math.cos(reach))
         if len(rows) < 4:
             continue
         local = Catalog(
