@@ -37,7 +37,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
-from make_reference import convert, raw_wcs, solve_one, wcs_of
+from make_reference import add_solve_command, convert, raw_wcs, solve_one, wcs_of
 
 HERE = Path(__file__).resolve().parent
 MANIFEST = HERE / "narrow_heldback.json"
@@ -182,12 +182,7 @@ def cmd_reference(args) -> None:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="cmd", required=True)
-    p = sub.add_parser("solve", help="run astrometry.net on each file")
-    p.add_argument("--again", action="store_true", help="solve files solved before too")
-    p.add_argument("--cpulimit", type=int, default=CPU_LIMIT_S, help="CPU seconds per image")
-    p.add_argument("--status", default="solve.json", help="this process's record (in WORK)")
-    p.add_argument("--reverse", action="store_true", help="from the last file")
-    p.add_argument("only", nargs="*", help="only these files")
+    add_solve_command(sub, "run astrometry.net on each file", CPU_LIMIT_S)
     sub.add_parser("reference", help="convert the WCS files and draw the hints")
     args = parser.parse_args()
     {"solve": cmd_solve, "reference": cmd_reference}[args.cmd](args)

@@ -542,15 +542,20 @@ def cmd_table(args) -> None:
     readme.write_text(text[:a] + "\n" + "\n".join(lines) + "\n" + text[b:])
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    sub = parser.add_subparsers(dest="cmd", required=True)
-    p = sub.add_parser("solve", help="run astrometry.net on every file")
+def add_solve_command(sub, help_text: str, cpulimit_s: int) -> None:
+    """The ``solve`` subcommand's options (this script's and make_narrow_reference.py's)."""
+    p = sub.add_parser("solve", help=help_text)
     p.add_argument("--again", action="store_true", help="solve files solved before too")
-    p.add_argument("--cpulimit", type=int, default=CPU_LIMIT_S, help="CPU seconds per image")
+    p.add_argument("--cpulimit", type=int, default=cpulimit_s, help="CPU seconds per image")
     p.add_argument("--status", default="solve.json", help="this process's record (in WORK)")
     p.add_argument("--reverse", action="store_true", help="from the last file")
     p.add_argument("only", nargs="*", help="only these files")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    sub = parser.add_subparsers(dest="cmd", required=True)
+    add_solve_command(sub, "run astrometry.net on every file", CPU_LIMIT_S)
     p = sub.add_parser("reference", help="convert the WCS files into reference.json")
     p.add_argument("--drop-checks", action="store_true", help="forget the earlier checks")
     p = sub.add_parser("check", help="project catalog stars onto the detections")
