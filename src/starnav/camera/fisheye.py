@@ -84,8 +84,22 @@ class Fisheye(Lens):
             )
         height = width if height is None else height
         unit = cls(int(width), int(height), 1.0, **coefficients)
-        g, _ = kernels().radial_g(cls.model_code, unit.params, math.radians(0.5 * fov_deg))
-        return cls(int(width), int(height), 0.5 * width / g, **coefficients)
+        return cls(
+            int(width), int(height), unit.focal_for_radius(0.5 * width, fov_deg), **coefficients
+        )
+
+    def focal_for_radius(self, radius_px: float, field_deg: float) -> float:
+        """The focal length (px) at which this model's circle of ``radius_px`` about the
+        principal point spans ``field_deg`` degrees (e.g. an image circle's 180°), cut at the
+        widest field the model maps."""
+        top = 2.0 * math.degrees(self.model_theta_max_rad)
+        theta = math.radians(0.5 * min(field_deg, top))
+        g, _ = kernels().radial_g(self.model_code, self.params, theta)
+        return float(radius_px / g)
+
+    def with_centre(self, cx: float, cy: float):
+        """The same camera with its principal point at (``cx``, ``cy``) px."""
+        return dataclasses.replace(self, cx=float(cx), cy=float(cy))
 
     @property
     def fov_deg(self) -> float:

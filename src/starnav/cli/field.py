@@ -12,7 +12,9 @@ from starnav.pipeline.fov import fov_limits_deg, search_range
 from starnav.pipeline.options import (
     DEFAULT_FOV_RANGE_DEG,
     DEFAULT_LENS_FOV_RANGE_DEG,
+    FISHEYE,
     default_fov_range_deg,
+    facts_model,
 )
 
 FOV_LIMITS_HELP = "{:g}-{:g} for the pinhole lens, {:g}-{:g} for a fisheye".format(
@@ -44,10 +46,12 @@ def add_fov_search(
         fov.add_argument("--camera", help=camera_help)
         p.add_argument(
             "--lens",
-            choices=tuple(MODELS),
+            choices=(*MODELS, FISHEYE),
             default="pinhole",
-            help="the lens model when no camera file is given (default %(default)s); without "
-            "--fov-deg a fisheye model's focal length is scanned over --fov-range",
+            help="the lens model when no camera file is given (default %(default)s; fisheye: "
+            "each of the common fisheye models, equidistant, equisolid, stereographic and "
+            "orthographic); without --fov-deg a fisheye model's focal length is scanned over "
+            "--fov-range, or from the image circle found in the image",
         )
 
 
@@ -62,4 +66,4 @@ def check_fov(args: argparse.Namespace, lens: str, *, exact: bool = False) -> No
     if exact and args.fov_deg is not None:
         return
     searched = tuple(args.fov_range) if args.fov_range else default_fov_range_deg(lens)
-    search_range(fov_deg, searched, None, lens)
+    search_range(fov_deg, searched, None, facts_model(lens))

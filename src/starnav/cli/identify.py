@@ -36,6 +36,7 @@ from starnav.cli.output import print_json, print_solution
 from starnav.errors import StarnavError
 from starnav.geometry import attitude_from_radec_roll
 from starnav.identify import DEFAULT_ALGORITHM
+from starnav.pipeline.options import facts_model
 from starnav.pipeline.star_files import FileResult, read_star_files, solve_star_files
 from starnav.results import SolveResult
 from starnav.starlist import read_star_csv
@@ -140,7 +141,8 @@ def _check_fov_search(args: argparse.Namespace, prior: np.ndarray | None) -> Non
         "without it the FOV search picks the catalog depth of each FOV band and fits the "
         "focal length"
     )
-    scanned = model_class(args.lens).scans_focal  # the focal scan takes a catalog depth
+    # the focal scan takes a catalog depth
+    scanned = model_class(facts_model(args.lens)).scans_focal
     if prior is not None or args.algorithm != DEFAULT_ALGORITHM or (args.mag_limit and not scanned):
         raise StarnavError(f"--prior-*, --algorithm and --mag-limit need --fov-deg ({why})")
     if args.algorithm_option:

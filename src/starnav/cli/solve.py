@@ -27,6 +27,7 @@ from starnav.cli.common import (
 )
 from starnav.cli.field import add_fov_search, check_fov
 from starnav.cli.output import print_json, print_solution, to_json
+from starnav.cli.site import add_sky_options, sky_options
 from starnav.errors import StarnavError
 from starnav.pipeline.options import DEFAULT_MAX_STARS, FISHEYE_MAX_STARS
 
@@ -47,6 +48,7 @@ def add_parser(subparsers: Subparsers) -> None:
         camera_help="camera file (any lens model, e.g. from 'starnav calibrate'; its focal "
         "length searched ±1 %%)",
     )
+    add_sky_options(p)
     p.add_argument(
         "--fit-distortion",
         action="store_true",
@@ -59,16 +61,13 @@ def add_parser(subparsers: Subparsers) -> None:
         f"{FISHEYE_MAX_STARS} for a fisheye lens)",
     )
     p.add_argument(
-        "--threshold-sigma",
-        type=finite,
-        default=5.0,
-        help="detection threshold over the background noise (default %(default)g)",
-    )
+        "--threshold-sigma", type=finite, default=5.0, help="detection threshold over the "
+        "background noise (default %(default)g)",
+    )  # fmt: skip
     p.add_argument(
-        "--sigma-px",
-        type=finite,
-        help="centroid error, 1 sigma (px; default: not known, estimated as by identify)",
-    )
+        "--sigma-px", type=finite, help="centroid error, 1 sigma (px; default: not known, "
+        "estimated as by identify)",
+    )  # fmt: skip
     p.add_argument("--parity", type=int, choices=(1, -1), help="force parity (default: find)")
     p.add_argument(
         "--catalog", help="CSV catalog id,ra_deg,dec_deg,mag (default: embedded Hipparcos)"
@@ -138,6 +137,7 @@ def _options(args: argparse.Namespace) -> dict:
         parity=args.parity,
         time_budget_s=args.time_budget,
         deep_mag_limit=args.deep_mag_limit,
+        **sky_options(args),
         **({"hints": ImageHints()} if args.no_hints else {}),
     )
 

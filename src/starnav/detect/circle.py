@@ -22,16 +22,21 @@ _REDUCED_PX = 256
 _OUTLIER_REDUCED_PX = 3.0
 _MIN_RADIUS_FRACTION = 0.25  # of the shorter side
 _MIN_DARK_FRACTION = 0.05  # of the reduced image outside the disc
+_EDGE_BAND = 0.04  # of the radius: the rings either side of the edge whose levels are compared
 
 
 @dataclass(frozen=True)
 class ImageCircle:
     """A circular fisheye's disc of sky: centre (``cx``, ``cy``, px, our convention: top-left
-    pixel centre at (0.5, 0.5)) and ``radius_px``."""
+    pixel centre at (0.5, 0.5)) and ``radius_px``; ``contrast``: the step in level across
+    the circle's edge (the median just inside less the median just outside, ±``_EDGE_BAND``
+    of the radius) over the sky's level above the dark frame's (about 1 for a lens's sharp
+    image circle; a photograph's vignetting, which a circle also fits, scores near 0)."""
 
     cx: float
     cy: float
     radius_px: float
+    contrast: float = 1.0
 
     def outside(self, width: int, height: int, *, margin_px: float = 0.0) -> np.ndarray:
         """Boolean (height, width) mask, True for pixels whose centre lies outside the circle
@@ -40,6 +45,31 @@ class ImageCircle:
         x = np.arange(width, dtype=np.float64)[None, :] + 0.5
         r = self.radius_px - margin_px
         return (x - self.cx) ** 2 + (y - self.cy) ** 2 > r * r
+
+
+_CORNER_FRACTION = 0.04  # of the shorter side: the corner patches looked at
+_DARK_CORNER_SHARE = 0.25  # a corner darker than this share of the way from black to the sky
+
+
+def dark_corners(image: np.ndarray) -> bool:
+    """Whether all four corners of a 2-D image are much darker than its centre, as around a
+    circular fisheye's disc: each corner patch's median below a quarter of the way from the
+    darkest corner to the centre's median, and the centre well above the corners' spread.
+    Cheap (five small medians), so any image can be asked before ``find_image_circle``."""
+    data = np.asarray(image)
+    height, width = data.shape
+    k = max(2, int(_CORNER_FRACTION * min(height, width)))
+    corners = [data[:k, :k], data[:k, -k:], data[-k:, :k], data[-k:, -k:]]
+    h2, w2 = height // 2, width // 2
+    centre = float(np.nanmedian(data[h2 - k : h2 + k, w2 - k : w2 + k]))
+    levels = np.array([float(np.nanmedian(c)) for c in corners])
+    if not (np.all(np.isfinite(levels)) and math.isfinite(centre)):
+        return False
+    floor = float(levels.min())
+    spread = max(float(np.nanstd(corners[int(np.argmin(levels))])), 1e-6)
+    if centre - floor < 10.0 * spread:
+        return False
+    return bool(np.all(levels < floor + _DARK_CORNER_SHARE * (centre - floor)))
 
 
 def find_image_circle(image: np.ndarray) -> ImageCircle | None:
@@ -77,7 +107,15 @@ def find_image_circle(image: np.ndarray) -> ImageCircle | None:
         cx, cy, r = _fit_circle(xs[near] + 0.5, ys[near] + 0.5)
     if not (np.isfinite(r) and r * step >= _MIN_RADIUS_FRACTION * min(height, width)):
         return None
-    return ImageCircle(float(cx * step), float(cy * step), float(r * step))
+    rows, cols = np.indices(small.shape)
+    rho = np.hypot(cols + 0.5 - cx, rows + 0.5 - cy) / r
+    inner = small[(rho > 1 - 2 * _EDGE_BAND) & (rho <= 1 - _EDGE_BAND)]
+    outer = small[(rho >= 1 + _EDGE_BAND) & (rho < 1 + 2 * _EDGE_BAND)]
+    inner, outer = inner[np.isfinite(inner)], outer[np.isfinite(outer)]
+    contrast = 0.0
+    if inner.size and outer.size:
+        contrast = float((np.median(inner) - np.median(outer)) / (sky - dark))
+    return ImageCircle(float(cx * step), float(cy * step), float(r * step), contrast)
 
 
 def _block_mean(data: np.ndarray, step: int) -> np.ndarray:

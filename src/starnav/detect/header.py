@@ -72,7 +72,8 @@ def fits_headers(path: Path) -> list:
 @dataclass(frozen=True)
 class ImageHints:
     """What a FITS header says of its image: the boresight ``ra_deg``/``dec_deg`` (degrees;
-    None when not given), the horizontal ``fov_deg``, the ``epoch_year`` of the catalog and
+    None when not given), the horizontal ``fov_deg``, the ``epoch_year`` of the catalog, the
+    time ``utc`` (ISO 8601, UTC), the ``site`` (latitude, longitude degrees, height m) and
     ``sources``: the keywords each came from."""
 
     ra_deg: float | None = None
@@ -80,6 +81,8 @@ class ImageHints:
     fov_deg: float | None = None
     epoch_year: float | None = None
     sources: tuple[str, ...] = ()
+    utc: str | None = None
+    site: tuple[float, float, float] | None = None
 
     def to_dict(self) -> dict:
         """The JSON form (``sources`` as a list)."""
@@ -88,6 +91,8 @@ class ImageHints:
             "dec_deg": self.dec_deg,
             "fov_deg": self.fov_deg,
             "epoch_year": self.epoch_year,
+            "utc": self.utc,
+            "site": None if self.site is None else list(self.site),
             "sources": list(self.sources),
         }
 
@@ -101,15 +106,46 @@ def fits_hints(path: str | Path) -> ImageHints:
     sources: list[str] = []
     ra, dec = _position(headers, sources)
     fov = _fov(headers, sources)
-    epoch = None
+    epoch = utc = None
     try:
         found = _fits_time(path, headers)
     except StarnavError:
         found = None
     if found is not None:
         epoch = float(found.time.jyear)
+        utc = found.time.utc.isot
         sources.append(found.source)
-    return ImageHints(ra, dec, fov, epoch, tuple(sources))
+    site = _site(headers, sources)
+    return ImageHints(ra, dec, fov, epoch, tuple(sources), utc, site)
+
+
+# the keywords of a site: latitude, longitude (east positive), height (m)
+_SITE_KEYS = (
+    ("SITELAT", "SITELONG", "SITEELEV"),  # MaxIm DL, N.I.N.A., SharpCap, indi-allsky
+    ("OBSGEO-B", "OBSGEO-L", "OBSGEO-H"),  # the FITS standard's
+    ("LAT-OBS", "LONG-OBS", "ALT-OBS"),  # ESO's and others'
+)
+
+
+def _site(headers, sources: list[str]) -> tuple[float, float, float] | None:
+    """(latitude, longitude degrees, height m) of the first header naming a site (degrees or
+    sexagesimal degrees); None when none does, or when its values are unreadable."""
+    from astropy.coordinates import Angle
+
+    for h in headers:
+        for lat_key, lon_key, height_key in _SITE_KEYS:
+            if lat_key not in h or lon_key not in h:
+                continue
+            try:
+                lat = float(Angle(h[lat_key], unit="deg").deg)
+                lon = float(Angle(h[lon_key], unit="deg").deg)
+            except (ValueError, TypeError):
+                continue
+            height = _number(h, height_key) or 0.0
+            if abs(lat) <= 90.0 and math.isfinite(lon):
+                sources.append(f"FITS {lat_key}/{lon_key}")
+                return lat, lon, height
+    return None
 
 
 def _number(header, key: str) -> float | None:

@@ -82,6 +82,7 @@ from starnav.detect.background import (
     noise_correlation,
     subtract_background,
 )
+from starnav.detect.circle import ImageCircle
 from starnav.detect.hot import clean_hot_pixels
 from starnav.detect.photometry import (
     LocalPhotometry,
@@ -135,7 +136,8 @@ class Detections:
     ``elongation``: the median ratio of the long to the short axis of the stars (sep's
     isophotal a / b; 1 for round stars, 3 for stars trailed to 3 times their width, 1 when
     none); ``n_rejected``: sources measured and not taken for stars (extended, elongated, or faint
-    against their surroundings).
+    against their surroundings); ``circle``: a circular fisheye's image circle, when it was
+    looked for and found (``detect.circle``), outside which nothing was detected.
     """
 
     xy: np.ndarray
@@ -152,6 +154,7 @@ class Detections:
     height: int
     n_rejected: int = 0
     elongation: float = 1.0
+    circle: ImageCircle | None = None
 
     def __len__(self) -> int:
         return len(self.xy)

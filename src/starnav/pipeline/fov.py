@@ -10,10 +10,11 @@ sqrt(2)^k, so every range and image shape shares the same cached tables.
 from __future__ import annotations
 
 import functools
+import itertools
 import math
 import time
-from collections.abc import Iterator
-from dataclasses import replace
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -27,6 +28,8 @@ from starnav.catalog import (
     is_embedded,
     load_catalog,
 )
+from starnav.catalog.sky import sky_at
+from starnav.detect.circle import ImageCircle
 from starnav.errors import CatalogError, StarnavError, shown
 from starnav.geometry import radec_to_unit
 from starnav.identify.base import SEARCH_SIGMA_PX, MatchSettings
@@ -55,6 +58,7 @@ FOV_LIMITS_DEG = Camera.fov_limits_deg  # (the lens classes hold the limits: the
 LENS_FOV_LIMITS_DEG = Fisheye.fov_limits_deg  # the focal scan of a fisheye model
 SCAN_STARS = 60  # the focal scan identifies the brightest this many stars,
 SCAN_HYPOTHESES = 2000  # testing at most this many hypotheses per trial focal length
+SCAN_TRIAL_S = 1.0  # and for at most this many seconds
 GIVEN_FOV_TOLERANCE = 0.05  # a given FOV is searched within +-5 %
 CAMERA_FOV_TOLERANCE = 0.01  # a calibrated camera's within +-1 %
 _STARS_PER_FIELD = 40.0  # catalog depth of a band: mean stars in one of its pattern fields
@@ -74,6 +78,13 @@ NEAR_PATTERN_STARS = 25  # searched with patterns of the brightest 25 points (no
 # (at 7.07°: 39), and a telescope's frame shows many stars it lacks
 GAIA_BELOW_DEG = 5.1
 MAX_DIAGONAL_FOV_DEG = 150.0
+# the fields an all-sky camera's image circle spans (degrees): a 180° lens's, a wider one's
+# (to 230°), and a horizon of trees or domes found as a smaller disc (to 140°)
+CIRCLE_FOV_RANGE_DEG = (140.0, 230.0)
+SCAN_INNER_DEG = 60.0  # a fisheye scan's trial identifies stars this close to the axis
+SCAN_PRIOR_SIGMA_DEG = 1.0  # the whole list is matched near a trial's attitude, good to this
+CENTRE_FIT_STARS = 8  # a trial's principal point is fitted from this many matched stars on
+CIRCLE_CENTRE_PX = 5.0  # an image circle's centre this far from the image's: both are tried
 HINT_BUDGET_SHARE = 0.25  # of the time budget, for the search near a position hint
 _SLIVER = 0.05  # a band narrower than this (relative) is merged into the next wider one
 _DATABASES = process_cache("FOV-search catalogs")  # catalog vectors and KD-tree
@@ -403,6 +414,7 @@ def solve_unknown_field(
     labels: list[str] | tuple[str, ...] | None = None,
     prior: np.ndarray | None = None,
     position_hint_deg: tuple[float, float] | None = None,
+    image_circle: ImageCircle | None = None,
 ) -> SolveResult:
     """Identify stars at ``xy`` (n, 2, px) in an image ``width`` x ``height`` px whose field
     of view is unknown: searched within ``options.search_range_deg`` (horizontal, degrees),
@@ -416,7 +428,9 @@ def solve_unknown_field(
     tracking, falling back to lost in space with that camera (``tracking_solver``).
     ``position_hint_deg``: (RA, Dec) of the boresight, roughly (e.g. a FITS header's): the
     catalog within ``options.position_radius_deg`` of it is searched first, then the whole
-    sky (the pinhole search). The time budget counts once the tables are loaded."""
+    sky (the pinhole search). ``image_circle``: a circular fisheye's image circle found in
+    the image (``detect.circle``), where the scan starts (``scan_starts``). The time budget
+    counts once the tables are loaded."""
     camera = options.camera
     if camera is not None:
         width, height = camera.width, camera.height
@@ -447,12 +461,8 @@ def solve_unknown_field(
             stars, prior=prior, prior_sigma_deg=options.prior_sigma_deg, deadline=deadline
         )
     if options.scans_focal:
-        cat = load_catalog(catalog, mag_limit=mag_limit, epoch_year=epoch_year)
-        focal_range = lens_focal_range(base, camera, (lo, hi))
-        solver = Solver(
-            base.with_focal(math.sqrt(focal_range[0] * focal_range[1])), cat, settings=settings
-        )
-        return scan_focal(stars, base, focal_range, solver, Deadline.after(budget_s))
+        starts = _scan_plan(base, camera, (lo, hi), options, image_circle)
+        return _scan(stars, starts, options, settings, budget_s)
     near = _near(position_hint_deg, options.position_radius_deg)
     ranges = [(lo, hi)]
     if options.fov_deg is None and camera is None:
@@ -584,42 +594,154 @@ def lens_focal_range(
     return f_lo, f_hi
 
 
+def _scan(
+    stars: StarList,
+    starts: list[ScanStart],
+    options: SolveOptions,
+    settings: SolveSettings,
+    budget_s: float,
+) -> SolveResult:
+    """The focal scan of ``starts`` on ``options``' catalog (``mag_limit``, default Hp <= 6),
+    or, with a site and time, on its stars and the planets above the horizon
+    (``catalog.sky.sky_at``)."""
+    cat = load_catalog(options.catalog, mag_limit=options.mag_limit, epoch_year=options.epoch_year)
+    if options.site is not None and options.utc is not None:
+        cat = sky_at(cat, options.site, options.utc)
+    middle = math.sqrt(starts[0].focal_range_px[0] * starts[0].focal_range_px[1])
+    solver = Solver(starts[0].base.with_focal(middle), cat, settings=settings)
+    return scan_focal(stars, starts, solver, Deadline.after(budget_s))
+
+
+def _scan_plan(
+    base: CameraModel,
+    camera: CameraModel | None,
+    fov_range_deg: tuple[float, float],
+    options: SolveOptions,
+    circle: ImageCircle | None,
+) -> list[ScanStart]:
+    """Every lens a focal scan tries (``scan_starts``): of each model of
+    ``options.lens_models`` (a camera's only), each principal point's models in turn, the
+    image circle's first."""
+    bases = [base]
+    if camera is None:
+        size = (base.width, base.height)
+        bases += [model_class(m)(*size, 1.0) for m in options.lens_models[1:]]
+    per_model = [scan_starts(b, camera, fov_range_deg, options, circle) for b in bases]
+    return [s for row in itertools.zip_longest(*per_model) for s in row if s is not None]
+
+
+def scan_starts(
+    base: CameraModel,
+    camera: CameraModel | None,
+    fov_range_deg: tuple[float, float],
+    options: SolveOptions,
+    circle: ImageCircle | None,
+) -> list[ScanStart]:
+    """The lenses a fisheye's focal scan tries: ``base`` over the focal lengths of the
+    horizontal ``fov_range_deg`` (``lens_focal_range``; a calibrated ``camera``'s within 1 %);
+    with an image ``circle`` and no camera, first the circle's centre as principal point,
+    the focal lengths that make the circle span ``CIRCLE_FOV_RANGE_DEG`` (those of the field
+    when ``options`` give one; ±5 % of ``options.circle_fov_deg`` or ``options.focal_px``)
+    from a 180° circle (or the one given) outward, then the image centre's, when the
+    two lie more than ``CIRCLE_CENTRE_PX`` apart (a disc cut by the frame or by trees is
+    found off its centre)."""
+    focal_range = lens_focal_range(base, camera, fov_range_deg)
+    if camera is None and options.focal_px is not None:
+        focal_range = _given_focal_range(options.focal_px)
+    if camera is not None or circle is None:
+        return [ScanStart(base, focal_range)]
+    at_circle = base.with_centre(circle.cx, circle.cy)
+    field = 180.0 if options.circle_fov_deg is None else options.circle_fov_deg
+    if options.fov_deg is None and options.fov_range_deg is None:
+        wide, narrow = CIRCLE_FOV_RANGE_DEG[1], CIRCLE_FOV_RANGE_DEG[0]
+        if options.circle_fov_deg is not None:
+            wide, narrow = field * (1 + GIVEN_FOV_TOLERANCE), field / (1 + GIVEN_FOV_TOLERANCE)
+        focal_range = tuple(at_circle.focal_for_radius(circle.radius_px, v) for v in (wide, narrow))
+    if options.focal_px is not None:
+        focal_range = _given_focal_range(options.focal_px)
+        field = None
+    lo, hi = focal_range
+    first = options.focal_px
+    if field is not None:
+        first = min(max(at_circle.focal_for_radius(circle.radius_px, field), lo), hi)
+    starts = [ScanStart(at_circle, focal_range, first, rough=True)]
+    if math.hypot(circle.cx - base.cx, circle.cy - base.cy) > CIRCLE_CENTRE_PX:
+        starts.append(ScanStart(base, focal_range, first, rough=True))
+    return starts
+
+
+@dataclass(frozen=True)
+class ScanStart:
+    """One lens a focal scan tries: ``base`` (a model at a principal point), its focal lengths
+    ``focal_range_px`` (px) and the one tried first, ``first_px`` (None: the middle);
+    ``rough``: the principal point and the model are guesses (from an image circle), so the
+    trials identify the stars near the axis only (``_scan_stars``)."""
+
+    base: CameraModel
+    focal_range_px: tuple[float, float]
+    first_px: float | None = None
+    rough: bool = False
+
+    def focals(self, step: float) -> list[float]:
+        """The trial focal lengths (px), ``step`` apart in log, from the first outward."""
+        f_lo, f_hi = sorted(self.focal_range_px)
+        start = math.sqrt(f_lo * f_hi) if self.first_px is None else self.first_px
+        below = math.ceil(math.log(start / f_lo) / step - 1e-9)
+        above = math.ceil(math.log(f_hi / start) / step - 1e-9)
+        return [start * math.exp(step * k) for k in sorted(range(-below, above + 1), key=abs)]
+
+
+def _given_focal_range(focal_px: float) -> tuple[float, float]:
+    """The focal lengths (px) searched about a given one: within ``GIVEN_FOV_TOLERANCE``."""
+    return focal_px / (1 + GIVEN_FOV_TOLERANCE), focal_px * (1 + GIVEN_FOV_TOLERANCE)
+
+
 def scan_focal(
     stars: StarList,
-    base: CameraModel,
-    focal_range_px: tuple[float, float],
+    starts: Sequence[ScanStart],
     solver: Solver,
     deadline: Deadline | None = None,
 ) -> SolveResult:
-    """A lens of known model but unknown focal length: the ``solver``'s (made for the
-    geometric middle of ``focal_range_px``, focal length fitted) identification of the
-    brightest ``SCAN_STARS`` (at most ``SCAN_HYPOTHESES`` each) at trial focal lengths over
-    ``focal_range_px`` (``base`` with another focal length), from the middle outward, in
-    steps small enough that the longest triangle side keeps within half the pair tolerance;
-    the first verified one's fitted camera then solves the whole list (focal length free).
-    ``deadline``: the scan stops when it passes (looked at in and between trials).
-    (Triangles of sides up to 20° would cover 3x the range per trial but take ~10x the
-    hypotheses to find, and missed a distorted lens seen as equidistant; 500 hypotheses per
-    trial missed an equisolid sky at a 1 px tolerance.)"""
+    """Lenses of known model but unknown focal length: the ``solver``'s (focal length fitted)
+    identification of the brightest ``SCAN_STARS`` (at most ``SCAN_HYPOTHESES`` each) at
+    trial focal lengths of each of the ``starts`` (a model at a principal point, e.g. the
+    image circle's centre and the image's), taken in turn, each from its first focal length
+    outward, in steps small enough that the longest triangle side keeps within half the pair
+    tolerance; the first verified one's fitted camera then solves the whole list (focal
+    length free). ``deadline``: the scan stops when it passes (looked at in and between
+    trials). (Triangles of sides up to 20° would cover 3x the range per trial but take ~10x
+    the hypotheses to find, and missed a distorted lens seen as equidistant; 500 hypotheses
+    per trial missed an equisolid sky at a 1 px tolerance.)"""
     t0 = time.perf_counter()
-    f_lo, f_hi = sorted(focal_range_px)
-    middle = solver.camera
-    tol_px = solver.match_settings.pair_tol_rad * middle.scale_px_per_rad
+    f_hi = max(max(s.focal_range_px) for s in starts)
+    tol_px = solver.match_settings.pair_tol_rad * solver.camera.scale_px_per_rad
     # a trial covers the focal lengths whose error on the longest side takes at most half the
     # pair tolerance (the centroid noise takes the rest), at the longest focal length
-    half = math.log1p(0.5 * tol_px / (solver.database.max_angle_rad * f_hi))
-    n = math.ceil(0.5 * math.log(f_hi / f_lo) / (2.0 * half) - 1e-9)
-    focals = [middle.focal_px * math.exp(2.0 * half * k) for k in sorted(range(-n, n + 1), key=abs)]
-    brightest = stars.order[:SCAN_STARS]
-    few = StarList(stars.xy[brightest], tuple(stars.labels[i] for i in brightest), None)
+    step = 2.0 * math.log1p(0.5 * tol_px / (solver.database.max_angle_rad * f_hi))
+    lists = [[(s.base.with_focal(f), s.rough) for f in s.focals(step)] for s in starts]
+    trials = [c for row in itertools.zip_longest(*lists) for c in row if c is not None]
     tried = 0
-    for focal in focals:
-        trial = solver.with_camera(base.with_focal(focal), SCAN_HYPOTHESES).solve(
-            few, deadline=deadline
-        )
+    lenses = ", ".join(sorted({s.base.model for s in starts}))
+    ranges = " and ".join(
+        f"{min(s.focal_range_px):.1f}-{max(s.focal_range_px):.1f} px" for s in starts[:1]
+    )
+    for camera, rough in trials:
+        few = _scan_stars(stars, camera, inner=rough)
+        # a trial at a wrong focal length (or model) can draw thousands of catalog triangles
+        # for each of its own: it stops after SCAN_TRIAL_S (one that identifies takes ~0.3 s)
+        trial_deadline = Deadline.after(SCAN_TRIAL_S)
+        if deadline is not None and deadline.end_time < trial_deadline.end_time:
+            trial_deadline = deadline
+        trial = solver.with_camera(camera, SCAN_HYPOTHESES).solve(few, deadline=trial_deadline)
         tried += 1
         if trial.solution is not None:
-            result = solver.with_camera(trial.solution.camera).solve(stars, deadline=deadline)
+            fitted = _with_fitted_centre(trial.solution, solver.database.catalog)
+            result = solver.with_camera(fitted).solve(
+                stars,
+                prior=trial.solution.R_cam_from_icrs,
+                prior_sigma_deg=SCAN_PRIOR_SIGMA_DEG,
+                deadline=deadline,
+            )
             reason = (
                 f"the brightest {len(few.xy)} stars identified at a focal length of "
                 f"{trial.solution.focal_px:.1f} px, the whole list refused: {result.reason}"
@@ -627,21 +749,63 @@ def scan_focal(
             break
         if expired(deadline):
             reason = deadline.reason(
-                f"{tried} of {len(focals)} focal lengths over {f_lo:.1f}-{f_hi:.1f} px tried "
-                f"({base.model} lens)"
+                f"{tried} of {len(trials)} trial focal lengths over {ranges} tried ({lenses} lens)"
             )
             result = trial
             break
     else:
         reason = (
-            f"no identification at {len(focals)} focal lengths over {f_lo:.1f}-{f_hi:.1f} px "
-            f"({base.model} lens; last: {trial.reason})"
+            f"no identification at {len(trials)} trial focal lengths over {ranges} ({lenses} "
+            f"lens; last: {trial.reason})"
         )
         result = trial
     ms = elapsed_ms(t0)
     if result.solution is not None:
         return replace(result, solution=replace(result.solution, time_ms=ms), time_ms=ms)
     return replace(result, reason=reason, time_ms=ms)
+
+
+def _scan_stars(stars: StarList, camera: CameraModel, *, inner: bool) -> StarList:
+    """The brightest ``SCAN_STARS`` of ``stars``; ``inner``: those within ``SCAN_INNER_DEG``
+    of ``camera``'s axis at its focal length, when there are at least half as many: near the
+    axis a principal point a few percent of the radius off, or a lens between two models,
+    changes the angles between stars least. (Not with a known centre: an unknown distortion
+    grows outward, and the stars far out, left out of the trial, then miss the whole list's
+    match.)"""
+    rows = stars.order[:SCAN_STARS]
+    if inner:
+        theta = np.arccos(np.clip(camera.pixels_to_bearings(stars.xy)[:, 2], -1.0, 1.0))
+        near = stars.order[theta[stars.order] <= math.radians(SCAN_INNER_DEG)][:SCAN_STARS]
+        rows = near if len(near) >= SCAN_STARS // 2 else rows
+    return StarList(stars.xy[rows], tuple(stars.labels[i] for i in rows), None)
+
+
+def _with_fitted_centre(solution, catalog: Catalog) -> CameraModel:
+    """The camera of a scan trial's ``solution`` with its principal point, focal length and
+    attitude fitted by least squares to the trial's matched stars (scipy), so that the stars
+    far from the axis, which the trial left out, fall where the whole list's solve looks for
+    them; the trial's camera when fewer than ``CENTRE_FIT_STARS`` matched."""
+    from scipy.optimize import least_squares
+    from scipy.spatial.transform import Rotation
+
+    table, camera = solution.star_table, solution.camera
+    matched = table.catalog_id >= 0
+    if matched.sum() < CENTRE_FIT_STARS:
+        return camera
+    xy = table.xy[matched]
+    stars_icrs = catalog.vectors[catalog.rows(table.catalog_id[matched])]
+    R0 = solution.R_cam_from_icrs
+
+    def model(p):
+        return camera.with_centre(p[4], p[5]).with_focal(camera.focal_px * math.exp(p[3]))
+
+    def residuals(p):
+        R = Rotation.from_rotvec(p[:3]).as_matrix() @ R0
+        return (model(p).bearings_to_pixels(stars_icrs @ R.T) - xy).ravel()
+
+    start = np.array([0.0, 0.0, 0.0, 0.0, camera.cx, camera.cy])
+    fit = least_squares(residuals, start, loss="soft_l1", f_scale=2.0)
+    return model(fit.x) if fit.success else camera
 
 
 def _search_and_fit(

@@ -20,7 +20,7 @@ import numpy as np
 
 from starnav.camera import Camera, CameraModel, model_class
 from starnav.catalog import Catalog, is_embedded
-from starnav.detect.circle import find_image_circle
+from starnav.detect.circle import ImageCircle, dark_corners, find_image_circle
 from starnav.detect.header import ImageHints, fits_hints, is_fits
 from starnav.detect.read import read_image
 from starnav.detect.stars import Detections, detect_stars
@@ -32,6 +32,7 @@ from starnav.pipeline.options import (
     DEFAULT_MAX_STARS,
     DEFAULT_PATTERN_STARS,
     DEFAULT_THRESHOLD_SIGMA,
+    FISHEYE,
     FISHEYE_MAX_STARS,
     SolveOptions,
 )
@@ -41,6 +42,8 @@ from starnav.runtime.budget import check_budget, default_budget_s
 
 NO_HINTS = ImageHints()
 MIN_DETECTIONS = 4  # fewer detected stars than this: not solved, without a search
+FISHEYE_CIRCLE_CONTRAST = 0.5  # an image with nothing said is a fisheye's from this on (all-sky
+# frames measured 0.8-1.5, vignetted photographs and wide-field shots at most 0.3)
 AUTO_BIN_PIXELS = 4.2e6  # an image is detected binned to at most this many pixels
 
 
@@ -144,6 +147,8 @@ def solve_image(
             f"the camera file is for {camera.width} x {camera.height} px images, this image is "
             f"{width} x {height} px"
         )
+    if _unsaid_fisheye(options, pixels):
+        options = replace(options, lens=FISHEYE)  # each common model, from the circle
     budget_s = check_budget(options.time_budget_s, _default_budget_s(options, pixels))
     t1 = time.perf_counter()
     found = _detect_binned(pixels, options)
@@ -157,6 +162,10 @@ def solve_image(
         )  # fmt: skip
     if options.epoch_year is None and hints.epoch_year is not None and is_embedded(options.catalog):
         options = replace(options, epoch_year=hints.epoch_year)  # Hipparcos' proper motion
+    if options.utc is None and hints.utc is not None:
+        options = replace(options, utc=hints.utc)  # where the sky is, with the site
+    if options.site is None and hints.site is not None:
+        options = replace(options, site=hints.site)
     searched = not options.field_known and not options.scans_focal
     result = _solve_hinted(
         found.xy,
@@ -166,6 +175,7 @@ def solve_image(
         budget_s,
         position_hint_deg,
         prior,
+        found.circle,
     )
     sol = result.solution
     reason, failure = result.reason, None
@@ -184,6 +194,19 @@ def solve_image(
         hints,
         failure,
     )
+
+
+def _unsaid_fisheye(options: SolveOptions, pixels: np.ndarray) -> bool:
+    """Whether an image solved with nothing said of its lens or field is a circular fisheye's:
+    dark corners (``detect.circle.dark_corners``) around an image circle that is found, with
+    a clean edge (``ImageCircle.contrast``)."""
+    said = options.camera is not None or options.fov_deg is not None
+    if said or options.fov_range_deg is not None or options.lens != "pinhole":
+        return False
+    if not dark_corners(pixels):
+        return False
+    circle = find_image_circle(pixels)
+    return circle is not None and circle.contrast >= FISHEYE_CIRCLE_CONTRAST
 
 
 def _diagnose(found: Detections, reason: str, options: SolveOptions) -> Failure:
@@ -236,7 +259,12 @@ def _detect_binned(pixels: np.ndarray, options: SolveOptions) -> Detections:
     binned = blocks.reshape(height, factor, width, factor).mean(axis=(1, 3))
     found = detect(binned)
     # a block's centre is its pixel's centre times the factor
-    return replace(found, xy=found.xy * factor, width=pixels.shape[1], height=pixels.shape[0])
+    circle = found.circle
+    if circle is not None:
+        circle = ImageCircle(circle.cx * factor, circle.cy * factor, circle.radius_px * factor)
+    return replace(
+        found, xy=found.xy * factor, width=pixels.shape[1], height=pixels.shape[0], circle=circle
+    )
 
 
 def _default_budget_s(options: SolveOptions, pixels: np.ndarray) -> float:
@@ -252,12 +280,15 @@ def _default_budget_s(options: SolveOptions, pixels: np.ndarray) -> float:
     )
 
 
-def _solve_hinted(xy, size, options: SolveOptions, hints: ImageHints, budget_s, position, prior):
+def _solve_hinted(
+    xy, size, options: SolveOptions, hints: ImageHints, budget_s, position, prior, circle=None
+):
     """The detections ``xy`` of an image of ``size`` (width, height px) solved
     (``pipeline.stars.solve_stars``) with the ``hints`` of a pinhole search: the position
     searched first (unless ``position`` is given); the FOV, when the default range is searched
     and the FOV lies within the pinhole's limits (1-100°: a telescope's 1.5° too), tried first
-    and, if that fails, the whole range on what is left of the budget."""
+    and, if that fails, the whole range on what is left of the budget. ``circle``: a fisheye's
+    image circle found in the image (``detect.circle``), where its focal scan starts."""
     if position is None and hints.ra_deg is not None and hints.dec_deg is not None:
         position = (hints.ra_deg, hints.dec_deg)
     width, height = size
@@ -271,6 +302,7 @@ def _solve_hinted(xy, size, options: SolveOptions, hints: ImageHints, budget_s, 
             position_hint_deg=position,
             prior=prior,
             images=True,
+            image_circle=circle,
         )
 
     hinted = None
@@ -302,18 +334,20 @@ def detect_image(
     image; ``threshold_sigma`` over the background noise, the brightest ``max_stars``
     (default ``DEFAULT_MAX_STARS``, ``FISHEYE_MAX_STARS`` for a fisheye)."""
     kind = model_class(lens).kind
+    circle = None
     if kind == "fisheye":
-        pixels = _outside_circle_masked(pixels)
+        circle = find_image_circle(pixels)
+        pixels = _outside_circle_masked(pixels, circle)
     if max_stars is None:
         max_stars = DEFAULT_MAX_STARS if kind == "pinhole" else FISHEYE_MAX_STARS
-    return detect_stars(pixels, threshold_sigma=threshold_sigma, max_stars=max_stars)
+    found = detect_stars(pixels, threshold_sigma=threshold_sigma, max_stars=max_stars)
+    return found if circle is None else replace(found, circle=circle)
 
 
-def _outside_circle_masked(pixels: np.ndarray) -> np.ndarray:
-    """A fisheye's pixels with those outside its image circle (``starnav.detect.circle``,
+def _outside_circle_masked(pixels: np.ndarray, circle: ImageCircle | None) -> np.ndarray:
+    """A fisheye's pixels with those outside its image ``circle`` (``starnav.detect.circle``,
     shrunk by 1 % of its radius: the rim is lit horizon) set to NaN, which detection masks;
-    the pixels unchanged when no circle is found (a full-frame fisheye)."""
-    circle = find_image_circle(pixels)
+    the pixels unchanged when no circle was found (a full-frame fisheye)."""
     if circle is None:
         return pixels
     height, width = pixels.shape

@@ -17,6 +17,7 @@ from typing import Any
 
 from starnav.camera import Camera, CameraModel, Fisheye, load_camera, model_class
 from starnav.catalog import Catalog
+from starnav.catalog.sky import Site, utc_time
 from starnav.errors import CameraError, ImageError, StarnavError, shown
 from starnav.identify import ALGORITHMS, DEFAULT_ALGORITHM
 from starnav.identify.base import SEARCH_SIGMA_PX
@@ -33,6 +34,10 @@ POSITION_HINT_RADIUS_DEG = 10.0  # a position hint's boresight is searched first
 DEFAULT_MAX_STARS = 50  # an image's brightest detections solved
 FISHEYE_MAX_STARS = 100  # a whole sky's brightest detections hold horizon lights and glow
 DEFAULT_THRESHOLD_SIGMA = 5.0  # detection threshold over the background noise
+# ``lens="fisheye"``: not a model, the common fisheye models of all-sky and meteor cameras,
+# each scanned (most common first)
+FISHEYE = "fisheye"
+FISHEYE_MODELS = ("equidistant", "equisolid", "stereographic", "orthographic")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -41,11 +46,13 @@ class SolveOptions:
 
     The field: ``fov_deg`` (horizontal field of view, degrees) or ``camera`` (a camera model
     or a camera file), or neither, when ``fov_range_deg`` (horizontal, degrees; None: the
-    lens model's default, 5-40° for the pinhole, 120-200° for a fisheye) is searched for a
-    pinhole or a fisheye's focal length is scanned. ``fov_exact``: whether a given ``fov_deg``
+    lens model's default, 5-40° for the pinhole, 120-200° for a fisheye, or the image circle's
+    140-230° when one is found) is searched for a pinhole or a fisheye's focal length is
+    scanned. ``fov_exact``: whether a given ``fov_deg``
     / ``camera`` is taken as it is (True) or searched within 5 % / 1 % with the focal length
     fitted (False); None: exact for star lists, approximate for images. ``lens``: the lens
-    model without a camera (``starnav.camera.MODELS``); ``fit_focal``, ``fit_distortion``:
+    model without a camera (``starnav.camera.MODELS``, or ``"fisheye"``: each of the common
+    fisheye models, ``FISHEYE_MODELS``); ``fit_focal``, ``fit_distortion``:
     fit the focal length (and k1, k2, from 12 matched stars) with the attitude.
 
     The catalog: ``catalog`` (a ``Catalog``, a CSV path, or None for the embedded
@@ -74,6 +81,13 @@ class SolveOptions:
     fisheye), ``threshold_sigma`` (detection threshold over the background noise),
     ``downsample`` (detect on the image binned by this factor; None: binned to at most
     4.2 MP, ``pipeline.image.detection_binning``).
+
+    Where and when: ``site`` (``catalog.sky.Site``, or (latitude, longitude degrees, height
+    m)) and ``utc`` (ISO 8601 or an astropy ``Time``; an image's own time when None): with
+    both, a fisheye's scan looks for the stars above the horizon and the planets
+    (``catalog.sky.sky_at``). A fisheye's scale, roughly (searched ±5 %): ``circle_fov_deg``
+    (the field across the image circle found in the image, degrees) or ``focal_px`` (the
+    focal length in pixels: focal length in mm over the pixel pitch in mm).
     """
 
     fov_deg: float | None = None
@@ -100,8 +114,25 @@ class SolveOptions:
     max_stars: int | None = None
     threshold_sigma: float = DEFAULT_THRESHOLD_SIGMA
     downsample: int | None = None
+    site: Site | None = None
+    utc: str | None = None
+    circle_fov_deg: float | None = None
+    focal_px: float | None = None
 
     def __post_init__(self) -> None:
+        if self.site is not None and not isinstance(self.site, Site):
+            object.__setattr__(self, "site", Site(*self.site))
+        for name in ("circle_fov_deg", "focal_px"):
+            v = getattr(self, name)
+            top = 360.0 if name == "circle_fov_deg" else 1e7
+            if v is not None and not (_number(v) and math.isfinite(v) and 0.0 < v <= top):
+                raise StarnavError(f"{name} must be in (0, {top:g}], got {shown(v)}")
+            if v is not None and self.camera is None and not self.lens_class.scans_focal:
+                raise StarnavError(
+                    f"{name} is a fisheye's scale: give a fisheye --lens, or the pinhole's FOV"
+                )
+        if self.utc is not None:
+            object.__setattr__(self, "utc", utc_time(self.utc).utc.isot)
         if isinstance(self.camera, str | Path):
             object.__setattr__(self, "camera", load_camera(self.camera))
         elif self.camera is not None and not hasattr(self.camera, "pixels_to_bearings"):
@@ -112,7 +143,8 @@ class SolveOptions:
             object.__setattr__(self, "algorithm_options", items)
         if self.fov_range_deg is not None:
             object.__setattr__(self, "fov_range_deg", tuple(self.fov_range_deg))
-        model_class(self.lens)  # a one-line error for an unknown model
+        if self.lens != FISHEYE:
+            model_class(self.lens)  # a one-line error for an unknown model
         if self.algorithm not in ALGORITHMS:
             known = ", ".join(ALGORITHMS)
             raise StarnavError(f"unknown algorithm {self.algorithm!r}; known: {known}")
@@ -155,8 +187,17 @@ class SolveOptions:
 
     @property
     def lens_model(self) -> str:
-        """The lens model solved with: the camera's, or ``lens``."""
-        return self.camera.model if self.camera is not None else self.lens
+        """The lens model solved with: the camera's, or ``lens`` (``FISHEYE``: the first of
+        ``FISHEYE_MODELS``, whose facts are all of theirs)."""
+        return self.camera.model if self.camera is not None else facts_model(self.lens)
+
+    @property
+    def lens_models(self) -> tuple[str, ...]:
+        """The lens models a focal scan tries: ``FISHEYE_MODELS`` for ``lens="fisheye"``
+        without a camera, else ``lens_model``."""
+        if self.camera is None and self.lens == FISHEYE:
+            return FISHEYE_MODELS
+        return (self.lens_model,)
 
     @property
     def lens_class(self) -> type:
@@ -218,11 +259,17 @@ def check_settings(
         raise StarnavError(f"max_false_match_probability must be in (0, 1), got {shown(p)}")
 
 
+def facts_model(lens: str) -> str:
+    """The lens model whose facts (kind, ranges, limits) ``lens`` has: itself, or for
+    ``FISHEYE`` the first of ``FISHEYE_MODELS``."""
+    return FISHEYE_MODELS[0] if lens == FISHEYE else lens
+
+
 def default_fov_range_deg(lens: str) -> tuple[float, float]:
     """The horizontal FOV range (degrees) searched for the ``lens`` model when none is given:
     its class's ``default_fov_range_deg`` (5-40° for the pinhole's FOV search, 120-200° for a
     fisheye model's focal scan)."""
-    return tuple(model_class(lens).default_fov_range_deg)
+    return tuple(model_class(facts_model(lens)).default_fov_range_deg)
 
 
 def _number(value: object) -> bool:

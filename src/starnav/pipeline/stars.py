@@ -12,6 +12,7 @@ import numpy as np
 
 from starnav.camera import CameraModel, model_class
 from starnav.catalog import load_catalog
+from starnav.detect.circle import ImageCircle
 from starnav.errors import CameraError, StarnavError
 from starnav.identify import DEFAULT_ALGORITHM
 from starnav.pipeline.fov import known_field_depth, solve_unknown_field
@@ -64,7 +65,7 @@ def prepare_solver(
         height=height,
         fov_deg=options.fov_deg,
         camera=options.camera,
-        lens=options.lens,
+        lens=options.lens_model,
     )
     mag_limit, deep_mag_limit = known_field_depth(camera, options)
     settings = SolveSettings.from_options(options, deep_mag_limit=deep_mag_limit)
@@ -126,13 +127,15 @@ def solve_stars(
     prior: Solution | np.ndarray | None = None,
     position_hint_deg: tuple[float, float] | None = None,
     images: bool = False,
+    image_circle: ImageCircle | None = None,
 ) -> SolveResult:
     """Solve one star list (``xy`` (n, 2) px with ``brightness``, larger is brighter, and
     ``labels``, or a ``StarList``) in a ``width`` x ``height`` px image with ``options``.
     ``prior``: the previous attitude (a ``Solution`` or ``R_cam_from_icrs``), good to
     ``options.prior_sigma_deg``; ``position_hint_deg``: (RA, Dec) of the boresight, roughly
     (the FOV search looks near it first); ``images``: whether the list was detected in an
-    image (its given field is then approximate unless ``options.fov_exact``). Options the
+    image (its given field is then approximate unless ``options.fov_exact``); ``image_circle``:
+    a circular fisheye's image circle (``detect.circle``), where a focal scan starts. Options the
     FOV search cannot take (another algorithm, a magnitude limit, a prior without a field)
     are refused, not ignored."""
     if isinstance(xy, StarList):
@@ -161,4 +164,5 @@ def solve_stars(
         labels=labels,
         prior=R_prior,
         position_hint_deg=position_hint_deg,
+        image_circle=image_circle,
     )

@@ -1,0 +1,62 @@
+"""Where and when an image was taken, and a fisheye's scale, on the command line:
+``--lat --lon --height --utc`` (the sky above the horizon and the planets) and
+``--circle-fov-deg`` / ``--focal-mm --pixel-um`` (``add_sky_options``), turned into solve
+options (``sky_options``)."""
+
+from __future__ import annotations
+
+import argparse
+
+from starnav.cli.common import finite
+from starnav.errors import StarnavError
+
+
+def add_sky_options(p: argparse.ArgumentParser) -> None:
+    """A fisheye's scale (the image circle's field, or the focal length) and the site and time
+    (the sky above the horizon, and the planets)."""
+    sky = p.add_argument_group("fisheye and all-sky cameras")
+    sky.add_argument(
+        "--circle-fov-deg",
+        type=finite,
+        help="a fisheye's field across its image circle (degrees, e.g. 180; searched ±5 %%): "
+        "the circle is found in the image",
+    )
+    sky.add_argument(
+        "--focal-mm",
+        type=finite,
+        help="a fisheye's focal length (mm; with --pixel-um; searched ±5 %%)",
+    )
+    sky.add_argument("--pixel-um", type=finite, help="the sensor's pixel pitch (µm, as binned)")
+    sky.add_argument("--lat", type=finite, help="the site's latitude (degrees, north positive)")
+    sky.add_argument("--lon", type=finite, help="the site's longitude (degrees, east positive)")
+    sky.add_argument("--height", type=finite, default=0.0, help="the site's height (m)")
+    sky.add_argument(
+        "--utc",
+        help="when the image was taken (ISO 8601 UTC; default: FITS DATE-OBS). With the site "
+        "(--lat --lon, or FITS SITELAT/SITELONG), a fisheye is solved on the stars above the "
+        "horizon and the planets",
+    )
+
+
+def sky_options(args: argparse.Namespace) -> dict:
+    """The ``SolveOptions`` fields of ``add_sky_options``'s arguments; a one-line error for a
+    site without both coordinates or a focal length without the pixel pitch."""
+    if (args.lat is None) != (args.lon is None):
+        raise StarnavError("--lat and --lon go together (the site)")
+    return {
+        "circle_fov_deg": args.circle_fov_deg,
+        "focal_px": _focal_px(args),
+        "site": None if args.lat is None else (args.lat, args.lon, args.height),
+        "utc": args.utc,
+    }
+
+
+def _focal_px(args: argparse.Namespace) -> float | None:
+    """--focal-mm over --pixel-um (px); a one-line error when one comes without the other."""
+    if (args.focal_mm is None) != (args.pixel_um is None):
+        raise StarnavError("--focal-mm and --pixel-um go together (the focal length in px)")
+    if args.focal_mm is None:
+        return None
+    if not (args.focal_mm > 0 and args.pixel_um > 0):
+        raise StarnavError("--focal-mm and --pixel-um must be positive")
+    return 1e3 * args.focal_mm / args.pixel_um
