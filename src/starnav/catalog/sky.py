@@ -5,8 +5,9 @@ An all-sky camera sees half the sky, and among its brightest points are often pl
 catalog holds and which then defeat a pattern search. When the site and the time are known,
 ``sky_at`` gives the catalog a camera on the ground can see: its stars above
 ``MIN_ALTITUDE_DEG`` (a hemisphere instead of the whole sphere: half the false candidates) and
-the five naked-eye planets above it, at their astrometric ICRS positions (astropy's
-``get_body``, the built-in ephemeris, seen from the site) with ids ``PLANET_IDS`` (negative:
+the five naked-eye planets above it, at their directions seen from the site in the ICRS axes
+(astropy's ``get_body``, the built-in ephemeris: GCRS with the site's parallax, aberration
+included: 20″ is nothing at an all-sky camera's scale) with ids ``PLANET_IDS`` (negative:
 never a Hipparcos number) and typical magnitudes (``PLANET_MAG``: the pattern search ranks by
 brightness; a planet's true magnitude varies by a few tenths to two magnitudes (Mars), which
 the ranking tolerates). The Moon is left out: it is a disc, not a point, and its glare is
@@ -86,17 +87,19 @@ def altitudes_deg(catalog: Catalog, site: Site, utc) -> np.ndarray:
 
 
 def planets(site: Site, utc) -> Catalog:
-    """The five naked-eye planets seen from ``site`` at ``utc``: astrometric ICRS positions
-    (light time, the site's parallax), ids ``PLANET_IDS``, magnitudes ``PLANET_MAG``."""
+    """The five naked-eye planets seen from ``site`` at ``utc``: RA/Dec in the ICRS axes
+    (GCRS: light time, the site's parallax), ids ``PLANET_IDS``, magnitudes ``PLANET_MAG``."""
     from astropy.coordinates import get_body
 
     when = utc_time(utc)
     where = site.location()
     ra, dec = [], []
     for name in PLANET_IDS:
-        icrs = get_body(name, when, where).icrs
-        ra.append(float(icrs.ra.deg))
-        dec.append(float(icrs.dec.deg))
+        # GCRS (ICRS axes, seen from the site): not .icrs, which moves the origin to the
+        # solar system's barycentre and the planet by up to 11° (Jupiter)
+        seen = get_body(name, when, where)
+        ra.append(float(seen.ra.deg))
+        dec.append(float(seen.dec.deg))
     return Catalog(
         np.array(list(PLANET_IDS.values())),
         np.array(ra),

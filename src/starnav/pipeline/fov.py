@@ -81,6 +81,7 @@ MAX_DIAGONAL_FOV_DEG = 150.0
 # the fields an all-sky camera's image circle spans (degrees): a 180° lens's, a wider one's
 # (to 230°), and a horizon of trees or domes found as a smaller disc (to 140°)
 CIRCLE_FOV_RANGE_DEG = (140.0, 230.0)
+MODEL_MATCH_DEG = 45.0  # models compared at the focal lengths that agree this far out
 SCAN_INNER_DEG = 60.0  # a fisheye scan's trial identifies stars this close to the axis
 SCAN_PRIOR_SIGMA_DEG = 1.0  # the whole list is matched near a trial's attitude, good to this
 CENTRE_FIT_STARS = 8  # a trial's principal point is fitted from this many matched stars on
@@ -759,10 +760,47 @@ def scan_focal(
             f"lens; last: {trial.reason})"
         )
         result = trial
+    if result.solution is not None:
+        result = _best_model(result, stars, starts, solver, deadline)
+        if any(s.rough for s in starts):  # the principal point again, from every star matched
+            fitted = _with_fitted_centre(result.solution, solver.database.catalog)
+            again = solver.with_camera(fitted).solve(
+                stars,
+                prior=result.solution.R_cam_from_icrs,
+                prior_sigma_deg=SCAN_PRIOR_SIGMA_DEG,
+                deadline=deadline,
+            )
+            if again.solution is not None and again.solution.n_matched >= result.solution.n_matched:
+                result = again
     ms = elapsed_ms(t0)
     if result.solution is not None:
         return replace(result, solution=replace(result.solution, time_ms=ms), time_ms=ms)
     return replace(result, reason=reason, time_ms=ms)
+
+
+def _best_model(result, stars: StarList, starts, solver: Solver, deadline) -> SolveResult:
+    """With several models scanned, the solution of the one that fits ``stars`` best: each
+    other model, at the solution's principal point with the focal length that puts a star
+    ``MODEL_MATCH_DEG`` from the axis at the same radius, matches the whole list near the
+    solution's attitude; the most stars matched, then the smallest rms, wins (a lens near
+    one model also passes as its neighbour, with its stars far out falling short)."""
+    found = result.solution
+    camera = found.camera
+    best = result
+    for other in {type(s.base): s.base for s in starts if s.base.model != camera.model}.values():
+        trial = other.with_centre(camera.cx, camera.cy)
+        radius = 1.0 / camera.focal_for_radius(1.0, 2.0 * MODEL_MATCH_DEG)  # r / f at 45°
+        trial = trial.with_focal(camera.focal_px * radius * trial.focal_for_radius(1.0, 90.0))
+        r = solver.with_camera(trial).solve(
+            stars,
+            prior=found.R_cam_from_icrs,
+            prior_sigma_deg=SCAN_PRIOR_SIGMA_DEG,
+            deadline=deadline,
+        )
+        s, b = r.solution, best.solution
+        if s is not None and (s.n_matched, -s.rms_px) > (b.n_matched, -b.rms_px):
+            best = r
+    return best
 
 
 def _scan_stars(stars: StarList, camera: CameraModel, *, inner: bool) -> StarList:
