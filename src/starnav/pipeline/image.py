@@ -20,9 +20,9 @@ import numpy as np
 
 from starnav.camera import Camera, CameraModel, model_class
 from starnav.catalog import Catalog, is_embedded
-from starnav.detect.circle import find_image_circle
 from starnav.detect.header import ImageHints, fits_hints, is_fits
 from starnav.detect.read import read_image
+from starnav.detect.skymask import find_sky_mask
 from starnav.detect.stars import Detections, detect_stars
 from starnav.errors import CameraError, ImageError, StarnavError
 from starnav.pipeline.diagnose import Failure, diagnose
@@ -42,6 +42,8 @@ from starnav.runtime.budget import check_budget, default_budget_s
 NO_HINTS = ImageHints()
 MIN_DETECTIONS = 4  # fewer detected stars than this: not solved, without a search
 AUTO_BIN_PIXELS = 4.2e6  # an image is detected binned to at most this many pixels
+FEW_STARS_DEEPER = 15  # a fisheye sky with fewer stars than this is detected again, deeper
+DEEPER_THRESHOLD_SIGMA = 3.0  # the threshold of that second detection
 
 
 @dataclass(frozen=True, eq=False)
@@ -297,29 +299,40 @@ def detect_image(
     threshold_sigma: float = DEFAULT_THRESHOLD_SIGMA,
     max_stars: int | None = None,
 ) -> Detections:
-    """The stars of an image array (row 0 at the top) as ``solve_image`` detects them: for a
-    fisheye ``lens`` (any model but the pinhole) only inside the image circle found in the
-    image; ``threshold_sigma`` over the background noise, the brightest ``max_stars``
-    (default ``DEFAULT_MAX_STARS``, ``FISHEYE_MAX_STARS`` for a fisheye)."""
+    """The stars of an image array (row 0 at the top) as ``solve_image`` detects them:
+    ``threshold_sigma`` over the background noise, the brightest ``max_stars`` (default
+    ``DEFAULT_MAX_STARS``, ``FISHEYE_MAX_STARS`` for a fisheye). For a fisheye ``lens`` (any
+    model but the pinhole) only in its sky (``starnav.detect.skymask``: inside the image
+    circle found in the image, less the horizon's obstacles and glare); and when fewer than
+    ``FEW_STARS_DEEPER`` stars are found there, again at ``DEEPER_THRESHOLD_SIGMA`` (a narrow
+    filter, a short exposure, thin cloud: going deeper before refusing), whose answer is kept
+    when it finds more. The ``Detections`` record the threshold used and the sky's share."""
     kind = model_class(lens).kind
-    if kind == "fisheye":
-        pixels = _outside_circle_masked(pixels)
     if max_stars is None:
         max_stars = DEFAULT_MAX_STARS if kind == "pinhole" else FISHEYE_MAX_STARS
-    return detect_stars(pixels, threshold_sigma=threshold_sigma, max_stars=max_stars)
+    if kind != "fisheye":
+        found = detect_stars(pixels, threshold_sigma=threshold_sigma, max_stars=max_stars)
+        return replace(found, threshold_sigma=threshold_sigma)
+    pixels, sky_fraction = _outside_sky_masked(pixels)
+    found = detect_stars(pixels, threshold_sigma=threshold_sigma, max_stars=max_stars)
+    if len(found) < FEW_STARS_DEEPER and threshold_sigma > DEEPER_THRESHOLD_SIGMA:
+        deeper = detect_stars(pixels, threshold_sigma=DEEPER_THRESHOLD_SIGMA, max_stars=max_stars)
+        if len(deeper) > len(found):
+            found, threshold_sigma = deeper, DEEPER_THRESHOLD_SIGMA
+    return replace(found, threshold_sigma=threshold_sigma, sky_fraction=sky_fraction)
 
 
-def _outside_circle_masked(pixels: np.ndarray) -> np.ndarray:
-    """A fisheye's pixels with those outside its image circle (``starnav.detect.circle``,
-    shrunk by 1 % of its radius: the rim is lit horizon) set to NaN, which detection masks;
-    the pixels unchanged when no circle is found (a full-frame fisheye)."""
-    circle = find_image_circle(pixels)
-    if circle is None:
-        return pixels
-    height, width = pixels.shape
+def _outside_sky_masked(pixels: np.ndarray) -> tuple[np.ndarray, float]:
+    """A fisheye's pixels with those outside its sky (``starnav.detect.skymask``: outside the
+    image circle shrunk by 1 % of its radius, the rim being lit horizon; the horizon's
+    obstacles; glare) set to NaN, which detection masks, and the share of the pixels left;
+    the pixels unchanged when nothing is masked (a full-frame fisheye of a clear sky)."""
+    sky = find_sky_mask(pixels)
+    if not sky.excluded.any():
+        return pixels, 1.0
     masked = np.array(pixels, dtype=np.float32)
-    masked[circle.outside(width, height, margin_px=0.01 * circle.radius_px)] = np.nan
-    return masked
+    masked[sky.excluded] = np.nan
+    return masked, sky.sky
 
 
 def annotate_result(path_out: str | Path, image: np.ndarray, result: ImageSolveResult) -> None:
