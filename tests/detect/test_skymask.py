@@ -4,6 +4,8 @@ halo). What stands above the horizon and the glare go; the stars of the clear sk
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 from scipy import ndimage
@@ -14,7 +16,7 @@ from starnav.catalog import load_catalog
 from starnav.detect.skymask import find_sky_mask
 from starnav.detect.stars import detect_stars
 from starnav.geometry import attitude_from_radec_roll
-from starnav.pipeline.image import detect_image
+from starnav.pipeline.image import detect_image, solve_image
 from starnav.simulate.render import RenderSettings, render_frame
 
 SIZE = 1024
@@ -106,3 +108,43 @@ def test_clear_frame_and_small_frames(scene):
     assert not small.excluded.any() and small.circle is None and small.sky == 1.0
     flat = find_sky_mask(rng.normal(100.0, 5.0, (600, 800)))  # a full frame of noise
     assert flat.circle is None and flat.excluded.mean() < 0.01
+
+
+def _faint_allsky(zero_point_e_per_s: float) -> tuple:
+    """A 512 px all-sky frame of the stars to magnitude 3.5, dim (a narrow filter, a short
+    exposure), no vignetting; and its camera."""
+    camera = Equidistant.from_fov(185.0, 512, 512).with_circle(185.0)
+    settings = RenderSettings(psf_sigma_px=1.0, background_e=200.0, exposure_s=1.0,
+                              zero_point_e_per_s=zero_point_e_per_s, mag_limit=3.5, seed=7,
+                              vignetting_power=0.0)  # fmt: skip
+    catalog = load_catalog(None, mag_limit=3.5)
+    return render_frame(catalog, camera, attitude_from_radec_roll(200.0, 40.0, 0.0), settings)
+
+
+def test_few_stars_are_looked_for_deeper():
+    frame = _faint_allsky(1500.0)
+    truth = cKDTree(frame.xy)
+    disc = frame.image.astype(np.float32)
+    disc[_outside(frame)] = np.nan
+    at_five = detect_stars(disc, threshold_sigma=5.0, max_stars=100)
+    assert len(at_five) < 15
+    found = detect_image(frame.image, lens="equidistant")
+    assert found.threshold_sigma == 4.0
+    real = truth.query(found.xy)[0] < 2.0
+    assert len(found) >= len(at_five) + 4  # deeper: more stars
+    assert real.all()  # and no noise peak
+
+
+def test_no_stars_is_refused_in_words_an_operator_acts_on():
+    frame = _faint_allsky(1.0)  # cloud: no star above the noise
+    result = solve_image(frame.image, lens="equidistant")
+    assert result.solution is None and result.failure == "too few stars"
+    assert re.search(r"only \d+ stars? above [345] sigma inside the sky \(7\d % of the frame\)",
+                     result.reason)  # fmt: skip
+    assert "longer exposure" in result.reason and "--threshold-sigma " in result.reason
+
+
+def _outside(frame) -> np.ndarray:
+    camera = frame.camera
+    y, x = np.mgrid[0 : camera.height, 0 : camera.width] + 0.5
+    return np.hypot(x - camera.cx, y - camera.cy) > 0.99 * camera.width / 2

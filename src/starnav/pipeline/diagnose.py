@@ -75,7 +75,8 @@ def diagnose(
             where = f" inside the sky ({100.0 * detections.sky_fraction:.0f} % of the frame)"
         return Failure(
             FEW_STARS,
-            f"only {n} stars above {used:g} sigma{where}, {FEW_STARS_LIMIT} or more are "
+            f"only {n} star{'s' if n != 1 else ''} above {used:g} sigma{where}, "
+            f"{FEW_STARS_LIMIT} or more are "
             "needed: cloud, daylight, dew or too short an exposure; try a longer exposure, "
             f"a clearer sky or --threshold-sigma {lower:g}",
         )
