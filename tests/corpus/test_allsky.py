@@ -57,3 +57,23 @@ def test_kho_sony_solves_and_agrees_with_the_hand_identified_stars(capsys):
     assert listed == 19
     assert wrong == 0
     assert agree >= 0.8 * listed
+
+
+def test_sky_mask_of_the_kho_frame_keeps_its_stars():
+    """The KHO frame's sky mask takes its horizon's rim (a few % of the disc) and none of the
+    hand-identified stars; fisheye detection finds nothing where it masks."""
+    from starnav.detect.skymask import find_sky_mask
+    from starnav.pipeline.image import detect_image
+
+    image = read_image(shared_file(KHO))
+    binned = image[:2832, :2832].reshape(1416, 2, 1416, 2).mean(axis=(1, 3))
+    mask = find_sky_mask(binned)
+    disc = 1.0 - mask.outside
+    assert 0.0 < mask.obstacles / disc < 0.08 and mask.glare == 0.0
+    with STAR_IDS.open() as fh:
+        stars = [(float(r["sony_x0"]) + 0.5, float(r["sony_y0"]) + 0.5) for r in csv.DictReader(fh)]
+    ij = (np.array(stars) / 2).astype(int)
+    assert not mask.excluded[ij[:, 1], ij[:, 0]].any()
+    found = detect_image(binned, lens="equisolid")
+    at = found.xy.astype(int)
+    assert len(found) == 100 and not mask.excluded[at[:, 1], at[:, 0]].any()

@@ -39,7 +39,9 @@ def _field(n: int, seed: int, trail_px: float = 0.0) -> np.ndarray:
 def test_few_stars():
     result = solve_image(_field(5, 1), time_budget_s=1.0)
     assert result.solution is None and result.failure == FEW_STARS
-    assert result.reason.startswith("too few stars: ") and "5 stars detected" in result.reason
+    assert result.reason.startswith("too few stars: ")
+    assert "only 5 stars above 5 sigma" in result.reason
+    assert "--threshold-sigma 4" in result.reason
 
 
 def test_trailed_stars():

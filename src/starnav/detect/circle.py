@@ -14,6 +14,7 @@ and the circle refitted once. No disc (a full-frame fisheye, a daylight frame) g
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -124,7 +125,9 @@ def _block_mean(data: np.ndarray, step: int) -> np.ndarray:
         return data
     h, w = (data.shape[0] // step) * step, (data.shape[1] // step) * step
     blocks = data[:h, :w].reshape(h // step, step, w // step, step)
-    return np.nanmean(blocks, axis=(1, 3))
+    with warnings.catch_warnings():  # a block of NaN only (a masked border) is NaN
+        warnings.simplefilter("ignore", RuntimeWarning)
+        return np.nanmean(blocks, axis=(1, 3))
 
 
 def _fit_circle(x: np.ndarray, y: np.ndarray) -> tuple[float, float, float]:

@@ -1,9 +1,18 @@
 """Image files to one 2-D float32 luminance array, row 0 at the top of the picture.
 
-Formats: FITS (astropy: the first HDU holding a 2-D image, or a 3-plane colour cube), and
-through Pillow PNG, JPEG, TIFF and whatever else Pillow opens (8/16-bit grey, 32-bit integer
-and float grey, colour). Pillow 13 reduces 16-bit-per-channel colour to 8 bits, so such TIFFs
-are read with ``tifffile`` and such PNGs with ``pypng`` (pure Python: ~1.5 s per megapixel).
+Formats: FITS (astropy: the first HDU holding an image, also a tile-compressed one, ``.fz``,
+and gzip-compressed files, ``.fits.gz``), and through Pillow PNG, JPEG, TIFF and whatever else
+Pillow opens (8/16-bit grey, 32-bit integer and float grey, colour). Pillow 13 reduces
+16-bit-per-channel colour to 8 bits, so such TIFFs are read with ``tifffile`` and such PNGs
+with ``pypng`` (pure Python: ~1.5 s per megapixel); binary PGM / PPM with more than 8 bits
+(THEMIS and other auroral imagers write 16-bit PGM) are read here, as stored (Pillow scales a
+12-bit PGM's values by 65535 / 4095 and cuts 16-bit PPM colour to 8 bits). A gzip-compressed
+file of any of these formats (``frame.pgm.gz``) is read as the file it holds.
+
+FITS cubes: the axes of length 1 are dropped; 3 planes, either axis order ((3, H, W) or
+(H, W, 3)), are a colour image: its luminance; 4 planes (H, W, 4): RGBA, the alpha dropped;
+any other stack of N planes (N, H, W) is a series of frames (a time series moves with the
+sky, and a sum would trail its stars): the first frame is read.
 Colour becomes luminance with the Rec. 709 weights (0.2126 R + 0.7152 G + 0.0722 B) on the
 stored values (no gamma decoding); an alpha channel is dropped. An EXIF orientation tag is
 applied, so row 0 is the top of the picture as viewers show it.
@@ -31,7 +40,9 @@ from starnav.errors import ImageError
 REC709 = np.array([0.2126, 0.7152, 0.0722])
 FITS_SUFFIXES = (".fits", ".fit", ".fts", ".fits.gz", ".fit.gz", ".fts.gz", ".fz")
 FITS_MAGIC = b"SIMPLE  ="  # the first bytes of a FITS file
-GZIP_MAGIC = b"\x1f\x8b"  # of a gzip file (a FITS file when its name says so)
+GZIP_MAGIC = b"\x1f\x8b"  # of a gzip file
+PNM_MAGICS = (b"P5", b"P6")  # binary PGM and PPM
+MAX_GUNZIPPED_BYTES = 2**31  # a gzip file holding more than 2 GiB is refused (a bomb)
 TIFF_MAGICS = (b"II*\x00", b"MM\x00*", b"II+\x00", b"MM\x00+")  # TIFF and BigTIFF
 # formats Pillow opens that ``read_image`` does not read as pictures: MPEG (no decoder), EPS
 # (needs Ghostscript), IPTC (metadata); Pillow's stubs (BUFR, GRIB, HDF5, WMF) are left out by
@@ -72,19 +83,100 @@ def read_image(path: str | Path) -> np.ndarray:
         raise ImageError(f"image file {name!r} is empty (0 bytes)")
     fits_name = path.name.lower().endswith(FITS_SUFFIXES)
     if head.startswith(FITS_MAGIC) or (fits_name and head.startswith(GZIP_MAGIC)):
-        data = _read_fits(path)
+        data = _read_fits(path, name)
     elif fits_name:
         raise ImageError(f"cannot read image file {name!r}: not a FITS file (no SIMPLE card)")
+    elif head.startswith(GZIP_MAGIC):
+        data = _read_gzipped(path, name)
+    elif head.startswith(PNM_MAGICS) and _pnm_maxval(head) > 255:
+        data = _read_deep_pnm(head + path.read_bytes()[len(head) :], name)
     else:
-        data = _read_pillow(path)
+        data = _read_pillow(path, name)
     return _finish(data, name)
+
+
+def _read_gzipped(path: Path, name: str) -> np.ndarray:
+    """The picture in a gzip-compressed file of any format read here (FITS, PGM, PNG, ...)."""
+    import gzip
+    import io
+    import zlib
+
+    try:
+        with gzip.open(path, "rb") as fh:
+            raw = fh.read(MAX_GUNZIPPED_BYTES + 1)
+    except (OSError, EOFError, zlib.error) as exc:
+        raise ImageError(f"cannot read gzip file {name!r}: {_one_line(exc)}") from None
+    if len(raw) > MAX_GUNZIPPED_BYTES:
+        raise ImageError(f"image file {name!r} unpacks to more than 2 GiB: too large to read")
+    if not raw:
+        raise ImageError(f"image file {name!r} holds an empty gzip stream")
+    if raw.startswith(FITS_MAGIC):
+        return _read_fits(io.BytesIO(raw), name)
+    if raw.startswith(PNM_MAGICS) and _pnm_maxval(raw[:80]) > 255:
+        return _read_deep_pnm(raw, name)
+    return _read_pillow(io.BytesIO(raw), name)
+
+
+def _pnm_header(raw: bytes) -> tuple[list[int], int] | None:
+    """(width, height, maxval) of a binary PGM / PPM and the offset of its pixels, None when
+    the header is incomplete or malformed."""
+    fields: list[int] = []
+    pos = 2
+    while len(fields) < 3:
+        while pos < len(raw) and raw[pos : pos + 1].isspace():
+            pos += 1
+        if raw[pos : pos + 1] == b"#":  # a comment, to the end of its line
+            end = raw.find(b"\n", pos)
+            if end < 0:
+                return None
+            pos = end + 1
+            continue
+        start = pos
+        while pos < len(raw) and raw[pos : pos + 1].isdigit():
+            pos += 1
+        if pos == start:
+            return None
+        fields.append(int(raw[start:pos]))
+    if pos >= len(raw) or not raw[pos : pos + 1].isspace():
+        return None
+    return fields, pos + 1  # one whitespace byte ends the header
+
+
+def _pnm_maxval(head: bytes) -> int:
+    """A binary PGM / PPM's maxval from its first bytes (0 when not found there)."""
+    parsed = _pnm_header(head)
+    return parsed[0][2] if parsed else 0
+
+
+def _read_deep_pnm(raw: bytes, name: str) -> np.ndarray:
+    """A binary PGM / PPM of more than 8 bits (two big-endian bytes a sample), as stored."""
+    parsed = _pnm_header(raw)
+    if parsed is None:
+        raise ImageError(f"cannot read PNM file {name!r}: malformed header")
+    (width, height, maxval), offset = parsed
+    planes = 3 if raw.startswith(b"P6") else 1
+    if not (0 < width and 0 < height and maxval < 65536):
+        raise ImageError(
+            f"cannot read PNM file {name!r}: bad header ({width} x {height}, maxval {maxval})"
+        )
+    need = width * height * planes * 2
+    if len(raw) - offset < need:
+        raise ImageError(
+            f"cannot read PNM file {name!r}: truncated ({len(raw) - offset} bytes of pixels, "
+            f"{need} needed for {width} x {height} px)"
+        )
+    data = np.frombuffer(raw, dtype=">u2", count=need // 2, offset=offset)
+    if planes == 3:
+        return luminance(data.reshape(height, width, 3))
+    return data.reshape(height, width)
 
 
 @functools.cache
 def readable_suffixes() -> tuple[str, ...]:
     """The file-name endings (lower case) of the formats ``read_image`` reads: FITS's and
     those of every format Pillow opens and decodes (PNG, JPEG, TIFF, BMP, GIF, WebP, PNM,
-    JPEG 2000, ...). A directory given to ``starnav solve`` is listed by them."""
+    JPEG 2000, ...), and the gzip-compressed PGM, PPM, PNM, PNG and TIFF files auroral imagers
+    archive (``.pgm.gz``). A directory given to ``starnav solve`` is listed by them."""
     from PIL import Image, ImageFile
 
     Image.init()
@@ -95,7 +187,8 @@ def readable_suffixes() -> tuple[str, ...]:
         and fmt not in _PILLOW_NOT_READ
         and not _is_stub(Image.OPEN[fmt][0], ImageFile.StubImageFile)
     }
-    return tuple(sorted(pillow | set(FITS_SUFFIXES)))
+    gzipped = {ext + ".gz" for ext in pillow if ext in (".pgm", ".ppm", ".pnm", ".png", ".tif")}
+    return tuple(sorted(pillow | gzipped | set(FITS_SUFFIXES)))
 
 
 def _is_stub(factory: object, stub: type) -> bool:
@@ -112,48 +205,62 @@ def luminance(rgb: np.ndarray) -> np.ndarray:
     return out
 
 
-def _read_fits(path: Path) -> np.ndarray:
+def _read_fits(source, name: str) -> np.ndarray:
+    """The first image of a FITS file (``source``: a path or a file object): a 2-D image, a
+    colour cube's luminance or a stack's first frame (the module's docstring)."""
     from astropy.io import fits
 
-    name = str(path)
     shapes = []
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # non-standard cards are common; the pixels matter
-            with fits.open(path, memmap=False) as hdul:
+            with fits.open(source, memmap=False) as hdul:
                 for hdu in hdul:
                     if not hdu.is_image or hdu.data is None:  # tables, empty primaries
                         continue
                     data = np.asarray(hdu.data)
-                    squeezed = data.reshape([n for n in data.shape if n != 1] or [1])
-                    if squeezed.ndim == 2:
-                        return squeezed
-                    if squeezed.ndim == 3 and squeezed.shape[0] == 3:
-                        return luminance(np.moveaxis(squeezed, 0, -1))
+                    image = _cube_image(data.reshape([n for n in data.shape if n != 1] or [1]))
+                    if image is not None:
+                        return image
                     shapes.append(data.shape)
     except (OSError, ValueError, TypeError, IndexError, KeyError) as exc:
         raise ImageError(f"cannot read FITS file {name!r}: {_one_line(exc)}") from None
     if shapes:
         raise ImageError(
-            f"FITS file {name!r} holds no 2-D image or 3-plane colour image (data shapes: "
+            f"FITS file {name!r} holds no 2-D image or cube of them (data shapes: "
             f"{', '.join(str(s) for s in shapes)})"
         )
     raise ImageError(f"FITS file {name!r} holds no image data")
 
 
-def _read_pillow(path: Path) -> np.ndarray:
+def _cube_image(data: np.ndarray) -> np.ndarray | None:
+    """The 2-D picture of a FITS HDU's data with its length-1 axes dropped: itself (2-D), a
+    colour cube's luminance ((3, H, W) or (H, W, 3); (H, W, 4): RGBA), a stack's first frame
+    ((N, H, W)); None for other shapes."""
+    if data.ndim == 2:
+        return data
+    if data.ndim != 3:
+        return None
+    if data.shape[0] == 3:
+        return luminance(np.moveaxis(data, 0, -1))
+    if data.shape[-1] in (3, 4) and min(data.shape[:2]) > 4:
+        return luminance(data[..., :3])
+    return data[0]
+
+
+def _read_pillow(path, name: str) -> np.ndarray:
+    """The picture Pillow reads from ``path`` (a path or a file object)."""
     from PIL import Image, ImageOps, UnidentifiedImageError
 
-    name = str(path)
     try:
         with Image.open(path) as img:
             if _deeper_than_pillow(img):
-                return _read_deep_colour(path, img.format)
+                return _read_deep_colour(path, img.format, name)
             img.load()
             return _pillow_to_array(ImageOps.exif_transpose(img))
     except UnidentifiedImageError:
         if _is_tiff(path):  # a TIFF that Pillow does not decode (e.g. float colour)
-            return _read_deep_colour(path, "TIFF")
+            return _read_deep_colour(path, "TIFF", name)
         raise ImageError(
             f"cannot read image file {name!r}: not an image format we read "
             "(FITS, PNG, JPEG, TIFF, ...)"
@@ -194,8 +301,10 @@ def _deeper_than_pillow(img) -> bool:
     return False
 
 
-def _read_deep_colour(path: Path, fmt: str | None) -> np.ndarray:
-    name = str(path)
+def _read_deep_colour(path, fmt: str | None, name: str) -> np.ndarray:
+    """A colour PNG or TIFF of more than 8 bits a channel (``path``: a path or a file object)."""
+    if hasattr(path, "seek"):
+        path.seek(0)
     if fmt == "PNG":
         try:
             import png
@@ -204,7 +313,8 @@ def _read_deep_colour(path: Path, fmt: str | None) -> np.ndarray:
                 f"cannot read {name!r}: 16-bit colour PNG needs the 'pypng' package"
             ) from None
         try:
-            width, height, rows, info = png.Reader(filename=name).asDirect()
+            reader = png.Reader(file=path) if hasattr(path, "read") else png.Reader(filename=name)
+            width, height, rows, info = reader.asDirect()
             data = np.vstack([np.asarray(row, dtype=np.uint16) for row in rows])
         except (png.Error, OSError, ValueError) as exc:
             raise ImageError(f"cannot read PNG file {name!r}: {_one_line(exc)}") from None
@@ -230,8 +340,12 @@ def _read_deep_colour(path: Path, fmt: str | None) -> np.ndarray:
     return data
 
 
-def _is_tiff(path: Path) -> bool:
-    with path.open("rb") as fh:
+def _is_tiff(path) -> bool:
+    """Whether the file (a path or a file object) starts as a TIFF does."""
+    if hasattr(path, "read"):
+        path.seek(0)
+        return path.read(4) in TIFF_MAGICS
+    with Path(path).open("rb") as fh:
         return fh.read(4) in TIFF_MAGICS
 
 

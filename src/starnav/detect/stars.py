@@ -136,8 +136,11 @@ class Detections:
     ``elongation``: the median ratio of the long to the short axis of the stars (sep's
     isophotal a / b; 1 for round stars, 3 for stars trailed to 3 times their width, 1 when
     none); ``n_rejected``: sources measured and not taken for stars (extended, elongated, or faint
-    against their surroundings); ``circle``: a circular fisheye's image circle, when it was
-    looked for and found (``detect.circle``), outside which nothing was detected.
+    against their surroundings); ``threshold_sigma``: the detection threshold the stars were
+    found at (None: not recorded); ``sky_fraction``: the share of the image's pixels detection
+    looked at (a fisheye's sky mask, ``starnav.detect.skymask``, leaves out the rest);
+    ``circle``: a circular fisheye's image circle, when it was looked for and found
+    (``detect.circle``), outside which nothing was detected.
     """
 
     xy: np.ndarray
@@ -154,6 +157,8 @@ class Detections:
     height: int
     n_rejected: int = 0
     elongation: float = 1.0
+    threshold_sigma: float | None = None
+    sky_fraction: float = 1.0
     circle: ImageCircle | None = None
 
     def __len__(self) -> int:

@@ -68,11 +68,17 @@ def diagnose(
     ``fit_distortion`` as solved."""
     n = len(detections)
     if n < FEW_STARS_LIMIT:
+        used = detections.threshold_sigma or threshold_sigma
+        lower = max(1.5, round(0.8 * used * 2.0) / 2.0)
+        where = ""
+        if detections.sky_fraction < 1.0:
+            where = f" inside the sky ({100.0 * detections.sky_fraction:.0f} % of the frame)"
         return Failure(
             FEW_STARS,
-            f"{n} stars detected, {FEW_STARS_LIMIT} or more are needed: a longer exposure, a "
-            "clearer sky, or a lower detection threshold (--threshold-sigma, now "
-            f"{threshold_sigma:g})",
+            f"only {n} star{'s' if n != 1 else ''} above {used:g} sigma{where}, "
+            f"{FEW_STARS_LIMIT} or more are "
+            "needed: cloud, daylight, dew or too short an exposure; try a longer exposure, "
+            f"a clearer sky or --threshold-sigma {lower:g}",
         )
     if _NOT_CONVINCING in reason.split("; ")[0] and detections.elongation < TRAILED_ELONGATION:
         return Failure(

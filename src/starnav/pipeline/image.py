@@ -23,6 +23,7 @@ from starnav.catalog import Catalog, is_embedded
 from starnav.detect.circle import ImageCircle, dark_corners, find_image_circle
 from starnav.detect.header import ImageHints, fits_hints, is_fits
 from starnav.detect.read import read_image
+from starnav.detect.skymask import find_sky_mask
 from starnav.detect.stars import Detections, detect_stars
 from starnav.errors import CameraError, ImageError, StarnavError
 from starnav.pipeline.diagnose import Failure, diagnose
@@ -45,6 +46,8 @@ MIN_DETECTIONS = 4  # fewer detected stars than this: not solved, without a sear
 FISHEYE_CIRCLE_CONTRAST = 0.5  # an image with nothing said is a fisheye's from this on (all-sky
 # frames measured 0.8-1.5, vignetted photographs and wide-field shots at most 0.3)
 AUTO_BIN_PIXELS = 4.2e6  # an image is detected binned to at most this many pixels
+FEW_STARS_DEEPER = 15  # a fisheye sky with fewer stars than this is detected again, deeper
+DEEPER_THRESHOLDS_SIGMA = (4.0, 3.0)  # the thresholds of those detections, in turn
 
 
 @dataclass(frozen=True, eq=False)
@@ -329,31 +332,57 @@ def detect_image(
     threshold_sigma: float = DEFAULT_THRESHOLD_SIGMA,
     max_stars: int | None = None,
 ) -> Detections:
-    """The stars of an image array (row 0 at the top) as ``solve_image`` detects them: for a
-    fisheye ``lens`` (any model but the pinhole) only inside the image circle found in the
-    image; ``threshold_sigma`` over the background noise, the brightest ``max_stars``
-    (default ``DEFAULT_MAX_STARS``, ``FISHEYE_MAX_STARS`` for a fisheye)."""
+    """The stars of an image array (row 0 at the top) as ``solve_image`` detects them:
+    ``threshold_sigma`` over the background noise, the brightest ``max_stars`` (default
+    ``DEFAULT_MAX_STARS``, ``FISHEYE_MAX_STARS`` for a fisheye). For a fisheye ``lens`` (any
+    model but the pinhole) only in its sky (``starnav.detect.skymask``: inside the image
+    circle found in the image, less the horizon's obstacles and glare); and when fewer than
+    ``FEW_STARS_DEEPER`` stars are found there, again at each of ``DEEPER_THRESHOLDS_SIGMA``
+    in turn while too few are found (a narrow filter, a short exposure, thin cloud: going
+    deeper before refusing; those no brighter than the noise's peaks are dropped,
+    ``_deeper``), an answer kept when it holds more. The ``Detections`` record the threshold
+    used and the sky's share."""
     kind = model_class(lens).kind
-    circle = None
-    if kind == "fisheye":
-        circle = find_image_circle(pixels)
-        pixels = _outside_circle_masked(pixels, circle)
     if max_stars is None:
         max_stars = DEFAULT_MAX_STARS if kind == "pinhole" else FISHEYE_MAX_STARS
+    if kind != "fisheye":
+        found = detect_stars(pixels, threshold_sigma=threshold_sigma, max_stars=max_stars)
+        return replace(found, threshold_sigma=threshold_sigma)
+    pixels, sky_fraction, circle = _outside_sky_masked(pixels)
     found = detect_stars(pixels, threshold_sigma=threshold_sigma, max_stars=max_stars)
-    return found if circle is None else replace(found, circle=circle)
+    for deeper_sigma in DEEPER_THRESHOLDS_SIGMA:
+        if len(found) >= FEW_STARS_DEEPER or deeper_sigma >= threshold_sigma:
+            continue
+        deeper = _deeper(pixels, deeper_sigma, max_stars)
+        if len(deeper) > len(found):
+            found, threshold_sigma = deeper, deeper_sigma
+    return replace(found, threshold_sigma=threshold_sigma, sky_fraction=sky_fraction, circle=circle)
 
 
-def _outside_circle_masked(pixels: np.ndarray, circle: ImageCircle | None) -> np.ndarray:
-    """A fisheye's pixels with those outside its image ``circle`` (``starnav.detect.circle``,
-    shrunk by 1 % of its radius: the rim is lit horizon) set to NaN, which detection masks;
-    the pixels unchanged when no circle was found (a full-frame fisheye)."""
-    if circle is None:
-        return pixels
-    height, width = pixels.shape
+def _deeper(pixels: np.ndarray, threshold_sigma: float, max_stars: int) -> Detections:
+    """The stars found at ``threshold_sigma`` that are brighter (in SNR) than every source
+    found in the negated image, which are noise: noise is symmetric, stars are not (3 sigma
+    finds 15-25 noise peaks of SNR up to ~6.6 in a 512 px all-sky frame of pure noise, 4 and
+    5 sigma none)."""
+    deeper = detect_stars(pixels, threshold_sigma=threshold_sigma, max_stars=max_stars)
+    noise = detect_stars(-pixels, threshold_sigma=threshold_sigma, max_stars=max_stars)
+    keep = deeper.saturated | (deeper.snr > (noise.snr.max() if len(noise) else 0.0))
+    columns = ("xy", "flux", "peak", "snr", "saturated")
+    return replace(deeper, **{name: getattr(deeper, name)[keep] for name in columns})
+
+
+def _outside_sky_masked(pixels: np.ndarray) -> tuple[np.ndarray, float, ImageCircle | None]:
+    """A fisheye's pixels with those outside its sky (``starnav.detect.skymask``: outside the
+    image circle shrunk by 1 % of its radius, the rim being lit horizon; the horizon's
+    obstacles; glare) set to NaN, which detection masks, the share of the pixels left and
+    the image circle (None: none found); the pixels unchanged when nothing is masked (a
+    full-frame fisheye of a clear sky)."""
+    sky = find_sky_mask(pixels)
+    if not sky.excluded.any():
+        return pixels, 1.0, sky.circle
     masked = np.array(pixels, dtype=np.float32)
-    masked[circle.outside(width, height, margin_px=0.01 * circle.radius_px)] = np.nan
-    return masked
+    masked[sky.excluded] = np.nan
+    return masked, sky.sky, sky.circle
 
 
 def annotate_result(path_out: str | Path, image: np.ndarray, result: ImageSolveResult) -> None:
