@@ -48,6 +48,12 @@ def add_parser(subparsers: Subparsers) -> None:
         "length searched ±1 %%)",
     )
     p.add_argument(
+        "--utc",
+        help="UTC of the image (ISO 8601; default: the file's DATE-OBS / EXIF UTC): with a "
+        "--camera file holding a fixed camera's mount ('starnav calibrate --lat --lon'), the "
+        "attitude is predicted and tracked from",
+    )
+    p.add_argument(
         "--fit-distortion",
         action="store_true",
         help="fit the lens model's coefficients as well (pinhole k1, k2; kannala-brandt k1..k4)",
@@ -147,6 +153,8 @@ def run(args: argparse.Namespace) -> int:
     check_fov(args, args.lens)
     paths = [Path(p) for p in args.images]
     if len(paths) > 1 or paths[0].is_dir() or args.jsonl or args.track or args.dask:
+        if args.utc:
+            raise StarnavError("--utc is for one image; a batch takes each file's own time")
         return run_batch(args, paths)
     _check_file_outputs(args)
     from starnav.detect.header import fits_hints
@@ -158,16 +166,28 @@ def run(args: argparse.Namespace) -> int:
     read_ms = (time.perf_counter() - t0) * 1e3
     options = _options(args)
     options.setdefault("hints", fits_hints(paths[0]))
-    res = solve_image(pixels, **options)
+    mounted = None
+    if args.camera:  # a fixed camera's mount and the time: the attitude predicted, tracked
+        from starnav.navigation.mount import mount_prior
+
+        mounted = mount_prior(args.camera, paths[0], args.utc)
+    prior = None if mounted is None else mounted.R_cam_from_icrs
+    res = solve_image(pixels, prior=prior, **options)
     res = replace(res, read_ms=read_ms)
     outputs = {"wcs": args.wcs, "new_fits": args.new_fits, "annotate": args.annotate}
     write_outputs({k: v and Path(v) for k, v in outputs.items()}, paths[0], pixels, res)
     if res.solution is None and (args.wcs or args.new_fits):
         print("starnav solve: not solved, no WCS written", file=sys.stderr)
     if args.json:
-        print_json(res.to_dict(args.images[0]))
+        out = res.to_dict(args.images[0])
+        if mounted is not None:
+            solved_R = None if res.solution is None else res.solution.R_cam_from_icrs
+            out["mount_prior"] = mounted.to_dict(solved_R)
+        print_json(out)
     else:
         _print_text(res)
+        if mounted is not None:
+            print(f"  attitude predicted by the camera file's mount at {mounted.utc} UTC")
     return EXIT_OK if res.solution else EXIT_NOT_SOLVED
 
 
