@@ -66,7 +66,7 @@ def sky(tmp_path_factory):
     for k, R in enumerate(truths):
         paths.append(folder / f"sky{k}.png")
         write_image(paths[-1], _frame(TRUE, R, k))
-    c, s = math.cos(math.radians(4.0)), math.sin(math.radians(4.0))
+    c, s = math.cos(math.radians(20.0)), math.sin(math.radians(20.0))
     bumped = np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]]) @ truths[2]
     paths.append(folder / "bumped.png")
     write_image(paths[-1], _frame(TRUE, bumped, 9))
@@ -91,7 +91,7 @@ def test_circular_decentred_kannala_brandt_within_its_sigmas(kb_calibration):
     # the fitted r(θ) is the true one over the sky
     for deg in range(5, 90, 5):
         assert abs(_r(cam, math.radians(deg)) - _r(TRUE, math.radians(deg))) < 0.1, deg
-    assert cal.rms_px < 0.2 and min(cal.frame_stars) > 60 and max(cal.frame_rms_px) < 0.2
+    assert cal.rms_px < 0.2 and min(cal.frame_stars) > 40 and max(cal.frame_rms_px) < 0.2
     # the camera records its circle: r(θ) increases to there, not into the dark corners,
     # where the lens turns over (what made the calibration refuse it before)
     assert 175.0 < cam.image_circle_deg < 181.0
@@ -120,7 +120,7 @@ def test_cli_calibrates_one_frame_then_tracks_a_later_one(sky, tmp_path, capsys)
     assert main([*args, "--plot", str(plot), "--json"]) == 0
     out = json.loads(capsys.readouterr().out)
     assert out["model"] == "kannala-brandt" and out["mount"]["lat_deg"] == 50.0
-    assert plot.stat().st_size > 10_000 and out["frames"][0]["n_stars"] > 60
+    assert plot.stat().st_size > 10_000 and out["frames"][0]["n_stars"] > 40
     data = json.loads(cam_file.read_text())
     assert data["image_circle_deg"] > 175 and set(data["sigma"]) >= {"focal_px", "k4"}
     assert load_camera(cam_file).model == "kannala-brandt"  # loads: checked up to its circle
@@ -133,13 +133,15 @@ def test_cli_calibrates_one_frame_then_tracks_a_later_one(sky, tmp_path, capsys)
     R = np.array(out["R_cam_from_icrs"])
     bore, roll = attitude_difference_deg(R, truths[2])
     assert bore * 3600 < 60 and roll < 0.05
-    # the camera was bumped by 4°: the prediction does not verify, the full search solves it
+    # the camera was bumped by 20°: still solved right, from the same prior (the tracking
+    # window is the field plus 3 sigma: for an all-sky lens most of the sky; a prediction that
+    # does not verify falls back to the full search through the camera)
     bumped = ["solve", str(paths[3]), "--camera", str(cam_file), "--utc", UTCS[2], "--json"]
     assert main(bumped) == 0
     out = json.loads(capsys.readouterr().out)
-    assert out["solved"] and out["algorithm"] != "tracking"
+    assert out["solved"] and out["false_match_probability"] < 1e-6
     bore, _ = attitude_difference_deg(np.array(out["R_cam_from_icrs"]), truths[3])
-    assert bore < 0.02 and 3.5 < out["mount_prior"]["off_deg"] < 4.5
+    assert bore < 0.02 and 19.5 < out["mount_prior"]["off_deg"] < 20.5
 
 
 @pytest.mark.slow

@@ -81,7 +81,9 @@ class Calibration:
     name, reason) of the images left out; ``models``: each candidate's fit (``auto``; one
     entry otherwise); ``parity``: -1 for a mirrored camera; ``attitudes``: R_cam_from_icrs
     per frame; ``mount``: the fixed orientation (with site and UTCs; else None);
-    ``residuals``: (frame index, x, y, dx, dy) px per matched star."""
+    ``residuals``: (frame index, x, y, dx, dy) px per matched star, ``star_icrs`` its
+    catalog direction (ICRS unit vector); ``circle``: the image circle found (px);
+    ``start_lens``: what solved the images first."""
 
     camera: CameraModel
     sigma: dict[str, float]
@@ -96,6 +98,7 @@ class Calibration:
     attitudes: tuple[np.ndarray, ...] = ()
     mount: Mount | None = None
     residuals: np.ndarray | None = None
+    star_icrs: np.ndarray | None = None
     circle: _Circle | None = None
     start_lens: str = ""
 
@@ -249,6 +252,7 @@ def calibrate(
         attitudes=attitudes,
         mount=mount,
         residuals=np.column_stack([which, xy, res]),
+        star_icrs=np.vstack([f[1] for f in frames]),
         circle=circle,
         start_lens=start_lens,
     )
