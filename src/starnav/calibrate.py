@@ -83,7 +83,8 @@ class Calibration:
     per frame; ``mount``: the fixed orientation (with site and UTCs; else None);
     ``residuals``: (frame index, x, y, dx, dy) px per matched star, ``star_icrs`` its
     catalog direction (ICRS unit vector); ``circle``: the image circle found (px);
-    ``start_lens``: what solved the images first."""
+    ``start_lens``: what solved the images first; ``refused``: the candidate models that
+    could not be fitted, with why."""
 
     camera: CameraModel
     sigma: dict[str, float]
@@ -101,6 +102,7 @@ class Calibration:
     star_icrs: np.ndarray | None = None
     circle: _Circle | None = None
     start_lens: str = ""
+    refused: tuple[str, ...] = ()
 
     def to_dict(self) -> dict:
         """The JSON of ``starnav calibrate``."""
@@ -118,6 +120,7 @@ class Calibration:
             ],
             "failed": [{"image": n, "reason": r} for n, r in self.failed],
             "models": [dataclasses.asdict(m) for m in self.models],
+            "models_refused": list(self.refused),
             "start_lens": self.start_lens,
             "image_circle_px": None
             if self.circle is None
@@ -255,6 +258,7 @@ def calibrate(
         star_icrs=np.vstack([f[1] for f in frames]),
         circle=circle,
         start_lens=start_lens,
+        refused=tuple(refused),
     )
 
 

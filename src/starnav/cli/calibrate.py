@@ -68,9 +68,7 @@ def _times(args: argparse.Namespace) -> list | None:
     from starnav.detect.header import image_time
     from starnav.navigation.frames import parse_utc
 
-    if args.utc is not None:
-        if len(args.images) != 1:
-            raise StarnavError("--utc is for one image; several take their files' own times")
+    if args.utc is not None:  # one image (check_fov)
         return [parse_utc(args.utc)]
     times = []
     for path in args.images:
@@ -143,6 +141,8 @@ def run(args: argparse.Namespace) -> int:
     if len(cal.models) > 1:
         for m in sorted(cal.models, key=lambda m: m.bic):
             print(f"  {m.model}: rms {m.rms_px:.3f} px over {m.n_stars} stars, BIC {m.bic:.1f}")
+    for why in cal.refused:
+        print(f"  not fitted: {why}")
     for name, rms, n in zip(cal.frames, cal.frame_rms_px, cal.frame_stars, strict=True):
         print(f"  {Path(name).name}: rms {rms:.3f} px over {n} stars")
     if cal.mount is not None:

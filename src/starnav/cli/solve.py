@@ -8,7 +8,6 @@ from __future__ import annotations
 import argparse
 import sys
 import time
-from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -25,7 +24,7 @@ from starnav.cli.common import (
     int_at_least,
     positive_int,
 )
-from starnav.cli.field import add_fov_search, check_fov
+from starnav.cli.field import add_fov_search, check_fov, mounted_dict, solve_mounted
 from starnav.cli.output import print_json, print_solution, to_json
 from starnav.errors import StarnavError
 from starnav.pipeline.options import DEFAULT_MAX_STARS, FISHEYE_MAX_STARS
@@ -46,12 +45,7 @@ def add_parser(subparsers: Subparsers) -> None:
         "horizontal FOV, roughly: searched ±5 %%",
         camera_help="camera file (any lens model, e.g. from 'starnav calibrate'; its focal "
         "length searched ±1 %%)",
-    )
-    p.add_argument(
-        "--utc",
-        help="UTC of the image (ISO 8601; default: the file's DATE-OBS / EXIF UTC): with a "
-        "--camera file holding a fixed camera's mount ('starnav calibrate --lat --lon'), the "
-        "attitude is predicted and tracked from",
+        utc=True,
     )
     p.add_argument(
         "--fit-distortion",
@@ -153,41 +147,26 @@ def run(args: argparse.Namespace) -> int:
     check_fov(args, args.lens)
     paths = [Path(p) for p in args.images]
     if len(paths) > 1 or paths[0].is_dir() or args.jsonl or args.track or args.dask:
-        if args.utc:
-            raise StarnavError("--utc is for one image; a batch takes each file's own time")
         return run_batch(args, paths)
     _check_file_outputs(args)
     from starnav.detect.header import fits_hints
     from starnav.detect.read import read_image
-    from starnav.pipeline.image import solve_image, write_outputs
+    from starnav.pipeline.image import write_outputs
 
     t0 = time.perf_counter()
     pixels = read_image(paths[0])
     read_ms = (time.perf_counter() - t0) * 1e3
     options = _options(args)
     options.setdefault("hints", fits_hints(paths[0]))
-    mounted = None
-    if args.camera:  # a fixed camera's mount and the time: the attitude predicted, tracked
-        from starnav.navigation.mount import mount_prior
-
-        mounted = mount_prior(args.camera, paths[0], args.utc)
-    prior = None if mounted is None else mounted.R_cam_from_icrs
-    res = solve_image(pixels, prior=prior, **options)
-    res = replace(res, read_ms=read_ms)
+    res, mounted = solve_mounted(args, paths[0], pixels, options, read_ms)
     outputs = {"wcs": args.wcs, "new_fits": args.new_fits, "annotate": args.annotate}
     write_outputs({k: v and Path(v) for k, v in outputs.items()}, paths[0], pixels, res)
     if res.solution is None and (args.wcs or args.new_fits):
         print("starnav solve: not solved, no WCS written", file=sys.stderr)
     if args.json:
-        out = res.to_dict(args.images[0])
-        if mounted is not None:
-            solved_R = None if res.solution is None else res.solution.R_cam_from_icrs
-            out["mount_prior"] = mounted.to_dict(solved_R)
-        print_json(out)
+        print_json(mounted_dict(res, mounted, args.images[0]))
     else:
         _print_text(res)
-        if mounted is not None:
-            print(f"  attitude predicted by the camera file's mount at {mounted.utc} UTC")
     return EXIT_OK if res.solution else EXIT_NOT_SOLVED
 
 
