@@ -4,6 +4,7 @@ one, the fixed camera's mount, and a later frame tracked from the camera file.""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 
@@ -217,3 +218,20 @@ def test_calibrate_utc_is_for_one_image(tmp_path, capsys):
     code = main([*args, "--utc", UTCS[0], "--lat", "50", "--lon", "10"])
     err = capsys.readouterr().err
     assert code == 2 and "--utc is for one image" in err
+
+
+@pytest.mark.slow
+def test_starting_camera_file_solves_and_the_fit_leaves_it(sky, tmp_path):
+    paths, _ = sky
+    # a hand-made equisolid camera: the focal length from the spec, the centre a few px off
+    start = dataclasses.replace(
+        _converted(TRUE, Equisolid, math.radians(90.0)), cx=TRUE.cx - 3.0, cy=TRUE.cy + 2.0
+    )
+    path = tmp_path / "start.json"
+    save_camera(path, start)
+    cal = calibrate(paths[:1], model="kannala-brandt", camera=path)
+    assert cal.start_lens == "camera" and isinstance(cal.camera, KannalaBrandt)
+    for key in ("cx", "cy"):
+        assert abs(getattr(cal.camera, key) - getattr(TRUE, key)) < 4 * cal.sigma[key], key
+    for deg in range(5, 90, 5):
+        assert abs(_r(cal.camera, math.radians(deg)) - _r(TRUE, math.radians(deg))) < 0.2, deg

@@ -225,7 +225,7 @@ def calibrate(
     if not fits:
         raise StarnavError("no lens model could be fitted: " + "; ".join(refused))
     models = _compare(fits, solved) if len(fits) > 1 else ()
-    best = min(models, key=lambda m: m.bic).model if models else candidates[0]
+    best = min(models, key=lambda m: m.bic).model if models else next(iter(fits))
     cam, fit, frames = fits[best]
     if not models:
         models = (_model_fit(best, fit),)
@@ -489,7 +489,10 @@ def _compare(fits: dict, solved) -> tuple[ModelFit, ...]:
             for i, (f, c) in enumerate(zip(frames, common, strict=True))
         ]
         cls = type(camera)
-        again = _fit(start, cls, camera, width, height, n, 3 + len(cls.coefficients))
+        try:
+            again = _fit(start, cls, camera, width, height, n, 3 + len(cls.coefficients))
+        except StarnavError:  # too few stars for this model's parameters: not a candidate
+            continue
         out.append(_model_fit(model, again))
     return tuple(out)
 
