@@ -160,7 +160,7 @@ def camera_from_dict(data: dict, where: str = "camera") -> CameraModel:
     return MODELS[name].from_dict(data, where)
 
 
-def save_camera(path: str | Path, camera: CameraModel, **extra: float | int | str) -> None:
+def save_camera(path: str | Path, camera: CameraModel, **extra: object) -> None:
     """Write ``camera`` as a camera file (JSON; ``extra`` keys are kept as notes)."""
     data = camera.to_dict()
     data.update(extra)

@@ -1,13 +1,20 @@
 """The field of view on the command line: ``--fov-deg`` / ``--fov-range`` / ``--camera`` /
 ``--lens`` (``add_fov_search``), checked against the lens model before any work
-(``check_fov``)."""
+(``check_fov``); and ``solve``'s ``--utc``, with which a camera file holding a fixed camera's
+mount predicts the attitude to track from (``solve_mounted``)."""
 
 from __future__ import annotations
 
 import argparse
+from dataclasses import replace
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
 
 from starnav.camera import MODELS
 from starnav.cli.common import finite
+from starnav.errors import StarnavError
 from starnav.pipeline.fov import fov_limits_deg, search_range
 from starnav.pipeline.options import (
     DEFAULT_FOV_RANGE_DEG,
@@ -21,12 +28,17 @@ FOV_LIMITS_HELP = "{:g}-{:g} for the pinhole lens, {:g}-{:g} for a fisheye".form
     *fov_limits_deg("pinhole"), *fov_limits_deg("equidistant")
 )  # the fields --fov-deg and --fov-range take
 
+if TYPE_CHECKING:
+    from starnav.navigation.mount import MountPrior
+    from starnav.pipeline.image import ImageSolveResult
+
 
 def add_fov_search(
-    p: argparse.ArgumentParser, fov_help: str, *, camera_help: str | None = None
+    p: argparse.ArgumentParser, fov_help: str, *, camera_help: str | None = None, utc=False
 ) -> None:
     """--fov-deg or --fov-range (the FOV search), or --camera (a camera file) when
-    ``camera_help`` is given; ``check_fov`` checks them against the lens model."""
+    ``camera_help`` is given, and with ``utc`` --utc (a camera file's mount predicts the
+    attitude at that time); ``check_fov`` checks them against the lens model."""
     fov = p.add_mutually_exclusive_group()
     fov.add_argument(
         "--fov-deg",
@@ -53,13 +65,26 @@ def add_fov_search(
             "orthographic); without --fov-deg a fisheye model's focal length is scanned over "
             "--fov-range, or from the image circle found in the image",
         )
+    if utc:
+        p.add_argument(
+            "--utc",
+            help="UTC of the image (ISO 8601; default: the file's DATE-OBS / EXIF UTC): a "
+            "--camera file with a fixed camera's mount ('starnav calibrate --lat --lon') "
+            "then predicts the attitude, and the solve tracks from it; with the site (--lat "
+            "--lon, or FITS SITELAT/SITELONG) a fisheye is solved on the stars and planets "
+            "above the horizon",
+        )
 
 
 def check_fov(args: argparse.Namespace, lens: str, *, exact: bool = False) -> None:
     """--fov-deg, else --fov-range, against ``pipeline.fov.fov_limits_deg(lens)`` before any
     work (the same error from each command); a --camera file brings its own field. ``exact``:
     the command takes --fov-deg as exact (``identify``: through the camera model, whose own
-    limits apply, 0-179° for the pinhole), so only a searched --fov-range is checked here."""
+    limits apply, 0-179° for the pinhole), so only a searched --fov-range is checked here.
+    --utc (solve's, calibrate's) is for one image."""
+    images = getattr(args, "images", [])
+    if getattr(args, "utc", None) and (len(images) != 1 or Path(images[0]).is_dir()):
+        raise StarnavError("--utc is for one image; several take their files' own times")
     if getattr(args, "camera", None) is not None:
         return
     fov_deg = None if exact else args.fov_deg
@@ -67,3 +92,28 @@ def check_fov(args: argparse.Namespace, lens: str, *, exact: bool = False) -> No
         return
     searched = tuple(args.fov_range) if args.fov_range else default_fov_range_deg(lens)
     search_range(fov_deg, searched, None, facts_model(lens))
+
+
+def solve_mounted(
+    args: argparse.Namespace, path: Path, pixels: np.ndarray, options: dict, read_ms: float
+) -> tuple[ImageSolveResult, MountPrior | None]:
+    """Solve one image (``solve_image`` with ``options``), from the attitude the ``--camera``
+    file's mount predicts at the image's UTC (``--utc``, else the file's) when it has one."""
+    from starnav.pipeline.image import solve_image
+
+    mounted = None
+    if args.camera:
+        from starnav.navigation.mount import mount_prior
+
+        mounted = mount_prior(args.camera, path, args.utc)
+    prior = None if mounted is None else mounted.R_cam_from_icrs
+    return replace(solve_image(pixels, prior=prior, **options), read_ms=read_ms), mounted
+
+
+def mounted_dict(res: ImageSolveResult, mounted: MountPrior | None, name: str) -> dict:
+    """The answer's JSON, with ``mount_prior`` (the prediction, how far off) when used."""
+    out = res.to_dict(name)
+    if mounted is not None:
+        solved = None if res.solution is None else res.solution.R_cam_from_icrs
+        out["mount_prior"] = mounted.to_dict(solved)
+    return out

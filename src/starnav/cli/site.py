@@ -1,7 +1,7 @@
-"""Where and when an image was taken, and a fisheye's scale, on the command line:
-``--lat --lon --height --utc`` (the sky above the horizon and the planets) and
-``--circle-fov-deg`` / ``--focal-mm --pixel-um`` (``add_sky_options``), turned into solve
-options (``sky_options``)."""
+"""Where an image was taken, and a fisheye's scale, on the command line: ``--lat --lon
+--height`` (with the time, ``cli.field``'s ``--utc``: the sky above the horizon and the
+planets) and ``--circle-fov-deg`` / ``--focal-mm --pixel-um`` (``add_sky_options``), turned
+into solve options (``sky_options``)."""
 
 from __future__ import annotations
 
@@ -18,23 +18,32 @@ def add_sky_options(p: argparse.ArgumentParser) -> None:
     sky.add_argument(
         "--circle-fov-deg",
         type=finite,
-        help="a fisheye's field across its image circle (degrees, e.g. 180; searched ±5 %%): "
-        "the circle is found in the image",
+        help="a fisheye's field across its image circle (degrees, e.g. 180; searched ±5 %%; "
+        "default: 140-230 scanned from 180): the circle is found in the image",
     )
     sky.add_argument(
         "--focal-mm",
         type=finite,
-        help="a fisheye's focal length (mm; with --pixel-um; searched ±5 %%)",
+        help="a fisheye's focal length (mm; with --pixel-um; searched ±5 %%; default: not "
+        "known, scanned)",
     )
-    sky.add_argument("--pixel-um", type=finite, help="the sensor's pixel pitch (µm, as binned)")
-    sky.add_argument("--lat", type=finite, help="the site's latitude (degrees, north positive)")
-    sky.add_argument("--lon", type=finite, help="the site's longitude (degrees, east positive)")
-    sky.add_argument("--height", type=finite, default=0.0, help="the site's height (m)")
     sky.add_argument(
-        "--utc",
-        help="when the image was taken (ISO 8601 UTC; default: FITS DATE-OBS). With the site "
-        "(--lat --lon, or FITS SITELAT/SITELONG), a fisheye is solved on the stars above the "
-        "horizon and the planets",
+        "--pixel-um",
+        type=finite,
+        help="the sensor's pixel pitch (µm, as binned; default: not known)",
+    )
+    sky.add_argument(
+        "--lat",
+        type=finite,
+        help="the site's latitude (degrees, north positive; default: FITS SITELAT / OBSGEO-B)",
+    )
+    sky.add_argument(
+        "--lon",
+        type=finite,
+        help="the site's longitude (degrees, east positive; default: FITS SITELONG)",
+    )
+    sky.add_argument(
+        "--height", type=finite, default=0.0, help="the site's height (m; default %(default)g)"
     )
 
 
@@ -47,7 +56,7 @@ def sky_options(args: argparse.Namespace) -> dict:
         "circle_fov_deg": args.circle_fov_deg,
         "focal_px": _focal_px(args),
         "site": None if args.lat is None else (args.lat, args.lon, args.height),
-        "utc": args.utc,
+        "utc": getattr(args, "utc", None),
     }
 
 

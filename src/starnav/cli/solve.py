@@ -8,7 +8,6 @@ from __future__ import annotations
 import argparse
 import sys
 import time
-from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -25,7 +24,7 @@ from starnav.cli.common import (
     int_at_least,
     positive_int,
 )
-from starnav.cli.field import add_fov_search, check_fov
+from starnav.cli.field import add_fov_search, check_fov, mounted_dict, solve_mounted
 from starnav.cli.output import print_json, print_solution, to_json
 from starnav.cli.site import add_sky_options, sky_options
 from starnav.errors import StarnavError
@@ -47,6 +46,7 @@ def add_parser(subparsers: Subparsers) -> None:
         "horizontal FOV, roughly: searched ±5 %%",
         camera_help="camera file (any lens model, e.g. from 'starnav calibrate'; its focal "
         "length searched ±1 %%)",
+        utc=True,
     )
     add_sky_options(p)
     p.add_argument(
@@ -151,21 +151,20 @@ def run(args: argparse.Namespace) -> int:
     _check_file_outputs(args)
     from starnav.detect.header import fits_hints
     from starnav.detect.read import read_image
-    from starnav.pipeline.image import solve_image, write_outputs
+    from starnav.pipeline.image import write_outputs
 
     t0 = time.perf_counter()
     pixels = read_image(paths[0])
     read_ms = (time.perf_counter() - t0) * 1e3
     options = _options(args)
     options.setdefault("hints", fits_hints(paths[0]))
-    res = solve_image(pixels, **options)
-    res = replace(res, read_ms=read_ms)
+    res, mounted = solve_mounted(args, paths[0], pixels, options, read_ms)
     outputs = {"wcs": args.wcs, "new_fits": args.new_fits, "annotate": args.annotate}
     write_outputs({k: v and Path(v) for k, v in outputs.items()}, paths[0], pixels, res)
     if res.solution is None and (args.wcs or args.new_fits):
         print("starnav solve: not solved, no WCS written", file=sys.stderr)
     if args.json:
-        print_json(res.to_dict(args.images[0]))
+        print_json(mounted_dict(res, mounted, args.images[0]))
     else:
         _print_text(res)
     return EXIT_OK if res.solution else EXIT_NOT_SOLVED
