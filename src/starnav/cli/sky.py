@@ -1,0 +1,183 @@
+"""``starnav sky``: one frame of an all-sky camera solved, then the sky's state over it: which
+catalog stars should be seen and are, clear / cloudy per region and per altitude-azimuth cell,
+the limiting magnitude reached (``starnav.sky``), as text or JSON and as a picture."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+from starnav.cli.common import EXIT_NOT_SOLVED, EXIT_OK, Subparsers, check_parent_dir, finite
+from starnav.cli.field import add_image_solve_options, check_fov, image_solve_options
+from starnav.cli.output import print_json
+from starnav.errors import StarnavError
+
+SKY_CATALOG_MAG = 7.5  # the stars tested: deeper than any all-sky camera's clear-sky limit
+
+
+def add_parser(subparsers: Subparsers) -> None:
+    """The ``sky`` command and its options."""
+    p = subparsers.add_parser(
+        "sky",
+        help="clear / cloudy sky of an all-sky frame: the stars expected and seen, a cloud map, "
+        "alt-az cells and the limiting magnitude",
+    )
+    p.add_argument("image", metavar="IMAGE", help="the frame (FITS, PNG, JPEG, TIFF)")
+    add_image_solve_options(p)
+    site = p.add_argument_group("site and time (alt-az cells, horizon, the Moon's glare)")
+    site.add_argument("--lat", type=finite, help="latitude (degrees, North positive)")
+    site.add_argument("--lon", type=finite, help="longitude (degrees, East positive)")
+    site.add_argument("--height-m", type=finite, default=0.0, help="height (m; default 0)")
+    site.add_argument(
+        "--utc", help="UTC of the frame, ISO 8601 (default: the FITS DATE-OBS / TIME-OBS)"
+    )
+    sky = p.add_argument_group("the sky's state")
+    sky.add_argument(
+        "--mag-limit",
+        type=finite,
+        help="the camera's clear-sky limiting magnitude: the stars to it are expected "
+        "(default: from the frame's photometric zero point)",
+    )
+    sky.add_argument(
+        "--snr-seen",
+        type=finite,
+        default=3.0,
+        help="a star is seen above this signal-to-noise at its predicted pixel (default "
+        "%(default)g)",
+    )
+    sky.add_argument(
+        "--min-alt-deg",
+        type=finite,
+        default=10.0,
+        help="lowest altitude judged, with a site (degrees; default %(default)g)",
+    )
+    p.add_argument("--png", metavar="PNG", help="draw the frame, the stars and the cloud map here")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(run=run)
+
+
+def _site(args: argparse.Namespace, path: Path):
+    """The ``Site`` of the options (and the file's time), or None with neither latitude nor
+    longitude; one-line errors for half a site or a site without a time."""
+    from starnav.sky import Site
+
+    if (args.lat is None) != (args.lon is None):
+        raise StarnavError("give both --lat and --lon (or neither)")
+    if args.lat is None:
+        if args.utc is not None:
+            raise StarnavError("--utc needs the site: give --lat and --lon too")
+        return None
+    utc = args.utc
+    if utc is None:
+        from starnav.detect.header import image_time
+
+        found = image_time(path)
+        if found is None:
+            raise StarnavError(f"{str(path)!r} records no time: give --utc")
+        if found.local:
+            raise StarnavError(
+                f"{str(path)!r} records the camera clock's local time ({found.text}, "
+                f"{found.source}) with no zone: give --utc"
+            )
+        utc = found.time.utc.isot
+    from starnav.navigation.frames import parse_utc
+
+    parse_utc(utc)  # a bad time fails here, before the solve
+    return Site(args.lat, args.lon, args.height_m, utc)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Read, solve, judge the sky, write the picture, print."""
+    check_fov(args, args.lens)
+    path = Path(args.image)
+    if args.png:
+        if not args.png.lower().endswith(".png"):
+            raise StarnavError(
+                f"--png writes a PNG file: give a name ending in .png, got {args.png!r}"
+            )
+        check_parent_dir("--png", args.png)
+    if not args.snr_seen > 0:
+        raise StarnavError(f"--snr-seen must be positive, got {args.snr_seen:g}")
+    site = _site(args, path)
+    from starnav.catalog import is_embedded, load_catalog
+    from starnav.detect.circle import find_image_circle
+    from starnav.detect.header import fits_hints
+    from starnav.detect.read import read_image
+    from starnav.pipeline.image import solve_image
+    from starnav.sky import sky_state
+
+    t0 = time.perf_counter()
+    pixels = read_image(path)
+    options = image_solve_options(args)
+    options.setdefault("hints", fits_hints(path))
+    if site is not None and args.epoch is None:
+        from starnav.navigation.frames import parse_utc
+
+        options["epoch_year"] = float(parse_utc(site.utc).decimalyear)
+    res = solve_image(pixels, **options)
+    solve_s = time.perf_counter() - t0
+    summary = {k: v for k, v in res.to_dict(str(path)).items() if k != "stars"}
+    if res.solution is None:
+        if args.json:
+            print_json({"file": str(path), "solve": summary, "sky": None})
+        else:
+            print(f"not solved: {res.reason}; the sky's state needs a solved frame")
+        return EXIT_NOT_SOLVED
+    t1 = time.perf_counter()
+    own = is_embedded(args.catalog)
+    catalog = load_catalog(
+        args.catalog,
+        mag_limit=SKY_CATALOG_MAG if own else None,
+        epoch_year=options.get("epoch_year") if own else None,
+    )
+    state = sky_state(
+        pixels,
+        R_cam_from_icrs=res.solution.R_cam_from_icrs,
+        camera=res.camera,
+        catalog=catalog,
+        psf_sigma_px=res.detections.psf_sigma_px,
+        circle=find_image_circle(pixels),
+        detected_xy=res.detections.xy,
+        site=site,
+        mag_limit=args.mag_limit,
+        snr_seen=args.snr_seen,
+        min_alt_deg=args.min_alt_deg,
+    )
+    sky_s = time.perf_counter() - t1
+    if args.png:
+        from starnav.sky.plot import plot_sky_state
+
+        plot_sky_state(
+            args.png, pixels, state, R_cam_from_icrs=res.solution.R_cam_from_icrs,
+            camera=res.camera, title=path.name,
+        )  # fmt: skip
+    if args.json:
+        out = {"file": str(path), "solve": summary, "sky": state.to_dict()}
+        out["sky"]["sky_ms"] = round(sky_s * 1e3, 1)
+        print_json(out)
+    else:
+        _print_text(state, solve_s, sky_s)
+    return EXIT_OK
+
+
+def _print_text(state, solve_s: float, sky_s: float) -> None:
+    frac = "n/a" if state.clear_fraction is None else f"{state.clear_fraction:.2f}"
+    lim = "n/a" if state.limiting_mag is None else f"{state.limiting_mag:.1f}"
+    n_exp = int(state.expected.sum())
+    print(
+        f"sky {state.state}: clear fraction {frac}, limiting magnitude {lim}; "
+        f"{int((state.expected & state.seen).sum())} of {n_exp} expected stars seen "
+        f"({len(state.ids)} tested, expected by {state.expected_by})"
+    )
+    counts = state.cell_counts()
+    frame = "alt-az" if state.altaz else "camera frame (no site)"
+    print(f"  cells ({frame}): " + ", ".join(f"{k} {v}" for k, v in counts.items()))
+    for c in state.cells:
+        lim = "-" if c.limiting_mag is None else f"{c.limiting_mag:.1f}"
+        print(
+            f"  alt {c.alt_min_deg:4.0f}-{c.alt_max_deg:<4.0f} az {c.az_min_deg:5.0f}-"
+            f"{c.az_max_deg:<5.0f} {c.state:8s} {c.n_seen:4d}/{c.n_expected:<4d} lim {lim}"
+        )
+    print(f"  solve {solve_s:.1f} s, sky {sky_s:.2f} s", file=sys.stderr)
