@@ -53,6 +53,14 @@ def add_parser(subparsers: Subparsers) -> None:
         default=10.0,
         help="lowest altitude judged, with a site (degrees; default %(default)g)",
     )
+    sky.add_argument(
+        "--mount",
+        metavar="JSON",
+        help="a fixed camera's mount (R_cam_from_enu): the JSON 'starnav sky --json' printed "
+        "for a solved frame of this camera with a site; with --camera, --lat/--lon and the "
+        "time, the attitude comes from it and the frame is not solved (an overcast frame gets "
+        "its map too)",
+    )
     p.add_argument("--png", metavar="PNG", help="draw the frame, the stars and the cloud map here")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(run=run)
@@ -105,41 +113,48 @@ def run(args: argparse.Namespace) -> int:
     from starnav.detect.circle import find_image_circle
     from starnav.detect.header import fits_hints
     from starnav.detect.read import read_image
+    from starnav.navigation.frames import parse_utc
     from starnav.pipeline.image import solve_image
     from starnav.sky import sky_state
+    from starnav.sky.state import mount_of
 
     t0 = time.perf_counter()
     pixels = read_image(path)
-    options = image_solve_options(args)
-    options.setdefault("hints", fits_hints(path))
-    if site is not None and args.epoch is None:
-        from starnav.navigation.frames import parse_utc
-
-        options["epoch_year"] = float(parse_utc(site.utc).decimalyear)
-    res = solve_image(pixels, **options)
+    if args.mount:
+        R, camera, detections, summary = _mounted(args, pixels, site)
+    else:
+        options = image_solve_options(args)
+        options.setdefault("hints", fits_hints(path))
+        if site is not None and args.epoch is None:
+            options["epoch_year"] = float(parse_utc(site.utc).decimalyear)
+        res = solve_image(pixels, **options)
+        summary = {k: v for k, v in res.to_dict(str(path)).items() if k != "stars"}
+        if res.solution is None:
+            if args.json:
+                print_json({"file": str(path), "solve": summary, "sky": None})
+            else:
+                print(f"not solved: {res.reason}; the sky's state needs a solved frame")
+            return EXIT_NOT_SOLVED
+        R, camera, detections = res.solution.R_cam_from_icrs, res.camera, res.detections
     solve_s = time.perf_counter() - t0
-    summary = {k: v for k, v in res.to_dict(str(path)).items() if k != "stars"}
-    if res.solution is None:
-        if args.json:
-            print_json({"file": str(path), "solve": summary, "sky": None})
-        else:
-            print(f"not solved: {res.reason}; the sky's state needs a solved frame")
-        return EXIT_NOT_SOLVED
     t1 = time.perf_counter()
     own = is_embedded(args.catalog)
+    epoch = args.epoch
+    if epoch is None and site is not None:
+        epoch = float(parse_utc(site.utc).decimalyear)
     catalog = load_catalog(
         args.catalog,
         mag_limit=SKY_CATALOG_MAG if own else None,
-        epoch_year=options.get("epoch_year") if own else None,
+        epoch_year=epoch if own else None,
     )
     state = sky_state(
         pixels,
-        R_cam_from_icrs=res.solution.R_cam_from_icrs,
-        camera=res.camera,
+        R_cam_from_icrs=R,
+        camera=camera,
         catalog=catalog,
-        psf_sigma_px=res.detections.psf_sigma_px,
+        psf_sigma_px=_psf(detections.psf_sigma_px),
         circle=find_image_circle(pixels),
-        detected_xy=res.detections.xy,
+        detected_xy=detections.xy,
         site=site,
         mag_limit=args.mag_limit,
         snr_seen=args.snr_seen,
@@ -150,16 +165,47 @@ def run(args: argparse.Namespace) -> int:
         from starnav.sky.plot import plot_sky_state
 
         plot_sky_state(
-            args.png, pixels, state, R_cam_from_icrs=res.solution.R_cam_from_icrs,
-            camera=res.camera, title=path.name,
+            args.png, pixels, state, R_cam_from_icrs=R, camera=camera, title=path.name,
         )  # fmt: skip
     if args.json:
         out = {"file": str(path), "solve": summary, "sky": state.to_dict()}
         out["sky"]["sky_ms"] = round(sky_s * 1e3, 1)
+        if site is not None:
+            out["sky"]["R_cam_from_enu"] = mount_of(R, site).tolist()
         print_json(out)
     else:
         _print_text(state, solve_s, sky_s)
     return EXIT_OK
+
+
+def _psf(sigma_px: float) -> float:
+    """The PSF sigma measured, or 1.5 px for a frame with too few stars to measure it."""
+    return sigma_px if sigma_px == sigma_px and sigma_px > 0 else 1.5
+
+
+def _mounted(args: argparse.Namespace, pixels, site):
+    """A fixed camera's frame with no solve: (R_cam_from_icrs from --mount and the site and
+    time, the --camera, the detections, a summary for the JSON)."""
+    from starnav.camera import load_camera
+    from starnav.detect.stars import detect_stars
+    from starnav.sky.state import attitude_of, read_mount
+
+    if args.camera is None or site is None:
+        raise StarnavError("--mount needs --camera and the site and time (--lat, --lon, a time)")
+    camera = load_camera(args.camera)
+    if pixels.shape != (camera.height, camera.width):
+        raise StarnavError(
+            f"the image is {pixels.shape[1]} x {pixels.shape[0]} px, the camera file "
+            f"{camera.width} x {camera.height}"
+        )
+    R = attitude_of(read_mount(args.mount), site)
+    detections = detect_stars(pixels, threshold_sigma=args.threshold_sigma)
+    return (
+        R,
+        camera,
+        detections,
+        {"solved": None, "attitude": "from the mount", "mount": args.mount},
+    )
 
 
 def _print_text(state, solve_s: float, sky_s: float) -> None:

@@ -37,6 +37,7 @@ from __future__ import annotations
 import itertools
 import math
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -546,3 +547,44 @@ def _map(camera, circle, R, xy, seen, weight, sigma_deg) -> np.ndarray:
         ok = np.isfinite(node_v).all(axis=1)
         out[np.flatnonzero(inside)[ok]] = frac[ok]
     return out.reshape(rows, cols)
+
+
+def read_mount(path: str | Path) -> np.ndarray:
+    """A fixed camera's mount, ``R_cam_from_enu`` (3, 3: the camera axes in East, North, Up),
+    from a JSON file: the object ``starnav sky --json`` prints for a solved frame with a site
+    (its "sky" holds it), or one with "R_cam_from_enu" at the top; one-line errors."""
+    import json
+
+    try:
+        data = json.loads(Path(path).read_text())
+    except OSError as exc:
+        raise StarnavError(f"cannot read the mount file {str(path)!r}: {exc.strerror}") from None
+    except ValueError:
+        raise StarnavError(f"the mount file {str(path)!r} is not JSON") from None
+    if isinstance(data, dict) and isinstance(data.get("sky"), dict):
+        data = data["sky"]
+    value = data.get("R_cam_from_enu") if isinstance(data, dict) else None
+    try:
+        R = np.array(value, dtype=float)
+    except (TypeError, ValueError):
+        R = np.zeros(0)
+    if (
+        R.shape != (3, 3)
+        or not np.isfinite(R).all()
+        or not np.allclose(R @ R.T, np.eye(3), atol=1e-4)
+    ):
+        raise StarnavError(
+            f"the mount file {str(path)!r} has no R_cam_from_enu rotation (a 3x3 orthonormal "
+            "matrix; 'starnav sky --json' prints it for a frame solved with a site)"
+        )
+    return R
+
+
+def mount_of(R_cam_from_icrs: np.ndarray, site: Site) -> np.ndarray:
+    """The camera's mount ``R_cam_from_enu`` at the site and time from its solved attitude."""
+    return np.asarray(R_cam_from_icrs) @ enu_from_icrs(site).T
+
+
+def attitude_of(R_cam_from_enu: np.ndarray, site: Site) -> np.ndarray:
+    """``R_cam_from_icrs`` of a camera fixed to the ground (its mount) at the site and time."""
+    return np.asarray(R_cam_from_enu) @ enu_from_icrs(site)
