@@ -57,9 +57,10 @@ def add_parser(subparsers: Subparsers) -> None:
         "--mount",
         metavar="JSON",
         help="a fixed camera's mount (R_cam_from_enu): the JSON 'starnav sky --json' printed "
-        "for a solved frame of this camera with a site; with --camera, --lat/--lon and the "
-        "time, the attitude comes from it and the frame is not solved (an overcast frame gets "
-        "its map too)",
+        "for a solved frame of this camera with a site (a clear night's: its limiting "
+        "magnitude becomes --mag-limit); with --camera, --lat/--lon and the time, the "
+        "attitude comes from it and the frame is not solved (an overcast frame gets its map "
+        "too)",
     )
     p.add_argument("--png", metavar="PNG", help="draw the frame, the stars and the cloud map here")
     p.add_argument("--json", action="store_true", help="print one JSON object")
@@ -198,14 +199,12 @@ def _mounted(args: argparse.Namespace, pixels, site):
             f"the image is {pixels.shape[1]} x {pixels.shape[0]} px, the camera file "
             f"{camera.width} x {camera.height}"
         )
-    R = attitude_of(read_mount(args.mount), site)
+    mount, clear_limit = read_mount(args.mount)
+    if args.mag_limit is None:
+        args.mag_limit = clear_limit
     detections = detect_stars(pixels, threshold_sigma=args.threshold_sigma)
-    return (
-        R,
-        camera,
-        detections,
-        {"solved": None, "attitude": "from the mount", "mount": args.mount},
-    )
+    summary = {"solved": None, "attitude": "from the mount", "mount": args.mount}
+    return attitude_of(mount, site), camera, detections, summary
 
 
 def _print_text(state, solve_s: float, sky_s: float) -> None:

@@ -549,10 +549,12 @@ def _map(camera, circle, R, xy, seen, weight, sigma_deg) -> np.ndarray:
     return out.reshape(rows, cols)
 
 
-def read_mount(path: str | Path) -> np.ndarray:
-    """A fixed camera's mount, ``R_cam_from_enu`` (3, 3: the camera axes in East, North, Up),
-    from a JSON file: the object ``starnav sky --json`` prints for a solved frame with a site
-    (its "sky" holds it), or one with "R_cam_from_enu" at the top; one-line errors."""
+def read_mount(path: str | Path) -> tuple[np.ndarray, float | None]:
+    """A fixed camera's mount from a JSON file: ``R_cam_from_enu`` (3, 3: the camera axes in
+    East, North, Up) and the clear-sky limiting magnitude (None when the file has none). The
+    file: the object ``starnav sky --json`` prints for a solved frame with a site (its "sky"
+    holds both: a clear night's frame gives the camera's clear-sky limit), or one with
+    "R_cam_from_enu" (and optionally "mag_limit") at the top; one-line errors."""
     import json
 
     try:
@@ -563,9 +565,10 @@ def read_mount(path: str | Path) -> np.ndarray:
         raise StarnavError(f"the mount file {str(path)!r} is not JSON") from None
     if isinstance(data, dict) and isinstance(data.get("sky"), dict):
         data = data["sky"]
-    value = data.get("R_cam_from_enu") if isinstance(data, dict) else None
+    if not isinstance(data, dict):
+        data = {}
     try:
-        R = np.array(value, dtype=float)
+        R = np.array(data.get("R_cam_from_enu"), dtype=float)
     except (TypeError, ValueError):
         R = np.zeros(0)
     if (
@@ -577,7 +580,10 @@ def read_mount(path: str | Path) -> np.ndarray:
             f"the mount file {str(path)!r} has no R_cam_from_enu rotation (a 3x3 orthonormal "
             "matrix; 'starnav sky --json' prints it for a frame solved with a site)"
         )
-    return R
+    limit = data.get("mag_limit")
+    if limit is not None and not (isinstance(limit, int | float) and math.isfinite(limit)):
+        raise StarnavError(f"the mount file {str(path)!r} has a mag_limit that is not a number")
+    return R, None if limit is None else float(limit)
 
 
 def mount_of(R_cam_from_icrs: np.ndarray, site: Site) -> np.ndarray:
