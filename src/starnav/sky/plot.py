@@ -16,12 +16,12 @@ from matplotlib.patches import Patch
 from starnav.camera import CameraModel
 from starnav.geometry import radec_to_unit
 from starnav.output.annotate import (
-    _OUTLINE,
-    _gray,
-    _image_figure,
-    _legend,
-    _title,
+    OUTLINE,
+    dark_legend,
     figure_size_px,
+    figure_title,
+    gray_image,
+    image_figure,
     save_figure,
 )
 from starnav.sky.state import CLEAR_FRACTION, CLOUDY_FRACTION, SkyState
@@ -66,20 +66,20 @@ def _grid(ax, state: SkyState, R: np.ndarray, camera: CameraModel) -> None:
         xy = _local_to_pixels(_altaz_vectors(np.array([alt]), np.array([az_mid])), state, R, camera)
         if np.isfinite(xy).all():
             ax.text(*xy[0], _LETTER[cell.state], color="white", fontsize=11, ha="center",
-                    va="center", fontweight="bold", path_effects=_OUTLINE)  # fmt: skip
+                    va="center", fontweight="bold", path_effects=OUTLINE)  # fmt: skip
     if state.altaz:
         for name, a in (("N", 0.0), ("E", 90.0), ("S", 180.0), ("W", 270.0)):
             at = max(rings[0] - 4.0, 1.0)
             xy = _local_to_pixels(_altaz_vectors(np.array([at]), np.array([a])), state, R, camera)
             if np.isfinite(xy).all():
                 ax.text(*xy[0], name, color="cyan", fontsize=12, ha="center", va="center",
-                        fontweight="bold", path_effects=_OUTLINE)  # fmt: skip
+                        fontweight="bold", path_effects=OUTLINE)  # fmt: skip
 
 
 def sky_figure(image: np.ndarray, state: SkyState, *, R_cam_from_icrs, camera: CameraModel,
                title: str | None = None):  # fmt: skip
     """The picture of ``state`` over ``image`` (2-D, the solved frame) as a matplotlib Figure."""
-    gray = _gray(image, camera.width, camera.height)
+    gray = gray_image(image, camera.width, camera.height)
     R = np.asarray(R_cam_from_icrs, dtype=float)
     counts = state.cell_counts()
     lines = [] if title is None else title.splitlines()
@@ -93,7 +93,7 @@ def sky_figure(image: np.ndarray, state: SkyState, *, R_cam_from_icrs, camera: C
         f"({'alt-az' if state.altaz else 'about the boresight'})"
     )
     fig_w, fig_h = figure_size_px(camera.width, camera.height, title_lines=len(lines))
-    fig, ax = _image_figure(gray, fig_w, fig_h, len(lines))
+    fig, ax = image_figure(gray, fig_w, fig_h, len(lines))
     step = state.map_step_px
     rows, cols = state.map_fraction.shape
     ax.imshow(
@@ -120,8 +120,8 @@ def sky_figure(image: np.ndarray, state: SkyState, *, R_cam_from_icrs, camera: C
         Patch(color=_STATE_COLOURS[1], alpha=0.5, label="partly"),
         Patch(color=_STATE_COLOURS[0], alpha=0.5, label=f"cloudy (< {CLOUDY_FRACTION:g} seen)"),
     ]
-    _legend(ax, handles)
-    _title(fig, lines, fig_h)
+    dark_legend(ax, handles)
+    figure_title(fig, lines, fig_h)
     return fig
 
 

@@ -337,32 +337,11 @@ def sky_state(
     to_local = _frame_of(R, site)
     moon = moon_altaz_deg(site) if site is not None else None
 
-    c = catalog.vectors @ R.T
-    rows = np.flatnonzero(camera.sees(c))
-    xy = camera.bearings_to_pixels(c[rows])
-    local = catalog.vectors[rows] @ to_local.T
-    alt, az = _altaz(local)
-    keep = np.isfinite(xy).all(axis=1)
-    r_ap, _, r_out = zones(psf_sigma_px)
-    edge = r_out + 1.0
-    keep &= (xy[:, 0] > edge) & (xy[:, 0] < camera.width - edge)
-    keep &= (xy[:, 1] > edge) & (xy[:, 1] < camera.height - edge)
-    if circle is not None:
-        keep &= np.hypot(xy[:, 0] - circle.cx, xy[:, 1] - circle.cy) < (
-            circle.radius_px - CIRCLE_MARGIN_PX
-        )
-    if site is not None:
-        keep &= alt >= min_alt_deg
-        if moon is not None and moon[0] > -1.0:
-            m = radec_to_unit(np.radians(90.0 - moon[1]), np.radians(moon[0]))
-            # (East, North, Up) of the Moon: radec_to_unit(lon, lat) with lon measured from
-            # East, which is 90 deg - azimuth
-            keep &= np.degrees(np.arccos(np.clip(local @ m, -1.0, 1.0))) > moon_glare_deg
-    rows, xy, alt, az = rows[keep], xy[keep], alt[keep], az[keep]
+    if not (math.isfinite(extinction_mag) and extinction_mag >= 0):
+        raise StarnavError(f"extinction_mag must be >= 0, got {shown(extinction_mag)}")
+    rows, xy, alt, az = _in_sky(catalog, R, camera, to_local, circle, site and min_alt_deg,
+                                moon, moon_glare_deg, psf_sigma_px)  # fmt: skip
     mag = catalog.mag[rows]
-    tested = _unblended(xy, mag, BLEND_RADII * r_ap)
-    rows, xy, alt, az, mag = rows[tested], xy[tested], alt[tested], az[tested], mag[tested]
-
     if detected_xy is not None:
         xy = local_shift(xy, mag, np.asarray(detected_xy, dtype=float).reshape(-1, 2))
     phot = local_photometry(data, None, xy[:, 0] - 0.5, xy[:, 1] - 0.5, psf_sigma_px)
@@ -372,19 +351,9 @@ def sky_state(
 
     m_eff = mag
     if site is not None:
-        if not (math.isfinite(extinction_mag) and extinction_mag >= 0):
-            raise StarnavError(f"extinction_mag must be >= 0, got {shown(extinction_mag)}")
         m_eff = mag + extinction_mag * (airmass(alt) - 1.0)
     low = min_alt_deg if site else None
-    expected_by, used_limit = "given", mag_limit
-    if mag_limit is None:
-        trial = _cells(alt, az, m_eff, seen, np.zeros_like(seen), np.zeros(len(seen)), low, camera)
-        limits = [c.limiting_mag for c in trial if c.limiting_mag is not None]
-        if len(limits) >= max(MIN_LIMIT_CELLS, len(trial) / 4):
-            expected_by = "clear cells"
-            used_limit = round(float(np.percentile(limits, LIMIT_PERCENTILE)) - LIMIT_MARGIN, 2)
-        else:
-            expected_by, used_limit = "fallback", FALLBACK_MAG
+    expected_by, used_limit = _expected_limit(alt, az, m_eff, seen, low, camera, mag_limit)
     expected = m_eff <= used_limit
     weight = np.clip(0.5 + used_limit - m_eff, *_WEIGHT_RANGE) * expected
 
@@ -413,6 +382,53 @@ def sky_state(
         site=site,
         R_frame_from_icrs=to_local,
     )
+
+
+def _in_sky(catalog, R, camera, to_local, circle, min_alt_deg, moon, moon_glare_deg, psf_sigma_px):
+    """The catalog rows judged, their pixels and (alt, az): in the camera's view, off the
+    image's edge by the photometry's annulus, inside the image circle, above ``min_alt_deg``
+    (None: no cut) and away from the Moon, with no brighter star within ``BLEND_RADII``
+    apertures."""
+    c = catalog.vectors @ R.T
+    rows = np.flatnonzero(camera.sees(c))
+    xy = camera.bearings_to_pixels(c[rows])
+    local = catalog.vectors[rows] @ to_local.T
+    alt, az = _altaz(local)
+    keep = np.isfinite(xy).all(axis=1)
+    r_ap, _, r_out = zones(psf_sigma_px)
+    edge = r_out + 1.0
+    keep &= (xy[:, 0] > edge) & (xy[:, 0] < camera.width - edge)
+    keep &= (xy[:, 1] > edge) & (xy[:, 1] < camera.height - edge)
+    if circle is not None:
+        keep &= np.hypot(xy[:, 0] - circle.cx, xy[:, 1] - circle.cy) < (
+            circle.radius_px - CIRCLE_MARGIN_PX
+        )
+    if min_alt_deg is not None:
+        keep &= alt >= min_alt_deg
+    if moon is not None and moon[0] > -1.0:
+        # (East, North, Up) of the Moon: radec_to_unit(lon, lat) with lon measured from East,
+        # which is 90 deg - azimuth
+        m = radec_to_unit(np.radians(90.0 - moon[1]), np.radians(moon[0]))
+        keep &= np.degrees(np.arccos(np.clip(local @ m, -1.0, 1.0))) > moon_glare_deg
+    rows, xy, alt, az = rows[keep], xy[keep], alt[keep], az[keep]
+    tested = _unblended(xy, catalog.mag[rows], BLEND_RADII * r_ap)
+    return rows[tested], xy[tested], alt[tested], az[tested]
+
+
+def _expected_limit(alt, az, m_eff, seen, low, camera, mag_limit) -> tuple[str, float]:
+    """How the stars are expected and to which magnitude: ("given", ``mag_limit``), else
+    ("clear cells", the best cells' limit less ``LIMIT_MARGIN``), else ("fallback",
+    ``FALLBACK_MAG``) when too few cells reach a limit."""
+    if mag_limit is not None:
+        return "given", float(mag_limit)
+    none = np.zeros(len(seen))
+    trial = _cells(alt, az, m_eff, seen, none.astype(bool), none, low, camera)
+    limits = [c.limiting_mag for c in trial if c.limiting_mag is not None]
+    if len(limits) >= max(MIN_LIMIT_CELLS, len(trial) / 4):
+        return "clear cells", round(
+            float(np.percentile(limits, LIMIT_PERCENTILE)) - LIMIT_MARGIN, 2
+        )
+    return "fallback", FALLBACK_MAG
 
 
 def camera_half_fov_deg(camera: CameraModel) -> float:
