@@ -18,7 +18,7 @@ from starnav.errors import StarnavError
 # in the order of ``starnav --help``; imported by ``build_parser``, so that a program that
 # needs only ``starnav.cli.common`` (the drop-ins) does not import every command
 COMMAND_MODULES = ("identify", "simulate", "demo", "pointing", "evaluate", "locate", "database",
-                   "solve", "render", "calibrate", "serve", "track")  # fmt: skip
+                   "solve", "sky", "render", "calibrate", "serve", "track")  # fmt: skip
 
 
 def build_parser() -> Parser:

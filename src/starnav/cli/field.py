@@ -1,7 +1,9 @@
 """The field of view on the command line: ``--fov-deg`` / ``--fov-range`` / ``--camera`` /
 ``--lens`` (``add_fov_search``), checked against the lens model before any work
-(``check_fov``); and ``solve``'s ``--utc``, with which a camera file holding a fixed camera's
-mount predicts the attitude to track from (``solve_mounted``)."""
+(``check_fov``); with them, the other options of an image's solve (``add_image_solve_options``,
+read by ``image_solve_options``), which ``starnav solve`` and ``starnav sky`` take; and
+``--utc``, with which a camera file holding a fixed camera's mount predicts the attitude to
+track from (``solve_mounted``)."""
 
 from __future__ import annotations
 
@@ -13,13 +15,16 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from starnav.camera import MODELS
-from starnav.cli.common import finite
+from starnav.cli.common import add_deep_mag_limit, add_time_budget, finite, int_at_least
+from starnav.cli.site import add_sky_options, sky_options
 from starnav.errors import StarnavError
 from starnav.pipeline.fov import fov_limits_deg, search_range
 from starnav.pipeline.options import (
     DEFAULT_FOV_RANGE_DEG,
     DEFAULT_LENS_FOV_RANGE_DEG,
+    DEFAULT_MAX_STARS,
     FISHEYE,
+    FISHEYE_MAX_STARS,
     default_fov_range_deg,
     facts_model,
 )
@@ -82,7 +87,7 @@ def check_fov(args: argparse.Namespace, lens: str, *, exact: bool = False) -> No
     the command takes --fov-deg as exact (``identify``: through the camera model, whose own
     limits apply, 0-179° for the pinhole), so only a searched --fov-range is checked here.
     --utc (solve's, calibrate's) is for one image."""
-    images = getattr(args, "images", [])
+    images = getattr(args, "images", None) or [getattr(args, "image", None)]
     if getattr(args, "utc", None) and (len(images) != 1 or Path(images[0]).is_dir()):
         raise StarnavError("--utc is for one image; several take their files' own times")
     if getattr(args, "camera", None) is not None:
@@ -117,3 +122,76 @@ def mounted_dict(res: ImageSolveResult, mounted: MountPrior | None, name: str) -
         solved = None if res.solution is None else res.solution.R_cam_from_icrs
         out["mount_prior"] = mounted.to_dict(solved)
     return out
+
+
+def add_image_solve_options(p: argparse.ArgumentParser) -> None:
+    """The options of an image's solve (``_options`` reads them): the field and lens, the
+    detection, the catalog, the hints and the time budget; ``solve`` and ``sky`` take them."""
+    add_fov_search(
+        p,
+        "horizontal FOV, roughly: searched ±5 %%",
+        camera_help="camera file (any lens model, e.g. from 'starnav calibrate'; its focal "
+        "length searched ±1 %%)",
+        utc=True,
+    )
+    add_sky_options(p)
+    p.add_argument(
+        "--fit-distortion",
+        action="store_true",
+        help="fit the lens model's coefficients as well (pinhole k1, k2; kannala-brandt k1..k4)",
+    )
+    p.add_argument(
+        "--max-stars",
+        type=int_at_least(4),
+        help=f"use the brightest this many detections (default {DEFAULT_MAX_STARS}, "
+        f"{FISHEYE_MAX_STARS} for a fisheye lens)",
+    )
+    p.add_argument(
+        "--threshold-sigma",
+        type=finite,
+        default=5.0,
+        help="detection threshold over the background noise (default %(default)g)",
+    )
+    p.add_argument(
+        "--sigma-px",
+        type=finite,
+        help="centroid error, 1 sigma (px; default: not known, estimated as by identify)",
+    )
+    p.add_argument("--parity", type=int, choices=(1, -1), help="force parity (default: find)")
+    p.add_argument(
+        "--catalog", help="CSV catalog id,ra_deg,dec_deg,mag (default: embedded Hipparcos)"
+    )
+    p.add_argument(
+        "--epoch", type=finite, help="year of Hipparcos proper motion (default: DATE-OBS, else now)"
+    )
+    add_deep_mag_limit(p)
+    p.add_argument(
+        "--no-hints",
+        action="store_true",
+        help="ignore a FITS header's RA/DEC, pixel scale and DATE-OBS (used by default when "
+        "the options do not say otherwise)",
+    )
+    add_time_budget(p)
+
+
+def image_solve_options(args: argparse.Namespace) -> dict:
+    """The ``solve_image`` options of the command line."""
+    from starnav.detect.header import ImageHints
+
+    return dict(
+        fov_deg=args.fov_deg,
+        fov_range_deg=args.fov_range and tuple(args.fov_range),
+        camera=args.camera,
+        lens=args.lens,
+        fit_distortion=args.fit_distortion,
+        max_stars=args.max_stars,
+        threshold_sigma=args.threshold_sigma,
+        sigma_px=args.sigma_px,
+        catalog=args.catalog,
+        epoch_year=args.epoch,
+        parity=args.parity,
+        time_budget_s=args.time_budget,
+        deep_mag_limit=args.deep_mag_limit,
+        **sky_options(args),
+        **({"hints": ImageHints()} if args.no_hints else {}),
+    )

@@ -17,18 +17,18 @@ from starnav.cli.common import (
     EXIT_OK,
     Subparsers,
     add_dask,
-    add_deep_mag_limit,
-    add_time_budget,
     check_parent_dir,
-    finite,
-    int_at_least,
     positive_int,
 )
-from starnav.cli.field import add_fov_search, check_fov, mounted_dict, solve_mounted
+from starnav.cli.field import (
+    add_image_solve_options,
+    check_fov,
+    image_solve_options,
+    mounted_dict,
+    solve_mounted,
+)
 from starnav.cli.output import print_json, print_solution, to_json
-from starnav.cli.site import add_sky_options, sky_options
 from starnav.errors import StarnavError
-from starnav.pipeline.options import DEFAULT_MAX_STARS, FISHEYE_MAX_STARS
 
 if TYPE_CHECKING:
     from starnav.pipeline.image import ImageSolveResult
@@ -41,41 +41,7 @@ def add_parser(subparsers: Subparsers) -> None:
         "solve", help="solve image files (FITS, PNG, JPEG, TIFF, BMP, ...): FOV may be unknown"
     )
     p.add_argument("images", nargs="+", metavar="IMAGE", help="image files or directories of them")
-    add_fov_search(
-        p,
-        "horizontal FOV, roughly: searched ±5 %%",
-        camera_help="camera file (any lens model, e.g. from 'starnav calibrate'; its focal "
-        "length searched ±1 %%)",
-        utc=True,
-    )
-    add_sky_options(p)
-    p.add_argument(
-        "--fit-distortion",
-        action="store_true",
-        help="fit the lens model's coefficients as well (pinhole k1, k2; kannala-brandt k1..k4)",
-    )
-    p.add_argument(
-        "--max-stars",
-        type=int_at_least(4),
-        help=f"use the brightest this many detections (default {DEFAULT_MAX_STARS}, "
-        f"{FISHEYE_MAX_STARS} for a fisheye lens)",
-    )
-    p.add_argument(
-        "--threshold-sigma", type=finite, default=5.0, help="detection threshold over the "
-        "background noise (default %(default)g)",
-    )  # fmt: skip
-    p.add_argument(
-        "--sigma-px", type=finite, help="centroid error, 1 sigma (px; default: not known, "
-        "estimated as by identify)",
-    )  # fmt: skip
-    p.add_argument("--parity", type=int, choices=(1, -1), help="force parity (default: find)")
-    p.add_argument(
-        "--catalog", help="CSV catalog id,ra_deg,dec_deg,mag (default: embedded Hipparcos)"
-    )
-    p.add_argument(
-        "--epoch", type=finite, help="year of Hipparcos proper motion (default: DATE-OBS, else now)"
-    )
-    add_deep_mag_limit(p)
+    add_image_solve_options(p)
     p.add_argument(
         "--wcs",
         metavar="FITS",
@@ -96,13 +62,6 @@ def add_parser(subparsers: Subparsers) -> None:
         help="draw the image into this PNG: solved, the stars identified; not solved, the "
         "detections and the reason; a directory for a batch (NAME.png)",
     )
-    p.add_argument(
-        "--no-hints",
-        action="store_true",
-        help="ignore a FITS header's RA/DEC, pixel scale and DATE-OBS (used by default when "
-        "the options do not say otherwise)",
-    )
-    add_time_budget(p)
     batch = p.add_argument_group("many files")
     batch.add_argument(
         "--workers", type=positive_int, help="processes for a batch (default: all cores)"
@@ -119,29 +78,6 @@ def add_parser(subparsers: Subparsers) -> None:
     p.set_defaults(run=run)
 
 
-def _options(args: argparse.Namespace) -> dict:
-    """The ``solve_image`` options of the command line."""
-    from starnav.detect.header import ImageHints
-
-    return dict(
-        fov_deg=args.fov_deg,
-        fov_range_deg=args.fov_range and tuple(args.fov_range),
-        camera=args.camera,
-        lens=args.lens,
-        fit_distortion=args.fit_distortion,
-        max_stars=args.max_stars,
-        threshold_sigma=args.threshold_sigma,
-        sigma_px=args.sigma_px,
-        catalog=args.catalog,
-        epoch_year=args.epoch,
-        parity=args.parity,
-        time_budget_s=args.time_budget,
-        deep_mag_limit=args.deep_mag_limit,
-        **sky_options(args),
-        **({"hints": ImageHints()} if args.no_hints else {}),
-    )
-
-
 def run(args: argparse.Namespace) -> int:
     """One file: read, detect, solve, write the outputs, print. Many: ``run_batch``."""
     check_fov(args, args.lens)
@@ -156,7 +92,7 @@ def run(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     pixels = read_image(paths[0])
     read_ms = (time.perf_counter() - t0) * 1e3
-    options = _options(args)
+    options = image_solve_options(args)
     options.setdefault("hints", fits_hints(paths[0]))
     res, mounted = solve_mounted(args, paths[0], pixels, options, read_ms)
     outputs = {"wcs": args.wcs, "new_fits": args.new_fits, "annotate": args.annotate}
@@ -208,7 +144,7 @@ def run_batch(args: argparse.Namespace, inputs: list[Path]) -> int:
     with tqdm(total=len(paths), desc="solve", unit="file", file=sys.stderr) as bar:
         results = batch.solve_files(
             paths,
-            _options(args),
+            image_solve_options(args),
             outputs=outputs,
             workers=args.workers,
             dask_address=args.dask,

@@ -39,7 +39,7 @@ STRETCH_UPPER_PERCENTILE = 99.99
 LINEAR_SIGMAS = 10.0
 _STATISTICS_SAMPLES = 250_000
 _RANKS_SHOWN = 30  # detections numbered by rank in an unsolved image's picture
-_OUTLINE = [patheffects.withStroke(linewidth=2.0, foreground="black")]
+OUTLINE = [patheffects.withStroke(linewidth=2.0, foreground="black")]
 # a cross with an open centre, so that the star it marks stays visible
 _OPEN_CROSS = MarkerPath(
     [(-1, 0), (-0.4, 0), (0.4, 0), (1, 0), (0, -1), (0, -0.4), (0, 0.4), (0, 1)],
@@ -56,7 +56,9 @@ def figure_size_px(width: int, height: int, *, title_lines: int = 1) -> tuple[in
     return round(width * scale), round(height * scale) + strip
 
 
-def _gray(image: np.ndarray, width: int, height: int) -> np.ndarray:
+def gray_image(image: np.ndarray, width: int, height: int) -> np.ndarray:
+    """``image`` (2-D, or colour (h, w, 3|4): their mean) as a float array, checked against the
+    camera's ``width`` x ``height``; ``ImageError`` (one line) otherwise."""
     data = np.asarray(image)
     if data.ndim == 3 and data.shape[2] in (3, 4):
         data = data[:, :, :3].astype(float).mean(axis=2)
@@ -133,7 +135,7 @@ def annotation_figure(
     """The annotated image as a matplotlib Figure (see ``annotate_image`` for the arguments)."""
     if not (np.isfinite(residual_scale) and residual_scale > 0):
         raise StarnavError(f"residual_scale must be a positive number, got {shown(residual_scale)}")
-    gray = _gray(image, camera.width, camera.height)
+    gray = gray_image(image, camera.width, camera.height)
     detected = _xy(detected_xy, "detected_xy")
     match = _matched_rows(matched)
     R = np.asarray(R_cam_from_icrs, dtype=float)
@@ -145,7 +147,7 @@ def annotation_figure(
 
     lines = _title_lines(R, camera, title, f"{len(detected)} detected, {len(match)} matched")
     fig_w, fig_h = figure_size_px(camera.width, camera.height, title_lines=len(lines))
-    fig, ax = _image_figure(gray, fig_w, fig_h, len(lines))
+    fig, ax = image_figure(gray, fig_w, fig_h, len(lines))
     rows, xy = project_catalog(catalog, R, camera)
     ids = catalog.ids[rows]
     handles = _catalog_markers(ax, xy, ids, match, catalog, R, camera)
@@ -155,8 +157,8 @@ def annotation_figure(
         handles.append(_residuals_and_ids(ax, match, residual_scale))
     _name_labels(ax, ids, xy, names)
     if handles:
-        _legend(ax, handles)
-    _title(fig, lines, fig_h)
+        dark_legend(ax, handles)
+    figure_title(fig, lines, fig_h)
     return fig
 
 
@@ -168,7 +170,8 @@ def _circles(
                       linewidths=width, label=label)  # fmt: skip
 
 
-def _title(fig: Figure, lines: list[str], fig_h: int) -> None:
+def figure_title(fig: Figure, lines: list[str], fig_h: int) -> None:
+    """The title ``lines`` in the strip above the image of a ``fig_h`` px figure."""
     fig.text(
         0.5,
         1.0 - (TITLE_PAD_PX / 2) / fig_h,
@@ -188,11 +191,11 @@ def unsolved_figure(
     of) as cyan circles numbered by rank, the others as dim circles, and the title ``lines``
     (the reason, what was tried)."""
     height, width = np.asarray(image).shape[:2]
-    gray = _gray(image, width, height)
+    gray = gray_image(image, width, height)
     detected = _xy(detected_xy, "detected_xy")
     lines = list(lines)
     fig_w, fig_h = figure_size_px(width, height, title_lines=len(lines))
-    fig, ax = _image_figure(gray, fig_w, fig_h, len(lines))
+    fig, ax = image_figure(gray, fig_w, fig_h, len(lines))
     handles = []
     given, rest = detected[:used], detected[used:]
     if len(rest):
@@ -202,10 +205,10 @@ def unsolved_figure(
         handles.append(_circles(ax, given, f"brightest {len(given)} (patterns)"))
         for rank, (x, y) in enumerate(given[:_RANKS_SHOWN], start=1):
             ax.annotate(str(rank), (x, y), xytext=(5, 5), textcoords="offset points",
-                        color="cyan", fontsize=7, path_effects=_OUTLINE)  # fmt: skip
+                        color="cyan", fontsize=7, path_effects=OUTLINE)  # fmt: skip
     if handles:
-        _legend(ax, handles)
-    _title(fig, lines, fig_h)
+        dark_legend(ax, handles)
+    figure_title(fig, lines, fig_h)
     return fig
 
 
@@ -217,9 +220,7 @@ def save_figure(fig: Figure, path_out: str | Path) -> None:
         raise StarnavError(f"cannot write image {str(path_out)!r}: {exc}") from None
 
 
-def _image_figure(
-    gray: np.ndarray, fig_w: int, fig_h: int, title_lines: int
-) -> tuple[Figure, Axes]:
+def image_figure(gray: np.ndarray, fig_w: int, fig_h: int, title_lines: int) -> tuple[Figure, Axes]:
     """A ``fig_w`` x ``fig_h`` px figure with the stretched image drawn in starnav's pixel
     convention below a strip for ``title_lines`` lines of title; the figure and the image
     axes."""
@@ -312,7 +313,7 @@ def _residuals_and_ids(ax: Axes, match: np.ndarray, residual_scale: float) -> Li
             textcoords="offset points",
             color="lime",
             fontsize=7,
-            path_effects=_OUTLINE,
+            path_effects=OUTLINE,
             zorder=5,
         )
     return handle
@@ -331,12 +332,12 @@ def _name_labels(ax: Axes, ids: np.ndarray, xy: np.ndarray, names: Mapping[int, 
                 color="yellow",
                 fontsize=10,
                 fontweight="bold",
-                path_effects=_OUTLINE,
+                path_effects=OUTLINE,
                 zorder=6,
             )
 
 
-def _legend(ax: Axes, handles: list) -> None:
+def dark_legend(ax: Axes, handles: list) -> None:
     """The legend of ``handles``, white on translucent black, at the lower left."""
     legend = ax.legend(handles=handles, loc="lower left", fontsize=8, framealpha=0.6)
     legend.get_frame().set_facecolor("black")
