@@ -10,6 +10,7 @@ pixels::
     python benchmarks/images/make_allsky_reference.py solve --files DIR --astrometry WORK
     python benchmarks/images/make_allsky_reference.py build --files DIR --astrometry WORK \
         [--manifest /work/allsky/manifest.json]
+    python benchmarks/images/make_allsky_reference.py table   # docs/allsky.md "The frames"
 
 ``solve`` reads each frame as starnav reads it (``starnav.detect.read.read_image``; a
 gzip-compressed PGM, which starnav does not read, by ``read_frame`` here: the first image of
@@ -120,8 +121,11 @@ def crop_plan(
     return plan, r
 
 
-def solve_crop(pixels, label, cx, cy, side, scale, stem, work: Path) -> dict:
-    """solve-field on one crop; its .wcs, .corr and the crop offset kept in ``work``."""
+def solve_crop(pixels, label, cx, cy, side, scale, stem, work: Path, stretch: float = 1.0) -> dict:
+    """solve-field on one crop; its .wcs, .corr and the crop offset kept in ``work``.
+    ``stretch``: the crop's rows are resampled by this factor first (linear interpolation),
+    for a camera whose pixels are not square (1 / the pixel aspect ratio width / height); the
+    crop's FITS row Y is then our row (Y - 0.5) / stretch + y0."""
     from astropy.io import fits
 
     height, width = pixels.shape
@@ -133,6 +137,12 @@ def solve_crop(pixels, label, cx, cy, side, scale, stem, work: Path) -> dict:
     if x1 - x0 < 64 or y1 - y0 < 64:
         return out | {"solved": False, "why": "crop outside the frame"}
     crop = np.nan_to_num(pixels[y0:y1, x0:x1]).astype(np.float32)
+    if stretch != 1.0:
+        from scipy import ndimage
+
+        rows = crop.shape[0]
+        crop = ndimage.zoom(crop, (stretch, 1.0), order=1, grid_mode=True, mode="nearest")
+        out["stretch"] = crop.shape[0] / rows  # what zoom made of it: row centres scale so
     name = f"{stem}.{label}"
     with tempfile.TemporaryDirectory() as tmp:
         image = Path(tmp) / f"{name}.fits"
@@ -191,7 +201,8 @@ def cmd_solve(args) -> None:
                 continue
             width_deg = side / (r / PX_PER_DISC_RADIUS_DEG)
             scale = (5.0, 100.0) if circle is None else (width_deg / 3, min(150, width_deg * 3))
-            crops.append(solve_crop(pixels, label, cx, cy, side, scale, stem, work))
+            stretch = 1.0 / entry.get("pixel_aspect", 1.0)
+            crops.append(solve_crop(pixels, label, cx, cy, side, scale, stem, work, stretch))
             print(name, json.dumps(crops[-1]), flush=True)
         status[name] = {
             "shape": list(pixels.shape),
@@ -224,7 +235,7 @@ def crop_stars(work: Path, stem: str, crop: dict) -> list[list]:
     x, y = fits_from_starnav(0, 0)  # our (0, 0) in FITS pixels: (0.5, 0.5)
     out = []
     for i in np.nonzero(keep)[0]:
-        xf, yf = fx[i] - x + crop["x0"], fy[i] - y + crop["y0"]
+        xf, yf = fx[i] - x + crop["x0"], (fy[i] - y) / crop.get("stretch", 1.0) + crop["y0"]
         src = f"astrometry.net crop {crop['label']} (log-odds {crop.get('log_odds')})"
         out.append([round(xf, 2), round(yf, 2), round(ra[i], 6), round(dec[i], 6), src])
     return out
@@ -391,9 +402,49 @@ def _spread(stars: list[list]) -> list[list]:
     return [unique[i] for i in pick]
 
 
+def cmd_table(args) -> None:
+    """The frames (block ``allsky-sources`` of docs/allsky.md): where from, licence, what makes
+    each hard, and its reference, from the committed allsky_manifest.json."""
+    sys.path.insert(0, str(ROOT))
+    from benchmarks.harness import DOCS, replace_block, table_head, table_row
+
+    doc = json.loads(OUT.read_text())
+    rows = table_head(
+        "frame", "set", "project", "source (repository @ commit: path)", "licence", "camera",
+        "site / UTC", "what makes it hard", "reference",
+    )  # fmt: skip
+    for f in doc["files"]:
+        ref = f["reference"]
+        site = "site ✓" if f.get("site") else "no site"
+        utc = f"UTC {f['utc']}" if f.get("utc") else "no UTC"
+        method = ref["method"].split(" (")[0]
+        if ref.get("stars"):
+            method += f": {len(ref['stars'])} stars"
+            if ref.get("zenith_offset_deg") is not None:
+                method += f", disc centre {ref['zenith_offset_deg']:.1f}° from the zenith"
+            if ref["method"].startswith("astrometry.net") and not ref.get("confirmed_by"):
+                method += " (one crop, log-odds < 40: unconfirmed)"
+        licence = f["licence"] + ("" if f["redistributable"] else " (not redistributable)")
+        rows.append(table_row(
+            f"`{f['name']}`", f["set"], f["project"],
+            f"{f['repository']} @ {f['commit'][:8]}: `{f['path']}`", licence,
+            f["camera"], f"{site}, {utc}", f["notes"].replace("|", "/"), method,
+        ))  # fmt: skip
+    projects = sorted({f["project"] for f in doc["files"]})
+    held = sorted({f["project"] for f in doc["files"] if f["set"] == "heldback"})
+    head = (
+        f"{len(doc['files'])} frames from {len(projects)} cameras/projects; held back (whole "
+        f"projects, not tuned on): {', '.join(held)}. Rejected when gathered: "
+        f"{len(doc.get('rejected', []))} files (listed in the manifest with the reason)."
+    )
+    replace_block(DOCS / "allsky.md", "allsky-sources", head + "\n\n" + "\n".join(rows))
+    print(head)
+
+
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     sub = parser.add_subparsers(dest="command", required=True)
+    sub.add_parser("table", help="the frames table into docs/allsky.md")
     for name in ("solve", "build"):
         p = sub.add_parser(name)
         p.add_argument("--files", default="/work/allsky/files", help="folder of the frames")
@@ -406,7 +457,7 @@ def main(argv: list[str] | None = None) -> None:
             p.add_argument("--set", choices=("development", "heldback"), help="this set only")
             p.add_argument("--again", action="store_true", help="solve files already tried")
     args = parser.parse_args(argv)
-    {"solve": cmd_solve, "build": cmd_build}[args.command](args)
+    {"solve": cmd_solve, "build": cmd_build, "table": cmd_table}[args.command](args)
 
 
 if __name__ == "__main__":

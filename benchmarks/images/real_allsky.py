@@ -242,8 +242,11 @@ class Reference:
         that the next crop, matched there, puts right). None outside every crop's interior."""
         best, margin = None, 0.0
         for crop, wcs in self.crops:
-            fx, fy = x - crop["x0"] + 0.5, y - crop["y0"] + 0.5  # crop FITS pixel, 1-based
-            inside = min(fx, crop["width"] - fx, fy, crop["height"] - fy)
+            stretch = crop.get("stretch", 1.0)  # rows resampled for non-square pixels
+            fx, fy = x - crop["x0"] + 0.5, (y - crop["y0"]) * stretch + 0.5  # crop FITS pixel
+            inside = min(
+                fx, crop["width"] - fx, (fy - 0.5) / stretch, crop["height"] - (fy - 0.5) / stretch
+            )
             inside /= min(crop["width"], crop["height"])
             if inside > max(margin, CROP_EDGE):
                 best, margin = (crop, wcs, fx, fy), inside
@@ -296,6 +299,24 @@ def score(answer: dict, ref: Reference, catalog) -> dict:
         "worst_star_deg": round(worst, 3),
         "boresight_deg": None if boresight is None else round(boresight, 3),
     }
+
+
+def score_try(got: dict, name: str, ref: Reference, catalog) -> None:
+    """Adds ``score`` (and on the KHO frame ``kho_hand_ids``) to a solved CLI run."""
+    answer = got.get("answer")
+    if not (answer and answer.get("solved")):
+        return
+    unchecked = {"verdict": "unchecked", "why": "no reference"}
+    got["score"] = score(answer, ref, catalog) if ref.usable else unchecked
+    if name == KHO_FRAME:
+        agree, wrong, listed = got["kho_hand_ids"] = kho_hand_ids(answer)
+        got["score"]["why"] = "; ".join(
+            w
+            for w in (got["score"].get("why"), f"hand ids {agree} agree, {wrong} wrong of {listed}")
+            if w
+        )
+        if wrong:
+            got["score"]["verdict"] = "WRONG"
 
 
 def kho_hand_ids(answer: dict) -> tuple[int, int, int]:
@@ -351,14 +372,7 @@ def run_frame(entry: dict, folder: Path, modes: list[str], help_text: str, catal
         for args in plans[mode]:
             got = run_cli(path, args)
             answer = got.get("answer")
-            if answer and answer.get("solved"):
-                got["score"] = (
-                    score(answer, ref, catalog)
-                    if ref.usable
-                    else {"verdict": "unchecked", "why": "no reference"}
-                )
-                if entry["name"] == KHO_FRAME:
-                    got["kho_hand_ids"] = kho_hand_ids(answer)
+            score_try(got, entry["name"], ref, catalog)
             tries.append(got)
             print(
                 f"  {entry['name']} ({mode}) {' '.join(args) or '(file only)'}: {outcome(got)}",
@@ -380,7 +394,7 @@ def outcome(got: dict) -> str:
         return f"not solved: {answer.get('reason') or answer.get('failure')}"
     verdict = got["score"]["verdict"]
     if verdict == "ok":
-        return "solved"
+        return "solved" + (f" ({got['score']['why']})" if got["score"].get("why") else "")
     return f"{verdict}: {got['score'].get('why', '')}".rstrip(": ")
 
 
@@ -388,7 +402,7 @@ def mode_summary(tries: list[dict]) -> tuple[str, str, str]:
     """(verdict word, text, seconds) of a mode: the last try (the first solved, else the last)."""
     last = tries[-1]
     text = outcome(last)
-    word = text.split(":")[0]
+    word = text.split(":")[0].split(" (")[0]
     seconds = sum(t.get("wall_s", 0) for t in tries)
     args = " ".join(last["args"]) or "(file only)"
     return word, f"{text} — `{args}`", f"{seconds:.1f}"
@@ -449,13 +463,7 @@ def rescore(path: Path, args) -> None:
         r["reference"] = (entries[r["name"]].get("reference") or {}).get("method", "none")
         for tries in r["modes"].values():
             for got in tries:
-                answer = got.get("answer")
-                if answer and answer.get("solved"):
-                    got["score"] = (
-                        score(answer, ref, catalog)
-                        if ref.usable
-                        else {"verdict": "unchecked", "why": "no reference"}
-                    )
+                score_try(got, r["name"], ref, catalog)
     modes = [m for m in ("a", "b", "c") if all(m in r["modes"] for r in results)]
     frames_md, totals_md = tables(results, modes)
     measured = json.loads(path.read_text())["machine"]
