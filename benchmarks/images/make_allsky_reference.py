@@ -316,6 +316,129 @@ def hand_ids(entry: dict) -> list[list] | None:
     return rows
 
 
+def enu_of(radec: np.ndarray, site: dict, utc: str) -> np.ndarray:
+    """East-north-up unit vectors of ICRS (RA, Dec) degrees at the site and time (astropy
+    AltAz, no refraction)."""
+    import astropy.units as u
+    from astropy.coordinates import AltAz, EarthLocation, SkyCoord
+    from astropy.time import Time
+
+    here = EarthLocation(
+        lat=site["lat_deg"] * u.deg,
+        lon=site["lon_deg"] * u.deg,
+        height=(site["height_m"] or 0) * u.m,
+    )
+    sky = SkyCoord(ra=radec[:, 0] * u.deg, dec=radec[:, 1] * u.deg)
+    aa = sky.transform_to(AltAz(obstime=Time(utc), location=here))
+    alt, az = aa.alt.rad, aa.az.rad
+    return np.stack([np.cos(alt) * np.sin(az), np.cos(alt) * np.cos(az), np.sin(alt)], axis=-1)
+
+
+def _project(params: np.ndarray, enu: np.ndarray, lens: str, parity: int) -> np.ndarray:
+    """Pixels of ENU directions through a fisheye looking along the rotated up axis."""
+    from scipy.spatial.transform import Rotation
+
+    cam = Rotation.from_rotvec(params[:3]).apply(enu)  # camera frame: z the optical axis
+    theta = np.arccos(np.clip(cam[:, 2], -1, 1))
+    r = params[3] * (theta if lens == "equidistant" else 2 * np.sin(theta / 2))
+    phi = np.arctan2(cam[:, 1], cam[:, 0])
+    return np.stack([params[4] + r * np.cos(phi), params[5] + parity * r * np.sin(phi)], axis=-1)
+
+
+def fit_camera(xy: np.ndarray, enu: np.ndarray, scale_px: float, centre: tuple[float, float]):
+    """Best (rms px, params, lens, parity) of an upward fisheye fitted to stars' pixels and
+    ENU directions: optical axis and roll (a rotation vector), focal length, centre; both
+    parities, equidistant and equisolid, twelve starting rolls."""
+    from scipy.optimize import least_squares
+
+    best = None
+    for lens in ("equidistant", "equisolid"):
+        for parity in (1, -1):
+            for roll in np.radians(np.arange(0, 360, 30)):
+                start = np.array([0.0, 0.0, roll, scale_px, centre[0], centre[1]])
+                fit = least_squares(
+                    lambda p, lens=lens, parity=parity: (
+                        _project(p, enu, lens, parity) - xy
+                    ).ravel(),
+                    start,
+                    loss="soft_l1",
+                    f_scale=3.0,
+                )
+                resid = np.hypot(*(_project(fit.x, enu, lens, parity) - xy).T)
+                rms = float(np.sqrt(np.mean(resid**2)))
+                if best is None or rms < best[0]:
+                    best = (rms, fit.x, lens, parity, float(np.max(resid)))
+    return best
+
+
+TRANSFER_MAX_RMS_PX = 3.0
+TRANSFER_MAG = 3.0  # the bright stars predicted on the target frame
+TRANSFER_MIN_ALT_DEG = 20.0
+
+
+def transferred_stars(entry: dict, files: list[dict]) -> dict | None:
+    """Reference stars for a frame astrometry.net did not solve, from another frame of the
+    same camera (same project, camera and disc) that has reference stars: an upward fisheye
+    fitted to that frame's stars (site and UTC: their altitude and azimuth), the Hipparcos
+    stars to magnitude 3 above 20° put through it at this frame's UTC. Only when the fit's rms
+    is under 3 px; the camera must not have moved between the two frames (a check: the fit of
+    one sibling predicting the other's stars, when there are two)."""
+    if not (entry.get("site") and entry.get("utc")):
+        return None
+    siblings = [
+        f for f in files
+        if f is not entry and f["project"] == entry["project"] and f["camera"] == entry["camera"]
+        and f.get("utc") and f["reference"].get("stars")
+        and "transfer" not in f["reference"]["method"]
+    ]  # fmt: skip
+    for sib in siblings:
+        stars = sib["reference"]["stars"]
+        xy = np.array([s[:2] for s in stars], float)
+        enu = enu_of(np.array([s[2:4] for s in stars], float), sib["site"], sib["utc"])
+        circle = sib["reference"].get("circle_px") or [*xy.mean(axis=0), 0.0]
+        scale = (circle[2] or 500.0) / (np.pi / 2)
+        rms, params, lens, parity, worst = fit_camera(xy, enu, scale, tuple(circle[:2]))
+        if rms > TRANSFER_MAX_RMS_PX:
+            continue
+        from starnav.catalog import load_catalog
+
+        cat = load_catalog().brighter_than(TRANSFER_MAG)
+        radec = np.stack([cat.ra_deg, cat.dec_deg], axis=-1)
+        target = enu_of(radec, entry["site"], entry["utc"])
+        up = target[:, 2] > np.sin(np.radians(TRANSFER_MIN_ALT_DEG))
+        pix = _project(params, target[up], lens, parity)
+        src = (
+            f"transfer from {sib['name']} ({lens} fisheye fitted to its {len(stars)} reference "
+            f"stars: rms {rms:.2f} px, worst {worst:.1f} px; Hp <= {TRANSFER_MAG:g}, alt >= "
+            f"{TRANSFER_MIN_ALT_DEG:g} deg)"
+        )
+        out = [
+            [round(float(x), 2), round(float(y), 2), round(float(ra), 6), round(float(dec), 6), src]
+            for (x, y), (ra, dec) in zip(pix, radec[up], strict=True)
+        ]
+        checks = {}  # the fit predicting the other siblings' reference stars (px)
+        for other in siblings:
+            if other is sib:
+                continue
+            o_xy = np.array([s[:2] for s in other["reference"]["stars"]], float)
+            o_enu = enu_of(
+                np.array([s[2:4] for s in other["reference"]["stars"]], float),
+                other["site"],
+                other["utc"],
+            )
+            miss = np.hypot(*(_project(params, o_enu, lens, parity) - o_xy).T)
+            checks[other["name"]] = round(float(np.median(miss)), 2)
+        return {
+            "method": src,
+            "stars": out[:MAX_STARS],
+            "transfer_fit_rms_px": round(rms, 2),
+            "scale_deg_per_px": round(float(np.degrees(1.0 / params[3])), 5),  # at the axis
+            "uncertainty_deg": round(float(2 * rms * np.degrees(1.0 / params[3])), 3),
+            "transfer_check_median_px": checks,
+        }
+    return None
+
+
 def cmd_build(args) -> None:
     manifest = json.loads(Path(args.manifest).read_text())
     work = Path(args.astrometry)
@@ -372,6 +495,11 @@ def cmd_build(args) -> None:
                 ref["stars"] = hand
         entry["reference"] = ref
         files.append(entry)
+    for entry in files:  # a frame without stars: a sibling frame's fitted camera, if any
+        if "stars" not in entry["reference"]:
+            transfer = transferred_stars(entry, files)
+            if transfer:
+                entry["reference"].update(transfer)
     doc = {
         "about": (
             "Real all-sky / meteor frames (metadata only: the bytes are other projects' files; "
