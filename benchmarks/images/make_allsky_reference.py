@@ -121,11 +121,8 @@ def crop_plan(
     return plan, r
 
 
-def solve_crop(pixels, label, cx, cy, side, scale, stem, work: Path, stretch: float = 1.0) -> dict:
-    """solve-field on one crop; its .wcs, .corr and the crop offset kept in ``work``.
-    ``stretch``: the crop's rows are resampled by this factor first (linear interpolation),
-    for a camera whose pixels are not square (1 / the pixel aspect ratio width / height); the
-    crop's FITS row Y is then our row (Y - 0.5) / stretch + y0."""
+def solve_crop(pixels, label, cx, cy, side, scale, stem, work: Path) -> dict:
+    """solve-field on one crop; its .wcs, .corr and the crop offset kept in ``work``."""
     from astropy.io import fits
 
     height, width = pixels.shape
@@ -137,12 +134,6 @@ def solve_crop(pixels, label, cx, cy, side, scale, stem, work: Path, stretch: fl
     if x1 - x0 < 64 or y1 - y0 < 64:
         return out | {"solved": False, "why": "crop outside the frame"}
     crop = np.nan_to_num(pixels[y0:y1, x0:x1]).astype(np.float32)
-    if stretch != 1.0:
-        from scipy import ndimage
-
-        rows = crop.shape[0]
-        crop = ndimage.zoom(crop, (stretch, 1.0), order=1, grid_mode=True, mode="nearest")
-        out["stretch"] = crop.shape[0] / rows  # what zoom made of it: row centres scale so
     name = f"{stem}.{label}"
     with tempfile.TemporaryDirectory() as tmp:
         image = Path(tmp) / f"{name}.fits"
@@ -189,6 +180,14 @@ def cmd_solve(args) -> None:
             print(f"{name}: not in {args.files}", flush=True)
             continue
         pixels = read_frame(path)
+        stretch = 1.0
+        if entry.get("pixel_aspect"):  # non-square pixels: rows resampled, all else on that
+            from scipy import ndimage
+
+            rows = pixels.shape[0]
+            zoom = (1.0 / entry["pixel_aspect"], 1.0)
+            pixels = ndimage.zoom(pixels, zoom, order=1, grid_mode=True, mode="nearest")
+            stretch = pixels.shape[0] / rows  # row centres scale by what zoom made of it
         circle = find_image_circle(pixels)
         plan, r = crop_plan(pixels.shape, circle)
         stem = Path(name).name.split(".")[0]
@@ -201,9 +200,14 @@ def cmd_solve(args) -> None:
                 continue
             width_deg = side / (r / PX_PER_DISC_RADIUS_DEG)
             scale = (5.0, 100.0) if circle is None else (width_deg / 3, min(150, width_deg * 3))
-            stretch = 1.0 / entry.get("pixel_aspect", 1.0)
-            crops.append(solve_crop(pixels, label, cx, cy, side, scale, stem, work, stretch))
+            crops.append(solve_crop(pixels, label, cx, cy, side, scale, stem, work))
+            if stretch != 1.0:
+                crops[-1]["stretch"] = stretch  # x0, y0, width, height: in stretched rows
             print(name, json.dumps(crops[-1]), flush=True)
+        if status_path.exists():  # another process may have added frames meanwhile
+            status = json.loads(status_path.read_text()) | {
+                k: v for k, v in status.items() if k == name
+            }
         status[name] = {
             "shape": list(pixels.shape),
             "circle": None if circle is None else [circle.cx, circle.cy, circle.radius_px],
@@ -235,7 +239,7 @@ def crop_stars(work: Path, stem: str, crop: dict) -> list[list]:
     x, y = fits_from_starnav(0, 0)  # our (0, 0) in FITS pixels: (0.5, 0.5)
     out = []
     for i in np.nonzero(keep)[0]:
-        xf, yf = fx[i] - x + crop["x0"], (fy[i] - y) / crop.get("stretch", 1.0) + crop["y0"]
+        xf, yf = fx[i] - x + crop["x0"], (fy[i] - y + crop["y0"]) / crop.get("stretch", 1.0)
         src = f"astrometry.net crop {crop['label']} (log-odds {crop.get('log_odds')})"
         out.append([round(xf, 2), round(yf, 2), round(ra[i], 6), round(dec[i], 6), src])
     return out
@@ -432,8 +436,8 @@ def transferred_stars(entry: dict, files: list[dict]) -> dict | None:
             "method": src,
             "stars": out[:MAX_STARS],
             "transfer_fit_rms_px": round(rms, 2),
-            "scale_deg_per_px": round(float(np.degrees(1.0 / params[3])), 5),  # at the axis
-            "uncertainty_deg": round(float(2 * rms * np.degrees(1.0 / params[3])), 3),
+            "scale_deg_per_px": round(float(np.degrees(1.0 / abs(params[3]))), 5),  # at the axis
+            "uncertainty_deg": round(float(2 * rms * np.degrees(1.0 / abs(params[3]))), 3),
             "transfer_check_median_px": checks,
         }
     return None
@@ -451,8 +455,14 @@ def cmd_build(args) -> None:
         stem = Path(entry["name"]).name.split(".")[0]
         if got is not None:
             solved = [c for c in got["crops"] if c["solved"]]
-            ref["circle_px"] = (
-                None if got["circle"] is None else [round(v, 1) for v in got["circle"]]
+            stretch = next((c["stretch"] for c in got["crops"] if "stretch" in c), 1.0)
+            ref["circle_px"] = (  # centre x, y and radius (in columns: rows may be stretched)
+                None
+                if got["circle"] is None
+                else [
+                    round(v, 1)
+                    for v in (got["circle"][0], got["circle"][1] / stretch, got["circle"][2])
+                ]
             )
             ref["crops"] = [
                 {
@@ -480,7 +490,7 @@ def cmd_build(args) -> None:
                     cx, cy = (got["circle"] or [got["shape"][1] / 2, got["shape"][0] / 2])[:2]
                     fx, fy = fits_from_starnav(cx - centre["x0"], cy - centre["y0"])
                     ra, dec = _wcs(work / f"{stem}.{centre['label']}.wcs").all_pix2world(fx, fy, 1)
-                    ref["centre_px"] = [round(cx, 1), round(cy, 1)]
+                    ref["centre_px"] = [round(cx, 1), round(cy / centre.get("stretch", 1.0), 1)]
                     ref["centre_radec_deg"] = [round(float(ra), 4), round(float(dec), 4)]
                     if entry.get("site") and entry.get("utc"):
                         zen = zenith_radec_deg(entry["site"], entry["utc"])

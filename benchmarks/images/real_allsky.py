@@ -20,7 +20,8 @@ subprocess per solve, as a user runs it) three ways:
   length / pixel size, the site and the UTC, each through the option ``starnav solve --help``
   offers for it (``DESCRIPTION_OPTIONS``); a disc field the command line cannot take directly
   is given as ``--fov-deg``, the horizontal field across the image width that the lens model
-  and the reference's disc radius imply.
+  and the disc's radius imply (the disc as a user would measure it on the frame:
+  ``starnav.detect.circle.find_image_circle``).
 
 Scoring (``score``): an answer is WRONG when any identified star's solved pixel lies more than
 0.5° (``WRONG_DEG``) from where the reference puts that catalog star (the angle between the
@@ -169,10 +170,10 @@ def width_fov_deg(entry: dict, lens: str, circle_fov_deg: float) -> float | None
     reference's, measured on the frame) spans ``circle_fov_deg``: r(theta) of the lens model
     through the disc edge, evaluated at half the width (the field beyond the lens's largest
     angle: 360°, the widest the command line takes)."""
-    circle = (entry.get("reference") or {}).get("circle_px")
-    if not circle:
+    circle = _CIRCLES.get(entry["name"])
+    if circle is None:
         return None
-    radius, half_width = circle[2], entry_width(entry) / 2
+    radius, half_width = circle.radius_px, entry_width(entry) / 2
     edge = math.radians(circle_fov_deg / 2)
     forward = {
         "equidistant": (lambda t: t, lambda r: r),
@@ -193,6 +194,7 @@ def entry_width(entry: dict) -> int:
 
 
 _SHAPES: dict[str, tuple[int, int]] = {}
+_CIRCLES: dict[str, object] = {}  # the sky disc a user would measure (find_image_circle)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -247,10 +249,8 @@ class Reference:
         best, margin = None, 0.0
         for crop, wcs in self.crops:
             stretch = crop.get("stretch", 1.0)  # rows resampled for non-square pixels
-            fx, fy = x - crop["x0"] + 0.5, (y - crop["y0"]) * stretch + 0.5  # crop FITS pixel
-            inside = min(
-                fx, crop["width"] - fx, (fy - 0.5) / stretch, crop["height"] - (fy - 0.5) / stretch
-            )
+            fx, fy = x - crop["x0"] + 0.5, y * stretch - crop["y0"] + 0.5  # crop FITS pixel
+            inside = min(fx, crop["width"] - fx, fy, crop["height"] - fy)
             inside /= min(crop["width"], crop["height"])
             if inside > max(margin, CROP_EDGE):
                 best, margin = (crop, wcs, fx, fy), inside
@@ -353,8 +353,12 @@ def run_frame(entry: dict, folder: Path, modes: list[str], help_text: str, catal
     from starnav.detect.read import read_image
 
     path = folder / entry["name"]
+    from starnav.detect.circle import find_image_circle
+
     try:
-        _SHAPES[entry["name"]] = read_image(path).shape
+        pixels = read_image(path)
+        _SHAPES[entry["name"]] = pixels.shape
+        _CIRCLES[entry["name"]] = find_image_circle(pixels)
     except Exception as exc:
         _SHAPES[entry["name"]] = (0, 0)
         print(f"  {entry['name']}: starnav cannot read it: {exc}", file=sys.stderr)

@@ -61,6 +61,9 @@ def test_manifest_entries_say_where_each_frame_comes_from():
         assert f["set"] in ("development", "heldback")
         assert f["lens"] in LENSES
         assert f["kind"] in ("all-sky", "meteor")
+        ref = f["reference"]
+        assert ref["method"]
+        assert ref.get("uncertainty_deg", 0.0) >= 0.0 and ref.get("scale_deg_per_px", 1.0) > 0.0
 
 
 def test_whole_projects_are_held_back():
