@@ -17,8 +17,9 @@ gzip-compressed PGM, which starnav does not read, by ``read_frame`` here: the fi
 the stack, row 0 at the top), finds the sky disc (``starnav.detect.circle.find_image_circle``,
 used only to place the crops; the image centre and half the shorter side without a disc) and
 cuts square crops of side 0.5 R (about 40-45° of sky for a 180° fisheye of disc radius R) at
-the disc centre, then 0.7 R and 0.35 R when that fails, and, once the centre solves, two more
-at 0.45 R right of and above the centre. Each crop goes to solve-field as a FITS file with
+the disc centre, then 0.7 R and 0.35 R when that fails, then the whole frame (told 5°-100°:
+a camera that is not a fisheye), and, once the centre solves, two more at 0.45 R right of and
+above the centre. Each crop goes to solve-field as a FITS file with
 ``data[0]`` as FITS row 1, so FITS pixel (X, Y) of the crop is our (X - 0.5 + x0, Y - 0.5 + y0)
 in the full frame (x0, y0: the crop's top-left corner in whole pixels; our convention: the
 top-left pixel's centre at (0.5, 0.5)). solve-field runs as::
@@ -117,6 +118,7 @@ def crop_plan(
         cx, cy, r = width / 2, height / 2, min(width, height) / 2
     plan = [("centre", cx, cy, 0.5 * r), ("centre_wide", cx, cy, 0.7 * r)]
     plan += [("centre_narrow", cx, cy, 0.35 * r)]
+    plan += [("centre_full", width / 2, height / 2, max(width, height))]  # a narrow camera
     plan += [("right", cx + 0.45 * r, cy, 0.5 * r), ("up", cx, cy - 0.45 * r, 0.5 * r)]
     return plan, r
 
@@ -199,7 +201,9 @@ def cmd_solve(args) -> None:
             if not label.startswith("centre") and not centre_done:
                 continue
             width_deg = side / (r / PX_PER_DISC_RADIUS_DEG)
-            scale = (5.0, 100.0) if circle is None else (width_deg / 3, min(150, width_deg * 3))
+            scale = (width_deg / 3, min(150, width_deg * 3))
+            if circle is None or label == "centre_full":
+                scale = (5.0, 100.0)
             crops.append(solve_crop(pixels, label, cx, cy, side, scale, stem, work))
             if stretch != 1.0:
                 crops[-1]["stretch"] = stretch  # x0, y0, width, height: in stretched rows
