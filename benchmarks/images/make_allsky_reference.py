@@ -384,6 +384,53 @@ TRANSFER_MAG = 3.0  # the bright stars predicted on the target frame
 TRANSFER_MIN_ALT_DEG = 20.0
 
 
+ROTATION_MAX_S = 3600.0  # a fixed camera's frames this close in time share one reference
+
+
+def rotated_reference(entry: dict, files: list[dict]) -> dict | None:
+    """The reference of another frame of the same fixed camera taken within an hour, turned
+    with the sky: what a fixed camera sees at a pixel keeps its hour angle, so its RA grows by
+    the local sidereal time elapsed (astropy, apparent sidereal time at the site); every
+    crop's CRVAL1 and every star's RA are shifted by it (a rotation about the celestial pole,
+    exact for a TAN-SIP WCS referred to north; precession and aberration over an hour are
+    below 0.01°)."""
+    from astropy.time import Time
+
+    if not (entry.get("site") and entry.get("utc")):
+        return None
+    for sib in files:
+        ref = sib["reference"]
+        if sib is entry or not ref.get("crops") or not ref.get("stars") or not sib.get("utc"):
+            continue
+        if (sib["project"], sib["camera"], sib.get("site")) != (
+            entry["project"], entry["camera"], entry["site"],
+        ):  # fmt: skip
+            continue
+        t0, t1 = Time(sib["utc"]), Time(entry["utc"])
+        if abs((t1 - t0).sec) > ROTATION_MAX_S:
+            continue
+        lon = entry["site"]["lon_deg"]
+        shift = float((t1.sidereal_time("apparent", lon) - t0.sidereal_time("apparent", lon)).deg)
+        shift = (shift + 180.0) % 360.0 - 180.0
+        dt = (t1 - t0).sec
+        src = f"sky rotation of {sib['name']}'s reference ({dt:+.0f} s: RA {shift:+.3f} deg)"
+        crops = []
+        for crop in ref["crops"]:
+            crop = dict(crop)
+            if "wcs" in crop:
+                crop["wcs"] = dict(crop["wcs"], CRVAL1=(crop["wcs"]["CRVAL1"] + shift) % 360.0)
+            crops.append(crop)
+        stars = [
+            [x, y, round((ra + shift) % 360.0, 6), dec, src] for x, y, ra, dec, _ in ref["stars"]
+        ]
+        out = {"method": src, "stars": stars, "crops": crops, "uncertainty_deg": 0.05}
+        for key in ("circle_px", "centre_px", "confirmed_by"):
+            if key in ref:
+                out[key] = ref[key]
+        return out
+    return None
+
+
 def transferred_stars(entry: dict, files: list[dict]) -> dict | None:
     """Reference stars for a frame astrometry.net did not solve, from another frame of the
     same camera (same project, camera and disc) that has reference stars: an upward fisheye
@@ -511,7 +558,7 @@ def cmd_build(args) -> None:
         files.append(entry)
     for entry in files:  # a frame without stars: a sibling frame's fitted camera, if any
         if "stars" not in entry["reference"]:
-            transfer = transferred_stars(entry, files)
+            transfer = rotated_reference(entry, files) or transferred_stars(entry, files)
             if transfer:
                 entry["reference"].update(transfer)
     doc = {
