@@ -29,7 +29,7 @@ attitude's error, and the time to predict (astropy) and to solve (detection coun
 median of 5 in one warm process, and the first call of a fresh process (the CLI's case).
 
 Run: python benchmarks/images/allsky_calibration.py [--magic-git DIR] [--kho-later FILE] [--write]
-(--write: the table into docs/allsky_calibration.md). MAGIC is tried only with --magic-git: its
+(--write: the table into docs/allsky.md). MAGIC is tried only with --magic-git: its
 frames are not solved yet by any start (each start's scan runs to its budget, ~25 min).
 """
 
@@ -62,7 +62,7 @@ from starnav.navigation.frames import enu_directions
 from starnav.navigation.mount import mount_prior, predict_attitude
 from starnav.pipeline.image import solve_image
 
-DOC = DOCS / "allsky_calibration.md"
+DOC = DOCS / "allsky.md"
 MAGIC_GIT = Path("/work/.mirror/tudo-astroparticlephysics+all_sky_cloud_detection/repo/.git")
 MAGIC_COMMIT = "e18e137d"
 MAGIC_FRAMES = ("20180816_2101", "20180817_0055", "20180817_0341")

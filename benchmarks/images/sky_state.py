@@ -8,7 +8,7 @@ seen, the clear fraction, the clear cells' limiting magnitude, the cells clear /
 cloudy / no data, what the eye sees in the frame, and the time per frame.
 
 Run: python benchmarks/images/sky_state.py   (prints a markdown table and the machine line;
-writes docs/images/sky_state_kho.png; docs/allsky_sky_state.md holds the table)
+writes docs/images/sky_state_kho.png; docs/allsky.md holds the table)
 """
 
 from __future__ import annotations

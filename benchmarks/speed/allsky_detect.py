@@ -1,10 +1,10 @@
-"""All-sky detection before and after the sky mask, on real frames, for docs/allsky_detection.md.
+"""All-sky detection before and after the sky mask, on real frames, for docs/allsky.md.
 
     nice python benchmarks/speed/allsky_detect.py [FILE ...] [--repeats 3] [--out PATH]
 
 Frames: the files given, else the KHO Sony frame of ``../shared/data/allsky`` and every file
 in the folder ``$STARNAV_ALLSKY_FRAMES`` names (real all-sky frames that may not be committed:
-see docs/allsky_detection.md for where they come from). Each frame is read, binned as
+see docs/allsky.md for where they come from). Each frame is read, binned as
 ``solve_image`` bins it (``pipeline.image.detection_binning``) and detected as a fisheye with
 the default threshold and star count, two ways:
 
@@ -40,7 +40,7 @@ from starnav.detect.stars import detect_stars
 from starnav.pipeline.image import detect_image, detection_binning
 from starnav.pipeline.options import DEFAULT_THRESHOLD_SIGMA, FISHEYE_MAX_STARS
 
-DOC = DOCS / "allsky_detection.md"
+DOC = DOCS / "allsky.md"
 
 
 def frames(args: list[str]) -> list[Path]:
