@@ -737,12 +737,7 @@ def scan_focal(
         tried += 1
         if trial.solution is not None:
             fitted = _with_fitted_centre(trial.solution, solver.database.catalog)
-            result = solver.with_camera(fitted).solve(
-                stars,
-                prior=trial.solution.R_cam_from_icrs,
-                prior_sigma_deg=SCAN_PRIOR_SIGMA_DEG,
-                deadline=deadline,
-            )
+            result = _matched_near(solver, fitted, stars, trial.solution, deadline)
             reason = (
                 f"the brightest {len(few.xy)} stars identified at a focal length of "
                 f"{trial.solution.focal_px:.1f} px, the whole list refused: {result.reason}"
@@ -764,18 +759,24 @@ def scan_focal(
         result = _best_model(result, stars, starts, solver, deadline)
         if any(s.rough for s in starts):  # the principal point again, from every star matched
             fitted = _with_fitted_centre(result.solution, solver.database.catalog)
-            again = solver.with_camera(fitted).solve(
-                stars,
-                prior=result.solution.R_cam_from_icrs,
-                prior_sigma_deg=SCAN_PRIOR_SIGMA_DEG,
-                deadline=deadline,
-            )
+            again = _matched_near(solver, fitted, stars, result.solution, deadline)
             if again.solution is not None and again.solution.n_matched >= result.solution.n_matched:
                 result = again
     ms = elapsed_ms(t0)
     if result.solution is not None:
         return replace(result, solution=replace(result.solution, time_ms=ms), time_ms=ms)
     return replace(result, reason=reason, time_ms=ms)
+
+
+def _matched_near(solver: Solver, camera: CameraModel, stars: StarList, near, deadline):
+    """The whole list solved through ``camera`` by tracking from the attitude of the solution
+    ``near`` (good to ``SCAN_PRIOR_SIGMA_DEG``), falling back to lost in space."""
+    return solver.with_camera(camera).solve(
+        stars,
+        prior=near.R_cam_from_icrs,
+        prior_sigma_deg=SCAN_PRIOR_SIGMA_DEG,
+        deadline=deadline,
+    )
 
 
 def _best_model(result, stars: StarList, starts, solver: Solver, deadline) -> SolveResult:
@@ -791,12 +792,7 @@ def _best_model(result, stars: StarList, starts, solver: Solver, deadline) -> So
         trial = other.with_centre(camera.cx, camera.cy)
         radius = 1.0 / camera.focal_for_radius(1.0, 2.0 * MODEL_MATCH_DEG)  # r / f at 45°
         trial = trial.with_focal(camera.focal_px * radius * trial.focal_for_radius(1.0, 90.0))
-        r = solver.with_camera(trial).solve(
-            stars,
-            prior=found.R_cam_from_icrs,
-            prior_sigma_deg=SCAN_PRIOR_SIGMA_DEG,
-            deadline=deadline,
-        )
+        r = _matched_near(solver, trial, stars, found, deadline)
         s, b = r.solution, best.solution
         if s is not None and (s.n_matched, -s.rms_px) > (b.n_matched, -b.rms_px):
             best = r
