@@ -29,7 +29,8 @@ def test_sky_at_keeps_the_stars_above_the_horizon_and_adds_the_planets_up():
     stars = sky.ids[sky.ids > 0]
     assert set(stars) <= set(cat.ids)
     every = planets(KHO, UTC)
-    up = {int(i) for i, a in zip(every.ids, altitudes_deg(every, KHO, UTC)) if a >= -2.0}
+    alt = altitudes_deg(every, KHO, UTC)
+    up = {int(i) for i, a in zip(every.ids, alt, strict=True) if a >= MIN_ALTITUDE_DEG}
     assert set(int(i) for i in sky.ids if i < 0) == up
 
 
