@@ -43,6 +43,7 @@ import numpy as np
 
 from starnav.camera import CameraModel
 from starnav.catalog import Catalog
+from starnav.catalog.sky import Site as GroundSite
 from starnav.detect.circle import ImageCircle
 from starnav.detect.photometry import local_photometry, zones
 from starnav.errors import StarnavError, shown
@@ -76,22 +77,11 @@ STATES = ("clear", "partly", "cloudy", "no data")
 
 
 @dataclass(frozen=True)
-class Site:
-    """Where and when the frame was taken: geodetic WGS84 latitude, longitude (degrees, East
-    positive), height (m), and the UTC (ISO 8601)."""
+class Site(GroundSite):
+    """Where and when the frame was taken: a ``catalog.sky.Site`` (geodetic WGS84 latitude,
+    longitude, degrees, East positive, height, m: checked there) with the ``utc`` (ISO 8601)."""
 
-    lat_deg: float
-    lon_deg: float
-    height_m: float
-    utc: str
-
-    def __post_init__(self) -> None:
-        if not (math.isfinite(self.lat_deg) and -90.0 <= self.lat_deg <= 90.0):
-            raise StarnavError(f"latitude must be within ±90 degrees, got {shown(self.lat_deg)}")
-        if not (math.isfinite(self.lon_deg) and -360.0 <= self.lon_deg <= 360.0):
-            raise StarnavError(f"longitude must be within ±360 degrees, got {shown(self.lon_deg)}")
-        if not (math.isfinite(self.height_m) and -500.0 <= self.height_m <= 10_000.0):
-            raise StarnavError(f"height must be within -500..10000 m, got {shown(self.height_m)}")
+    utc: str = ""
 
 
 @dataclass(frozen=True)
