@@ -199,7 +199,7 @@ def test_camera_file_without_mount_gives_no_prior(tmp_path):
     ("extra", "message"),
     [
         (["--lat", "50"], "give both --lat and --lon"),
-        (["--lat", "95", "--lon", "10"], "latitude must be within"),
+        (["--lat", "95", "--lon", "10"], "latitude must be in [-90, 90]"),
         (["--plot", "x.jpg"], "ending in .png"),
     ],
 )

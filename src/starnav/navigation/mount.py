@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
+from starnav.catalog.sky import Site
 from starnav.errors import StarnavError
 from starnav.navigation.frames import enu_directions, parse_utc
 
@@ -77,13 +78,8 @@ class Mount:
 
 
 def check_site(lat_deg: float, lon_deg: float, height_m: float = 0.0) -> None:
-    """A one-line error for a site that cannot be."""
-    if not (np.isfinite(lat_deg) and -90.0 <= lat_deg <= 90.0):
-        raise StarnavError(f"latitude must be within -90..90 degrees, got {lat_deg}")
-    if not (np.isfinite(lon_deg) and -360.0 <= lon_deg <= 360.0):
-        raise StarnavError(f"longitude must be within -360..360 degrees, got {lon_deg}")
-    if not (np.isfinite(height_m) and -500.0 <= height_m <= 1e5):
-        raise StarnavError(f"height must be within -500..100000 m, got {height_m}")
+    """A one-line error for a site that cannot be (``catalog.sky.Site`` checks it)."""
+    Site(lat_deg, lon_deg, height_m)
 
 
 def R_enu_from_icrs(time, lat_deg: float, lon_deg: float, height_m: float = 0.0) -> np.ndarray:
