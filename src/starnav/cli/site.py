@@ -1,5 +1,5 @@
 """Where an image was taken, and a fisheye's scale, on the command line: ``--lat --lon
---height`` (with the time, ``cli.field``'s ``--utc``: the sky above the horizon and the
+--height-m`` (with the time, ``cli.field``'s ``--utc``: the sky above the horizon and the
 planets) and ``--circle-fov-deg`` / ``--focal-mm --pixel-um`` (``add_sky_options``), turned
 into solve options (``sky_options``)."""
 
@@ -43,7 +43,7 @@ def add_sky_options(p: argparse.ArgumentParser) -> None:
         help="the site's longitude (degrees, east positive; default: FITS SITELONG)",
     )
     sky.add_argument(
-        "--height", type=finite, default=0.0, help="the site's height (m; default %(default)g)"
+        "--height-m", type=finite, default=0.0, help="the site's height (m; default %(default)g)"
     )
 
 
@@ -55,7 +55,7 @@ def sky_options(args: argparse.Namespace) -> dict:
     return {
         "circle_fov_deg": args.circle_fov_deg,
         "focal_px": _focal_px(args),
-        "site": None if args.lat is None else (args.lat, args.lon, args.height),
+        "site": None if args.lat is None else (args.lat, args.lon, args.height_m),
         "utc": getattr(args, "utc", None),
     }
 

@@ -87,7 +87,7 @@ def _site(args: argparse.Namespace, path: Path):
     from starnav.navigation.frames import parse_utc
 
     parse_utc(utc)  # a bad time fails here, before the solve
-    return Site(args.lat, args.lon, args.height, utc)
+    return Site(args.lat, args.lon, args.height_m, utc)
 
 
 def run(args: argparse.Namespace) -> int:

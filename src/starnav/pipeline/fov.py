@@ -16,6 +16,7 @@ import time
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -29,7 +30,6 @@ from starnav.catalog import (
     load_catalog,
 )
 from starnav.catalog.sky import sky_at
-from starnav.detect.circle import ImageCircle
 from starnav.errors import CatalogError, StarnavError, shown
 from starnav.geometry import radec_to_unit
 from starnav.identify.base import SEARCH_SIGMA_PX, MatchSettings
@@ -50,6 +50,9 @@ from starnav.runtime.budget import (
 )
 from starnav.runtime.caches import process_cache
 from starnav.starlist import StarList, check_star_list
+
+if TYPE_CHECKING:  # the detection stack (sep) is not loaded for a star list's solve
+    from starnav.detect.circle import ImageCircle
 
 # the narrowest horizontal field searched: 1°, where the embedded Gaia DR3 (G <= 10) holds
 # about 8 stars in a 1° x 0.67° image (docs/narrow_fields.md); the whole-sky pattern tables

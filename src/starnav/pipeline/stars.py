@@ -8,11 +8,12 @@ given); otherwise the pinhole FOV search, or a fisheye's focal scan, runs
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from starnav.camera import CameraModel, model_class
 from starnav.catalog import load_catalog
-from starnav.detect.circle import ImageCircle
 from starnav.errors import CameraError, StarnavError
 from starnav.identify import DEFAULT_ALGORITHM
 from starnav.pipeline.fov import known_field_depth, solve_unknown_field
@@ -22,6 +23,9 @@ from starnav.results import Solution, SolveResult
 from starnav.runtime.budget import Deadline, check_budget, default_budget_s
 from starnav.runtime.caches import process_cache
 from starnav.starlist import StarList, check_star_list
+
+if TYPE_CHECKING:  # the detection stack (sep) is not loaded for a star list's solve
+    from starnav.detect.circle import ImageCircle
 
 _SOLVERS = process_cache("prepared solvers", max_items=32)  # of recent options
 
