@@ -58,7 +58,7 @@ def test_a_bad_site_is_a_one_line_error(site, word):
 
 
 def test_a_time_that_cannot_be_read_is_a_one_line_error():
-    from starnav.catalog.sky import utc_time
+    from starnav.catalog.sky import parse_utc
 
-    with pytest.raises(StarnavError, match="cannot read the time"):
-        utc_time("yesterday evening")
+    with pytest.raises(StarnavError, match="is not an ISO 8601 time"):
+        parse_utc("yesterday evening")

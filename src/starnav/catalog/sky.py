@@ -17,6 +17,7 @@ masked by detection. Refraction is ignored: it lifts a star by at most 0.6° at 
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -61,19 +62,34 @@ class Site:
         )
 
 
-def utc_time(utc):
-    """An astropy ``Time`` (UTC) from ISO 8601 text or a ``Time``; a one-line error naming a
-    time that cannot be read."""
+def parse_utc(utc):
+    """An astropy ``Time`` from an ISO 8601 UTC string (a trailing Z is accepted; a ``Time``
+    is returned as it is); a one-line error for another format or a year outside 1900-2200.
+    (Here, below the pipeline and navigation, which both read times.)"""
     from astropy.time import Time
 
     if isinstance(utc, Time):
         return utc
+    text = utc.strip()
+    if text.endswith(("Z", "z")):
+        text = text[:-1]
     try:
-        return Time(str(utc).strip().removesuffix("Z"), scale="utc")
+        t = Time(text, format="isot", scale="utc")
     except ValueError:
         raise StarnavError(
-            f"cannot read the time {utc!r}: give UTC as ISO 8601, e.g. 2024-03-01T21:30:00"
+            f"utc {utc!r} is not an ISO 8601 time (e.g. 2026-03-14T21:30:00Z)"
         ) from None
+    if not 1900 <= t.decimalyear <= 2200:
+        raise StarnavError(f"utc {utc!r} is outside 1900-2200")
+    return t
+
+
+def offline_iers():
+    """A context in which astropy never downloads Earth-orientation tables (the IERS tables
+    the astropy-iers-data package ships are used)."""
+    from astropy.utils import iers
+
+    return iers.conf.set_temp("auto_download", False)
 
 
 def altitudes_deg(catalog: Catalog, site: Site, utc) -> np.ndarray:
@@ -82,8 +98,10 @@ def altitudes_deg(catalog: Catalog, site: Site, utc) -> np.ndarray:
     from astropy.coordinates import AltAz, SkyCoord
 
     stars = SkyCoord(ra=catalog.ra_deg * u.deg, dec=catalog.dec_deg * u.deg, frame="icrs")
-    frame = AltAz(obstime=utc_time(utc), location=site.location())
-    return np.asarray(stars.transform_to(frame).alt.deg)
+    frame = AltAz(obstime=parse_utc(utc), location=site.location())
+    with offline_iers(), warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # "tried to get polar motions for times after IERS data"
+        return np.asarray(stars.transform_to(frame).alt.deg)
 
 
 def planets(site: Site, utc) -> Catalog:
@@ -91,13 +109,15 @@ def planets(site: Site, utc) -> Catalog:
     (GCRS: light time, the site's parallax), ids ``PLANET_IDS``, magnitudes ``PLANET_MAG``."""
     from astropy.coordinates import get_body
 
-    when = utc_time(utc)
+    when = parse_utc(utc)
     where = site.location()
     ra, dec = [], []
     for name in PLANET_IDS:
         # GCRS (ICRS axes, seen from the site): not .icrs, which moves the origin to the
         # solar system's barycentre and the planet by up to 11° (Jupiter)
-        seen = get_body(name, when, where)
+        with offline_iers(), warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            seen = get_body(name, when, where)
         ra.append(float(seen.ra.deg))
         dec.append(float(seen.dec.deg))
     return Catalog(
@@ -126,5 +146,5 @@ def sky_at(catalog: Catalog, site: Site, utc) -> Catalog:
     up = altitudes_deg(joined, site, utc) >= MIN_ALTITUDE_DEG
     order = np.argsort(mag[up], kind="stable")
     rows = np.flatnonzero(up)[order]
-    name = f"{catalog.name} and planets above the horizon at {utc_time(utc).isot[:19]} UTC"
+    name = f"{catalog.name} and planets above the horizon at {parse_utc(utc).isot[:19]} UTC"
     return Catalog(ids[rows], ra[rows], dec[rows], mag[rows], name)

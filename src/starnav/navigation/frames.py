@@ -15,9 +15,10 @@ import numpy as np
 from astropy import units as u
 from astropy.coordinates import ITRS, AltAz, EarthLocation, SkyCoord
 from astropy.time import Time
-from astropy.utils import iers
 
-from starnav.errors import StarnavError
+from starnav.catalog.sky import offline_iers, parse_utc
+
+__all__ = ["enu_directions", "itrs_directions", "parse_utc", "radii_of_curvature_m"]
 
 # WGS84
 _A_M = 6378137.0
@@ -25,29 +26,9 @@ _F = 1.0 / 298.257223563
 _E2 = _F * (2.0 - _F)
 
 
-def parse_utc(utc: str) -> Time:
-    """An astropy ``Time`` from an ISO 8601 UTC string (a trailing Z is accepted)."""
-    text = utc.strip()
-    if text.endswith(("Z", "z")):
-        text = text[:-1]
-    try:
-        t = Time(text, format="isot", scale="utc")
-    except ValueError:
-        raise StarnavError(
-            f"utc {utc!r} is not an ISO 8601 time (e.g. 2026-03-14T21:30:00Z)"
-        ) from None
-    if not 1900 <= t.decimalyear <= 2200:
-        raise StarnavError(f"utc {utc!r} is outside 1900-2200")
-    return t
-
-
-def _offline():
-    return iers.conf.set_temp("auto_download", False)
-
-
 def itrs_directions(ra_deg: np.ndarray, dec_deg: np.ndarray, time: Time) -> np.ndarray:
     """Geocentric apparent directions (n, 3) of stars in the ITRS (Earth-fixed) frame."""
-    with _offline(), warnings.catch_warnings():
+    with offline_iers(), warnings.catch_warnings():
         warnings.simplefilter("ignore")  # "tried to get polar motions for times after IERS data"
         c = SkyCoord(ra=ra_deg * u.deg, dec=dec_deg * u.deg, frame="icrs")
         v = c.transform_to(ITRS(obstime=time)).cartesian.xyz.value.T
@@ -76,7 +57,7 @@ def enu_directions(
         relative_humidity=0.0,
         obswl=0.55 * u.micron,
     )
-    with _offline(), warnings.catch_warnings():
+    with offline_iers(), warnings.catch_warnings():
         warnings.simplefilter("ignore")
         aa = SkyCoord(ra=ra_deg * u.deg, dec=dec_deg * u.deg, frame="icrs").transform_to(frame)
     alt, az = aa.alt.rad, aa.az.rad

@@ -726,9 +726,7 @@ def scan_focal(
     trials = [c for row in itertools.zip_longest(*lists) for c in row if c is not None]
     tried = 0
     lenses = ", ".join(sorted({s.base.model for s in starts}))
-    ranges = " and ".join(
-        f"{min(s.focal_range_px):.1f}-{max(s.focal_range_px):.1f} px" for s in starts[:1]
-    )
+    ranges = f"{min(starts[0].focal_range_px):.1f}-{max(starts[0].focal_range_px):.1f} px"
     for camera, rough in trials:
         few = _scan_stars(stars, camera, inner=rough)
         # a trial at a wrong focal length (or model) can draw thousands of catalog triangles
@@ -791,10 +789,11 @@ def _best_model(result, stars: StarList, starts, solver: Solver, deadline) -> So
     found = result.solution
     camera = found.camera
     best = result
+    field_deg = 2.0 * MODEL_MATCH_DEG
+    radius_px = camera.focal_px / camera.focal_for_radius(1.0, field_deg)  # where 45° lands
     for other in {type(s.base): s.base for s in starts if s.base.model != camera.model}.values():
         trial = other.with_centre(camera.cx, camera.cy)
-        radius = 1.0 / camera.focal_for_radius(1.0, 2.0 * MODEL_MATCH_DEG)  # r / f at 45°
-        trial = trial.with_focal(camera.focal_px * radius * trial.focal_for_radius(1.0, 90.0))
+        trial = trial.with_focal(trial.focal_for_radius(radius_px, field_deg))
         r = _matched_near(solver, trial, stars, found, deadline)
         s, b = r.solution, best.solution
         if s is not None and (s.n_matched, -s.rms_px) > (b.n_matched, -b.rms_px):

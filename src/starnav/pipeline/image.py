@@ -264,7 +264,8 @@ def _detect_binned(pixels: np.ndarray, options: SolveOptions) -> Detections:
     # a block's centre is its pixel's centre times the factor
     circle = found.circle
     if circle is not None:
-        circle = ImageCircle(circle.cx * factor, circle.cy * factor, circle.radius_px * factor)
+        scaled = {name: getattr(circle, name) * factor for name in ("cx", "cy", "radius_px")}
+        circle = replace(circle, **scaled)
     return replace(
         found, xy=found.xy * factor, width=pixels.shape[1], height=pixels.shape[0], circle=circle
     )

@@ -17,7 +17,7 @@ from typing import Any
 
 from starnav.camera import Camera, CameraModel, Fisheye, load_camera, model_class
 from starnav.catalog import Catalog
-from starnav.catalog.sky import Site, utc_time
+from starnav.catalog.sky import Site, parse_utc
 from starnav.errors import CameraError, ImageError, StarnavError, shown
 from starnav.identify import ALGORITHMS, DEFAULT_ALGORITHM
 from starnav.identify.base import SEARCH_SIGMA_PX
@@ -132,7 +132,7 @@ class SolveOptions:
                     f"{name} is a fisheye's scale: give a fisheye --lens, or the pinhole's FOV"
                 )
         if self.utc is not None:
-            object.__setattr__(self, "utc", utc_time(self.utc).utc.isot)
+            object.__setattr__(self, "utc", parse_utc(self.utc).utc.isot)
         if isinstance(self.camera, str | Path):
             object.__setattr__(self, "camera", load_camera(self.camera))
         elif self.camera is not None and not hasattr(self.camera, "pixels_to_bearings"):
