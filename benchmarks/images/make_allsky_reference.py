@@ -31,6 +31,12 @@ top-left pixel's centre at (0.5, 0.5)). solve-field runs as::
 with LO-HI a third to three times the width the disc radius implies (R px for 85°), or
 5°-100° without a disc, its process group killed after 70 s of wall time.
 
+``solve --only NAME --at X Y`` adds a crop of side 0.3 R centred on the pixel (X, Y) of a
+frame already solved (label ``at_X_Y``): a second opinion where a star lies far from the
+centres of the first crops, whose TAN-SIP fits of the fisheye may be off by 10 px there
+(``real_allsky.py`` reads a star's sky direction through the crop holding it farthest
+inside, so a crop centred on it wins).
+
 ``build`` writes tests/data/real/allsky_manifest.json: the manifest's metadata (no image bytes)
 and per frame ``reference``: ``stars`` [[x_px, y_px, ra_deg, dec_deg, source], ...] (at most
 40, spread over the crops), astrometry.net's catalog (Tycho-2) positions of the stars it
@@ -175,6 +181,9 @@ def cmd_solve(args) -> None:
             continue
         if args.set and entry["set"] != args.set:
             continue
+        if args.at:
+            _solve_at(entry, status, args)
+            continue
         if name in status and not args.again:
             continue
         path = Path(args.files) / name
@@ -218,6 +227,30 @@ def cmd_solve(args) -> None:
             "crops": crops,
         }
         status_path.write_text(json.dumps(status, indent=1))
+
+
+def _solve_at(entry: dict, status: dict, args) -> None:
+    """Crops centred on the pixels ``args.at`` of a frame ``solve`` already tried, added to
+    its crops (see the module's docstring)."""
+    name = entry["name"]
+    if name not in status:
+        raise SystemExit(f"{name}: run solve on it first (--at adds to its crops)")
+    got = status[name]
+    pixels = read_frame(Path(args.files) / name)
+    if entry.get("pixel_aspect"):
+        raise SystemExit(f"{name}: --at is not done for non-square pixels")
+    r = got["circle"][2] if got["circle"] else min(pixels.shape) / 2
+    side = 0.3 * r
+    width_deg = side / (r / PX_PER_DISC_RADIUS_DEG)
+    stem = Path(name).name.split(".")[0]
+    for x, y in zip(args.at[::2], args.at[1::2]):
+        label = f"at_{x:.0f}_{y:.0f}"
+        crop = solve_crop(pixels, label, x, y, side, (width_deg / 3, width_deg * 3), stem,
+                          Path(args.astrometry))  # fmt: skip
+        got["crops"] = [c for c in got["crops"] if c["label"] != label] + [crop]
+        print(name, json.dumps(crop), flush=True)
+    status_path = Path(args.astrometry) / "crops.json"
+    status_path.write_text(json.dumps(status, indent=1))
 
 
 def _wcs(path: Path):
@@ -645,6 +678,8 @@ def main(argv: list[str] | None = None) -> None:
             p.add_argument("--only", nargs="*", help="these file names only")
             p.add_argument("--set", choices=("development", "heldback"), help="this set only")
             p.add_argument("--again", action="store_true", help="solve files already tried")
+            p.add_argument("--at", nargs="+", type=float, metavar="X Y",
+                           help="with --only NAME: add crops centred on these pixels")  # fmt: skip
     args = parser.parse_args(argv)
     {"solve": cmd_solve, "build": cmd_build, "table": cmd_table}[args.command](args)
 
