@@ -243,7 +243,9 @@ def _solve_at(entry: dict, status: dict, args) -> None:
     side = 0.3 * r
     width_deg = side / (r / PX_PER_DISC_RADIUS_DEG)
     stem = Path(name).name.split(".")[0]
-    for x, y in zip(args.at[::2], args.at[1::2]):
+    if len(args.at) % 2:
+        raise SystemExit("--at takes pixel pairs: X Y [X Y ...]")
+    for x, y in zip(args.at[::2], args.at[1::2], strict=True):
         label = f"at_{x:.0f}_{y:.0f}"
         crop = solve_crop(pixels, label, x, y, side, (width_deg / 3, width_deg * 3), stem,
                           Path(args.astrometry))  # fmt: skip
