@@ -127,6 +127,8 @@ def _observation(**changes):
             ),
             "not a rotation",
         ),
+        (_observation(gravity_sigma_deg=-1), "gravity_sigma_deg"),
+        (_observation(gravity_sigma_deg="1°"), "gravity_sigma_deg must be a number"),
     ],
 )
 def test_bad_observations_are_one_line_exit_2(tmp_path, capsys, data, needle):
@@ -233,3 +235,34 @@ def test_cli_locate_study_upward_camera(capsys, tmp_path):
     assert main(["locate-study", "--upward-camera", str(tmp_path / "none.json")]) == 2
     err = capsys.readouterr().err.strip()
     assert "none.json does not exist" in err and "\n" not in err
+
+
+def test_an_upward_fisheye_fixes_within_its_stated_levelling():
+    """One levelled upward all-sky camera (an equidistant 180° fisheye): the zenith of the
+    fitted camera is the vertical. Level, the fix is metres off; tilted 1° while gravity still
+    says level, it is ~111 km off, and the 1° the observation states covers it."""
+    from dataclasses import replace
+
+    from starnav.camera.fisheye import Equidistant
+
+    lens = Equidistant.from_fov(180.0, 800)
+    site = {"lat_deg": 78.148, "lon_deg": 16.043, "utc": "2020-12-11T20:09:33"}
+    for tilt_deg in (0.0, 1.0):
+        sky = simulate_observation(
+            **site, heading_deg=30.0, pitch_deg=tilt_deg, mounts=((0.0, 90.0),), camera=lens,
+            mag_limit=5.0, seed=2,
+        )  # fmt: skip
+        level = replace(sky.observation, gravity_body=np.array([0.0, 0.0, 1.0]),
+                        gravity_sigma_deg=1.0)  # fmt: skip
+        fix = locate(level)
+        m_north, m_east = radii_of_curvature_m(site["lat_deg"])
+        north = np.radians(fix.lat_deg - site["lat_deg"]) * m_north
+        east = np.radians(fix.lon_deg - site["lon_deg"]) * np.cos(np.radians(78.148)) * m_east
+        off_m = float(np.hypot(north, east))
+        assert fix.cameras[0].stars_used > 50
+        if tilt_deg == 0.0:
+            assert off_m < 100.0
+        else:
+            assert 0.9 * fix.gravity_north_m < off_m < 1.1 * fix.gravity_north_m
+        assert fix.gravity_north_m == pytest.approx(111_700, rel=0.01)
+        assert fix.to_dict()["gravity_east_m"] == pytest.approx(fix.gravity_east_m)

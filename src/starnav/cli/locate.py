@@ -93,7 +93,13 @@ def run(args: argparse.Namespace) -> int:
         f"{fix.ellipse_angle_deg:.0f}° from North), heading 1σ {fix.sigma_azimuth_arcsec:.2f}″, "
         f"{fix.n_stars} stars, rms {fix.rms_arcsec:.2f}″, {fix.time_ms:.0f} ms"
     )
-    print("  (stars only: a tilt error of the gravity vector adds about 31 m per arcsecond)")
+    if fix.gravity_sigma_deg > 0:
+        print(
+            f"  gravity known to {fix.gravity_sigma_deg:g}° (1σ) adds "
+            f"{fix.gravity_north_m / 1e3:.1f} km north, {fix.gravity_east_m / 1e3:.1f} km east (1σ)"
+        )
+    else:
+        print("  (stars only: a tilt error of the gravity vector adds about 31 m per arcsecond)")
     for view, c in zip(observation.cameras, fix.cameras, strict=True):
         status = (
             f"{c.stars_used} of {c.n_points} points identified, boresight RA {c.ra_deg:.3f}° "

@@ -19,6 +19,7 @@ moves the fix by about 31 m (see docs/locate.md).
 
 from __future__ import annotations
 
+import math
 import time as _time
 from dataclasses import dataclass, field
 
@@ -75,7 +76,9 @@ class Fix:
     stars, ``ellipse_angle_deg``: direction of the major axis from North through East (0-180);
     ``sigma_azimuth_arcsec``: 1-sigma heading error; ``rms_arcsec``: residual of the star
     directions; ``R_body_from_enu``: rows = body axes in (East, North, Up); ``cameras``: one
-    report each; ``time_ms``: identification and fix.
+    report each; ``time_ms``: identification and fix; ``gravity_sigma_deg``: the 1-sigma error
+    of the gravity direction the observation states (a levelled camera's tolerance; 0: not
+    stated), whose position error ``gravity_north_m`` / ``gravity_east_m`` give.
     """
 
     lat_deg: float
@@ -91,9 +94,23 @@ class Fix:
     R_body_from_enu: np.ndarray
     cameras: tuple[CameraReport, ...] = field(default=())
     time_ms: float = 0.0
+    gravity_sigma_deg: float = 0.0
+
+    @property
+    def gravity_north_m(self) -> float:
+        """1-sigma north position error (m) from ``gravity_sigma_deg``: a vertical tilted by an
+        angle moves the fix by that angle of the meridian's arc."""
+        return math.radians(self.gravity_sigma_deg) * radii_of_curvature_m(self.lat_deg)[0]
+
+    @property
+    def gravity_east_m(self) -> float:
+        """1-sigma east position error (m) from ``gravity_sigma_deg`` (the prime vertical's
+        arc)."""
+        return math.radians(self.gravity_sigma_deg) * radii_of_curvature_m(self.lat_deg)[1]
 
     def to_dict(self) -> dict:
         out = {k: v for k, v in self.__dict__.items() if k not in ("R_body_from_enu", "cameras")}
+        out["gravity_north_m"], out["gravity_east_m"] = self.gravity_north_m, self.gravity_east_m
         out["stars_used"] = {c.name: c.stars_used for c in self.cameras}
         out["R_body_from_enu"] = self.R_body_from_enu.tolist()
         out["cameras"] = [c.__dict__ for c in self.cameras]
@@ -236,7 +253,12 @@ def locate(
         sigma_rad=sigma_px / min(scales),
     )
     return Fix(
-        **{**fix.__dict__, "cameras": tuple(reports), "time_ms": (_time.perf_counter() - t0) * 1e3}
+        **{
+            **fix.__dict__,
+            "cameras": tuple(reports),
+            "time_ms": (_time.perf_counter() - t0) * 1e3,
+            "gravity_sigma_deg": observation.gravity_sigma_deg,
+        }
     )
 
 

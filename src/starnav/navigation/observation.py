@@ -38,7 +38,15 @@ from starnav.navigation.images import image_stars
 STANDARD_PRESSURE_HPA = 1013.25
 STANDARD_TEMPERATURE_C = 15.0
 MAX_TIME_SPREAD_S = 1.0  # images whose times differ by more do not make one observation
-_TOP_KEYS = {"utc", "utc_offset_hours", "gravity_body", "pressure_hpa", "temperature_c", "cameras"}
+_TOP_KEYS = {
+    "utc",
+    "utc_offset_hours",
+    "gravity_body",
+    "gravity_sigma_deg",
+    "pressure_hpa",
+    "temperature_c",
+    "cameras",
+}
 _CAMERA_KEYS = {
     "name",
     "camera",
@@ -79,7 +87,8 @@ class CameraView:
 class Observation:
     """``utc`` (ISO 8601 string), ``gravity_body`` (unit vector, body frame), the air
     (``pressure_hpa``, 0 = no refraction; ``temperature_c``) and the ``cameras``;
-    ``utc_source``: where the time came from ("file", or the images' header or tag)."""
+    ``utc_source``: where the time came from ("file", or the images' header or tag);
+    ``gravity_sigma_deg``: the gravity direction's stated 1-sigma error (degrees; 0: none)."""
 
     utc: str
     gravity_body: np.ndarray
@@ -87,6 +96,7 @@ class Observation:
     temperature_c: float
     cameras: tuple[CameraView, ...]
     utc_source: str = "file"
+    gravity_sigma_deg: float = 0.0
 
 
 def mount_from_azimuth_elevation(azimuth_deg: float, elevation_deg: float) -> np.ndarray:
@@ -302,6 +312,7 @@ def parse_observation(data, base_dir: str | Path | None = None) -> Observation:
     norm = float(np.linalg.norm(g))
     if norm < 1e-6:
         raise ObservationError("gravity_body is the zero vector: it must give the down direction")
+    gravity_sigma = _number(data.get("gravity_sigma_deg", 0.0), "gravity_sigma_deg", low=0, high=30)
     pressure = _number(
         data.get("pressure_hpa", STANDARD_PRESSURE_HPA), "pressure_hpa", low=0, high=1200
     )
@@ -325,7 +336,7 @@ def parse_observation(data, base_dir: str | Path | None = None) -> Observation:
             parse_utc(utc)
         except StarnavError as exc:
             raise ObservationError(f"the images' time: {exc}") from None
-    return Observation(utc, g / norm, pressure, temperature, views, source)
+    return Observation(utc, g / norm, pressure, temperature, views, source, gravity_sigma)
 
 
 def read_observation(path: str | Path) -> Observation:
