@@ -117,7 +117,7 @@ def test_cli_calibrates_one_frame_then_tracks_a_later_one(sky, tmp_path, capsys)
     paths, truths = sky
     cam_file, plot = tmp_path / "allsky.json", tmp_path / "residuals.png"
     args = ["calibrate", str(paths[0]), "-o", str(cam_file), "--model", "kannala-brandt"]
-    args += ["--utc", UTCS[0], "--lat", "50", "--lon", "10", "--height", "300"]
+    args += ["--utc", UTCS[0], "--lat", "50", "--lon", "10", "--height-m", "300"]
     assert main([*args, "--plot", str(plot), "--json"]) == 0
     out = json.loads(capsys.readouterr().out)
     assert out["model"] == "kannala-brandt" and out["mount"]["lat_deg"] == 50.0

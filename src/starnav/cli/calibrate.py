@@ -57,7 +57,14 @@ def add_parser(subparsers: Subparsers) -> None:
     )
     fixed.add_argument("--lat", type=finite, help="site latitude (degrees, north positive)")
     fixed.add_argument("--lon", type=finite, help="site longitude (degrees, east positive)")
-    fixed.add_argument("--height", type=finite, default=0.0, help="site height (m, default 0)")
+    fixed.add_argument(
+        "--height-m",
+        "--height",
+        type=finite,
+        default=0.0,
+        dest="height_m",
+        help="site height (m, default 0; --height-m as in solve and sky)",
+    )
     p.add_argument("--plot", help="write the residuals (vs radius and as arrows) to this PNG")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(run=run)
@@ -84,8 +91,8 @@ def _site(args: argparse.Namespace) -> tuple[float, float, float] | None:
         raise StarnavError("give both --lat and --lon (the site), or neither")
     if args.lat is None:
         return None
-    check_site(args.lat, args.lon, args.height)
-    return (args.lat, args.lon, args.height)
+    check_site(args.lat, args.lon, args.height_m)
+    return (args.lat, args.lon, args.height_m)
 
 
 def run(args: argparse.Namespace) -> int:
