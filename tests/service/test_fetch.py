@@ -270,6 +270,8 @@ def test_non_public_addresses_are_refused_before_any_connection(host, host6, url
         ("file:///etc/passwd", "only http and https URLs are fetched, not 'file'"),
         ("http://127.0.0.1:99999/image", "not a valid URL: Port out of range"),
         ("http:///image", "the URL has no host"),
+        ("http://127.0.0.1:0/image", "not a valid URL: port 0"),
+        ("http://127.0.0.1:{port}/\ud800", "a character that is not text"),
     ],
 )
 def test_other_urls_are_refused(host, url, says):
@@ -462,6 +464,9 @@ def test_the_job_queue_is_bounded_and_internal_urls_refused(tmp_path, host):
         assert answer["status"] == "error" and REFUSED in answer["errormessage"], answer
         assert "127.0.0.1 is a loopback address" in answer["errormessage"]
         assert host.requests == []
+        status, _, answer = _post(server.url, "url_upload",
+                                  {"session": session, "url": "http://\ud800/"})  # fmt: skip
+        assert status in (200, 400) and answer["status"] == "error", answer  # no plain 500
         xy = {"session": session, "x": [10.0, 20.0], "y": [15.0, 25.0], "image_width": 64,
               "image_height": 48}  # fmt: skip
         answers = [_post(server.url, "url_upload", xy) for _ in range(3)]

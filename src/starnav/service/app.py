@@ -400,7 +400,8 @@ class NovaApi:
         except FetchBusy as exc:
             return busy(str(exc))
         except FetchError as exc:
-            return error(f"cannot fetch {url[:200]}: {exc}")
+            text = f"cannot fetch {url[:200]}: {exc}"  # a lone surrogate shown escaped
+            return error(text.encode("utf-8", "backslashreplace").decode("utf-8"))
         return self.image_job(data, url.rsplit("/", 1)[-1], args)
 
     def job_or_404(self, request: Request):

@@ -211,10 +211,15 @@ class _Target:
             raise FetchError("URLs with a user name or password are not fetched")
         if not parts.hostname:
             raise FetchError("the URL has no host")
+        if port == 0:
+            raise FetchError("not a valid URL: port 0")
         tls = parts.scheme.lower() == "https"
-        path = urllib.parse.quote(parts.path or "/", safe=_URL_SAFE)
-        if parts.query:
-            path += "?" + urllib.parse.quote(parts.query, safe=_URL_SAFE)
+        try:
+            path = urllib.parse.quote(parts.path or "/", safe=_URL_SAFE)
+            if parts.query:
+                path += "?" + urllib.parse.quote(parts.query, safe=_URL_SAFE)
+        except UnicodeEncodeError:
+            raise FetchError("not a valid URL: it holds a character that is not text") from None
         return cls(tls, parts.hostname, port or (443 if tls else 80), path)
 
 
