@@ -24,6 +24,8 @@ import urllib.request
 from email.message import Message
 
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 pytest.importorskip("starlette", reason="the serve extra is not installed: pip install '.[serve]'")
 
@@ -277,6 +279,22 @@ def test_non_public_addresses_are_refused_before_any_connection(host, host6, url
 def test_other_urls_are_refused(host, url, says):
     with pytest.raises(FetchError, match=says):
         fetch_url(url.format(port=host.port), _policy("127.0.0.1"))
+    assert host.requests == []
+
+
+@settings(
+    max_examples=300, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
+)
+@given(
+    netloc=st.sampled_from(["127.0.0.1:{port}", "[::ffff:127.0.0.1]:{port}", "0.0.0.0:{port}",
+                            "169.254.169.254", "[fd00:ec2::254]", "10.0.0.1"]),
+    tail=st.tuples(st.sampled_from("/?#:@"), st.text()).map("".join),
+)  # fmt: skip
+def test_any_url_to_these_hosts_is_refused_with_a_message(host, netloc, tail):
+    """Whatever follows an internal host (path, query, port, user info, odd characters):
+    a FetchError, never another exception, and no request."""
+    with pytest.raises(FetchError):
+        fetch_url(f"http://{netloc.format(port=host.port)}{tail}", _policy())
     assert host.requests == []
 
 

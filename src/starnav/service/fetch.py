@@ -171,7 +171,6 @@ def fetch_url(url: str, policy: FetchPolicy) -> bytes:
     for _ in range(policy.max_redirects + 1):
         target = _Target.of(url)
         addresses = _checked_addresses(target, policy.allowed)
-        location = None
         try:
             location, body = _get(target, addresses, policy.max_bytes, deadline)
         except FetchError:
@@ -228,7 +227,7 @@ def _checked_addresses(target: _Target, allowed: AllowedHosts) -> list[tuple]:
     allowed; ``FetchError`` naming the first that is not."""
     try:
         infos = socket.getaddrinfo(target.host, target.port, type=socket.SOCK_STREAM)
-    except (socket.gaierror, UnicodeError) as exc:
+    except (OSError, ValueError) as exc:  # no such name, an idna label too long, a NUL
         raise FetchError(f"cannot resolve {target.host}: {exc.args[-1]}") from None
     if target.host.rstrip(".").lower() in allowed.names:
         return infos
