@@ -48,10 +48,12 @@ def nova_server(tmp_path_factory):
     """``starnav serve`` with 2 workers on a free loopback port, its data in a fresh folder,
     for one test module (``service_helpers.Server``: ``url``, ``data_dir``, ``log()``). It
     uses the user's table cache, not the tests' fresh one: the service's tests are not about
-    building tables, and a build would cost each test session half a minute."""
+    building tables, and a build would cost each test session half a minute. URL uploads
+    may fetch from the loopback (the tests' image hosts)."""
     from service_helpers import Server
 
-    server = Server(tmp_path_factory.mktemp("serve"), cache_dir=USER_CACHE_DIR).start()
+    server = Server(tmp_path_factory.mktemp("serve"), cache_dir=USER_CACHE_DIR,
+                    options=("--allow-url-hosts", "127.0.0.1")).start()  # fmt: skip
     yield server
     server.stop()
 

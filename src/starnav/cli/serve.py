@@ -17,6 +17,7 @@ from starnav.cli.common import (
     positive_int,
 )
 from starnav.errors import StarnavError
+from starnav.service.limits import DEFAULT_MAX_QUEUED, DEFAULT_URL_DEADLINE_S
 
 DEFAULT_PORT = 8080
 
@@ -37,6 +38,15 @@ def add_parser(subparsers: Subparsers) -> None:
     p.add_argument("--api-key", help="the key api/login asks for (needed off the loopback)")
     p.add_argument("--max-upload-mb", type=finite, default=100.0,
                    help="largest request body accepted (MB; default 100)")  # fmt: skip
+    p.add_argument("--max-queued", type=positive_int, default=DEFAULT_MAX_QUEUED,
+                   help="jobs waiting for a worker before uploads are answered 503 busy "
+                   f"(default {DEFAULT_MAX_QUEUED})")  # fmt: skip
+    p.add_argument("--allow-url-hosts", default="", metavar="LIST",
+                   help="non-public hosts api/url_upload may fetch from: host names, addresses "
+                   "and CIDR networks, comma-separated (default: none)")  # fmt: skip
+    p.add_argument("--url-timeout", type=finite, default=DEFAULT_URL_DEADLINE_S,
+                   metavar="SECONDS", help="limit of a whole URL fetch "
+                   f"(s; default {DEFAULT_URL_DEADLINE_S:g})")  # fmt: skip
     add_time_budget(p)
     add_dask(p, "the jobs")
     p.add_argument("--json", action="store_true",
@@ -79,15 +89,19 @@ def run(args: argparse.Namespace) -> int:
     check_host(args.host, args.api_key)
     if args.max_upload_mb <= 0:
         raise StarnavError(f"--max-upload-mb must be positive, got {args.max_upload_mb:g}")
+    if args.url_timeout <= 0:
+        raise StarnavError(f"--url-timeout must be positive, got {args.url_timeout:g}")
     try:
         import uvicorn
 
         from starnav.service.app import ServiceConfig, create_app
+        from starnav.service.fetch import AllowedHosts
     except ImportError as exc:
         raise StarnavError(
             f"starnav serve needs the serve extra ({exc.name} is missing): "
             "pip install 'starnav[serve]'"
         ) from None
+    allowed = AllowedHosts.parse(args.allow_url_hosts)
     data_dir = Path(args.data_dir)
     try:
         data_dir.mkdir(parents=True, exist_ok=True)
@@ -100,6 +114,9 @@ def run(args: argparse.Namespace) -> int:
         max_upload_bytes=int(args.max_upload_mb * 1e6),
         time_budget_s=args.time_budget,
         dask_address=args.dask,
+        max_queued=args.max_queued,
+        url_deadline_s=args.url_timeout,
+        allow_url_hosts=allowed,
     )
     _check_port(args.host, args.port)
     url = f"http://{args.host}:{args.port}/"

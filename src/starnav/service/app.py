@@ -27,7 +27,7 @@ import json
 import logging
 import time
 import urllib.request
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from starlette.applications import Starlette
@@ -39,6 +39,18 @@ from starlette.staticfiles import StaticFiles
 
 from starnav.runtime.pools import dask_client, one_blas_thread, process_pool
 from starnav.service import nova
+from starnav.service.fetch import (
+    AllowedHosts,
+    FetchBusy,
+    FetchError,
+    FetchPolicy,
+    FetchQueue,
+)
+from starnav.service.limits import (
+    DEFAULT_MAX_QUEUED,
+    DEFAULT_URL_DEADLINE_S,
+    DEFAULT_URL_FETCHES,
+)
 from starnav.service.store import JobStore
 from starnav.service.worker import OUTPUTS, input_name, run_job
 
@@ -47,7 +59,7 @@ STATIC_DIR = Path(__file__).parent / "static"
 # upload, which _lenient_multipart then reads: not worth a warning per upload
 logging.getLogger("python_multipart").setLevel(logging.ERROR)
 DEFAULT_MAX_UPLOAD_MB = 100.0
-URL_TIMEOUT_S = 30.0
+RETRY_AFTER_S = 5
 RESULT_FILE = "result.json"
 
 
@@ -56,7 +68,9 @@ class ServiceConfig:
     """How the service runs: ``data_dir`` (SQLite file and job directories), ``workers``
     (processes solving at once; with ``dask_address``, jobs at once on that cluster),
     ``api_key`` (None: any key logs in), ``max_upload_bytes``, ``time_budget_s`` per job
-    (None: starnav's defaults)."""
+    (None: starnav's defaults); ``max_queued`` jobs waiting for a worker before uploads are
+    answered 503 "busy"; URL uploads (``starnav.service.fetch``): ``url_deadline_s`` for a
+    whole fetch, ``url_fetches`` at once, from public hosts and those ``allow_url_hosts``."""
 
     data_dir: Path
     workers: int = 1
@@ -64,6 +78,10 @@ class ServiceConfig:
     max_upload_bytes: int = int(DEFAULT_MAX_UPLOAD_MB * 1e6)
     time_budget_s: float | None = None
     dask_address: str | None = None
+    max_queued: int = DEFAULT_MAX_QUEUED
+    url_deadline_s: float = DEFAULT_URL_DEADLINE_S
+    url_fetches: int = DEFAULT_URL_FETCHES
+    allow_url_hosts: AllowedHosts = field(default_factory=AllowedHosts)
 
 
 class Jobs:
@@ -185,6 +203,14 @@ def error(message: str, status_code: int = 200) -> NovaJSON:
     return NovaJSON({"status": "error", "errormessage": message}, status_code=status_code)
 
 
+def busy(message: str) -> NovaJSON:
+    """503 with Retry-After: the server is at one of its limits now; the same request may
+    succeed later."""
+    response = error(message, 503)
+    response.headers["Retry-After"] = str(RETRY_AFTER_S)
+    return response
+
+
 class UploadLimit:
     """ASGI middleware: a request body over ``limit`` bytes gets 413 (by its Content-Length
     before anything is read, or once the bytes received pass the limit)."""
@@ -280,6 +306,9 @@ class NovaApi:
 
     def __init__(self, config: ServiceConfig, store: JobStore, jobs: Jobs):
         self.config, self.store, self.jobs = config, store, jobs
+        policy = FetchPolicy(config.max_upload_bytes, config.url_deadline_s,
+                             config.allow_url_hosts)  # fmt: skip
+        self.fetches = FetchQueue(policy, slots=config.url_fetches)
 
     async def parsed(self, request: Request, *, session: bool):
         """(error response or None, the request's JSON, its form), as nova's decorators
@@ -309,6 +338,15 @@ class NovaApi:
         return NovaJSON({"status": "success", "message": "authenticated user: starnav",
                              "session": self.store.new_session()})  # fmt: skip
 
+    def queue_full(self) -> NovaJSON | None:
+        """503 "busy" when ``max_queued`` jobs wait for a worker, else None."""
+        waiting = self.jobs.queued - self.jobs.running
+        if waiting < self.config.max_queued:
+            return None
+        jobs = "1 job waits" if waiting == 1 else f"{waiting} jobs wait"
+        return busy(f"busy: {jobs} for a worker, this server's limit (--max-queued); try "
+                    "again later")  # fmt: skip
+
     def accepted(self, job_id: int) -> NovaJSON:
         self.jobs.enqueue(job_id)
         return NovaJSON({"status": "success", "subid": job_id, "hash": str(job_id)})
@@ -328,6 +366,8 @@ class NovaApi:
     def image_job(self, data: bytes, original_filename: str, args: dict) -> NovaJSON:
         if not data:
             return error("the uploaded file is empty")
+        if (full := self.queue_full()) is not None:
+            return full
         job_id = self.store.add_job("image", Path(original_filename).name, _hints_only(args))
         name = input_name(data[:16])
         (self.store.job_dir(job_id) / name).write_bytes(data)
@@ -340,6 +380,8 @@ class NovaApi:
             return error('Failed to parse JSON "x" and "y" values -- should be lists of floats')
         if len(x) != len(y):
             return error('"x" and "y" lists must be the same length')
+        if (full := self.queue_full()) is not None:
+            return full
         return self.accepted(self.store.add_job("xy", "json-xy", _hints_only(args, keep_xy=True)))
 
     async def url_upload(self, request: Request):
@@ -351,12 +393,15 @@ class NovaApi:
         url = args.get("url")
         if not isinstance(url, str) or not url.lower().startswith(("http://", "https://")):
             return error('need "url" (http or https), or "x" and "y"')
+        if (full := self.queue_full()) is not None:
+            return full  # before fetching what could not be queued
         try:
-            data = await asyncio.get_running_loop().run_in_executor(
-                None, _fetch, url, self.config.max_upload_bytes
-            )
-        except (OSError, ValueError) as exc:
-            return error(f"cannot fetch {url}: {exc}")
+            data = await self.fetches.fetch(url)
+        except FetchBusy as exc:
+            return busy(str(exc))
+        except FetchError as exc:
+            text = f"cannot fetch {url[:200]}: {exc}"  # a lone surrogate shown escaped
+            return error(text.encode("utf-8", "backslashreplace").decode("utf-8"))
         return self.image_job(data, url.rsplit("/", 1)[-1], args)
 
     def job_or_404(self, request: Request):
@@ -455,9 +500,11 @@ def create_app(config: ServiceConfig) -> Starlette:
         await jobs.start()
         yield
         await jobs.stop()
+        api.fetches.close()
         store.close()
 
-    app = Starlette(routes=NovaApi(config, store, jobs).routes(), lifespan=lifespan)
+    api = NovaApi(config, store, jobs)
+    app = Starlette(routes=api.routes(), lifespan=lifespan)
     app.state.store, app.state.jobs = store, jobs
     app.add_middleware(UploadLimit, limit=config.max_upload_bytes)
     return app
@@ -468,18 +515,6 @@ def _hints_only(args: dict, keep_xy: bool = False) -> dict:
     without a source list."""
     drop = {"session"} | (set() if keep_xy else {"x", "y"})
     return {k: v for k, v in args.items() if k not in drop}
-
-
-def _fetch(url: str, limit: int) -> bytes:
-    """The bytes at ``url`` (at most ``limit``; ``ValueError`` past it)."""
-    req = urllib.request.Request(url, headers={"User-Agent": "starnav-serve"})
-    with urllib.request.urlopen(
-        req, timeout=URL_TIMEOUT_S
-    ) as resp:  # http(s) only: checked by the caller
-        data = resp.read(limit + 1)
-    if len(data) > limit:
-        raise ValueError(f"larger than this server's limit of {limit / 1e6:g} MB")
-    return data
 
 
 def wait_ready(url: str, timeout_s: float = 30.0) -> None:
