@@ -26,7 +26,7 @@ from starnav.service.privacy import SESSION_COOKIE
 from starnav.service.store import JobStore
 
 pytestmark = pytest.mark.service
-slow = pytest.mark.slow  # the tests of a server process: two servers, five solves, 25 s
+slow = pytest.mark.slow  # the tests of a server process: two servers and their solves
 
 KEY = "the operator's key"
 JOB_ROUTES = ["api/submissions/{}", "api/jobs/{}", "api/jobs/{}/calibration", "api/jobs/{}/info",

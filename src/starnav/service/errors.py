@@ -24,7 +24,7 @@ from starnav.errors import StarnavError
 
 log = logging.getLogger("starnav.service")
 
-MAX_JSON_BYTES = 1 << 20  # a source list of 20 000 stars is about 0.8 MB of request-json
+MAX_JSON_BYTES = 1 << 20  # 20 000 stars' x and y (random pixels, Python's floats): 0.78 MB
 MAX_JSON_DEPTH = 16  # nova's request is an object of numbers, strings and lists: depth 2
 ECHO_CHARS = 100  # how much of a client's text an error message repeats
 
