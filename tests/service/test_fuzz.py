@@ -76,13 +76,21 @@ methods = st.sampled_from(["GET", "POST", "POST", "PUT", "DELETE", "PATCH", "OPT
 @pytest.fixture(scope="module")
 def app_client(tmp_path_factory):
     """The service with an API key and one worker process (a 1 s budget: a random source list
-    that is queued costs little), raising nothing to the test: a 500 is seen as one."""
+    that is queued costs little), raising nothing to the test: a 500 is seen as one. Job 1 is
+    private, job 2 public (source lists of the fuzz's session)."""
     config = ServiceConfig(data_dir=tmp_path_factory.mktemp("fuzz"), workers=1, api_key=API_KEY,
                            max_upload_bytes=MAX_UPLOAD, time_budget_s=1.0)  # fmt: skip
     with TestClient(create_app(config), raise_server_exceptions=False) as client:
         client.session_key = client.post(
             "/api/login", data={"request-json": json.dumps({"apikey": API_KEY})}
         ).json()["session"]
+        client.cookies.clear()  # the login's cookie: sent only where a test says so
+        for visible in ("n", "y"):
+            args = {"session": client.session_key, "x": [1, 2, 3, 4, 5], "y": [5, 1, 4, 2, 3],
+                    "image_width": 10, "image_height": 10, "publicly_visible": visible}  # fmt: skip
+            client.post("/api/url_upload", data={"request-json": json.dumps(args)})
+        assert client.get("/api/jobs/1").status_code == 404  # private
+        assert client.get(f"/api/jobs/1?session={client.session_key}").status_code == 200
         yield client
 
 
@@ -188,14 +196,17 @@ def test_random_bodies_and_files(app_client, route, body, content_type, as_file,
     method=methods,
     slash=st.booleans(),
     cookie=st.one_of(st.none(), st.text(PRINTABLE_ASCII, max_size=60)),
+    own=st.booleans(),
 )
-def test_random_paths_ids_and_queries(app_client, route, number, query, method, slash, cookie):
+def test_random_paths_ids_and_queries(app_client, route, number, query, method, slash, cookie,
+                                      own):  # fmt: skip
     """Job numbers (huge, negative, not numbers), odd paths and query strings, any method,
-    a random Cookie header (read for a private job: the fuzz's uploads made some)."""
+    a random Cookie header (read for job 1, which is private), the job's own session in the
+    query string or not."""
     segment = urllib.parse.quote(number.encode("utf-8", "surrogatepass"), safe="")
     path = route.format(segment) + ("/" if slash else "")
     if isinstance(query, dict):
-        path += "?" + urlencoded(query)
+        path += "?" + urlencoded({**query, **({"session": app_client.session_key} if own else {})})
     elif query is not None:  # raw: its own & and = (and anything else as bytes)
         path += "?" + urllib.parse.quote(_bytes(query), safe="&=")
     headers = {} if cookie is None else {"cookie": cookie}
