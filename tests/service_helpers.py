@@ -41,12 +41,21 @@ class Server:
     """One ``starnav serve`` process (``workers`` worker processes, jobs under ``data_dir``);
     its output goes to ``data_dir/server.log``. ``start`` again after ``stop`` or ``kill`` to
     restart it on the same data dir and port. ``cache_dir``: its STARNAV_CACHE_DIR (None: the
-    default cache); ``options``: more of ``starnav serve``'s options."""
+    default cache); ``api_key``: its --api-key; ``options``: more of ``starnav serve``'s
+    options."""
 
-    def __init__(self, data_dir: Path, *, workers: int = 2, port: int | None = None,
-                 cache_dir=None, options: tuple[str, ...] = ()):  # fmt: skip
+    def __init__(
+        self,
+        data_dir: Path,
+        *,
+        workers: int = 2,
+        port: int | None = None,
+        cache_dir=None,
+        api_key: str | None = None,
+        options: tuple[str, ...] = (),
+    ):
         self.data_dir, self.workers, self.cache_dir = Path(data_dir), workers, cache_dir
-        self.options = options
+        self.api_key, self.options = api_key, options
         self.port = port or free_port()
         self.url = f"http://127.0.0.1:{self.port}"
         self.proc: subprocess.Popen | None = None
@@ -56,6 +65,8 @@ class Server:
         cmd = [sys.executable, "-m", "starnav.cli", "serve", "--port", str(self.port),
                "--data-dir", str(self.data_dir), "--workers", str(self.workers),
                *self.options]  # fmt: skip
+        if self.api_key is not None:
+            cmd += ["--api-key", self.api_key]
         env = {k: v for k, v in os.environ.items() if k != "STARNAV_CACHE_DIR"}
         if self.cache_dir is not None:
             env["STARNAV_CACHE_DIR"] = str(self.cache_dir)

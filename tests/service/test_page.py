@@ -5,7 +5,8 @@ its reference answer (tests/data/images/reference.json; the image: the Lyra fram
 tetra3 as a PNG, made from upstream's TIFF in ../shared/data) with the picture, the star table and
 the downloads; the image's own detections pasted as x y lines solve too; an image with too few
 stars fails with the reason and its unsolved picture, a file that is no image (dropped on the
-page) with the reason alone; a server started with --api-key makes the page ask for the key.
+page) with the reason alone; a server started with --api-key makes the page ask for the key,
+and a job sent from it as private is shown on the page and hidden from other clients.
 
 ``STARNAV_SCREENSHOT=docs/images/serve_page.png`` also saves the solved page (docs/service.md).
 """
@@ -21,6 +22,7 @@ import socket
 import sqlite3
 import subprocess
 import sys
+import urllib.error
 import urllib.request
 from dataclasses import dataclass
 from pathlib import Path
@@ -157,11 +159,16 @@ def _field_size_hint(driver, lower: float, upper: float, units: str) -> None:
     Select(driver.find_element(By.ID, "scale-units")).select_by_value(units)
 
 
-def _solve(driver, server: Server, timeout_s: float) -> tuple[str, int]:
-    """Click Solve and wait for the job to end: its state and job number."""
+def _solve(driver, server: Server, timeout_s: float, after: int | None = None) -> tuple[str, int]:
+    """Click Solve and wait for the job to end (a job after job ``after``, the one the page
+    showed before): its state and job number."""
     driver.find_element(By.ID, "submit").click()
     status = driver.find_element(By.ID, "status")
     try:
+        # the new job's number first: until then the state shown may be the last job's
+        WebDriverWait(driver, timeout_s, poll_frequency=0.25).until(
+            lambda d: _text(d, "#job-id") not in ("", str(after))
+        )
         WebDriverWait(driver, timeout_s, poll_frequency=0.25).until(
             lambda d: status.get_attribute("data-state") in ("success", "failure")
         )
@@ -377,5 +384,15 @@ def test_asks_for_the_key_of_a_server_with_one(serve, browser, tmp_path):
     browser.find_element(By.ID, "submit").click()
     WebDriverWait(browser, 10).until(lambda d: "refused" in _text(d, "#form-error"))
     _fill(browser, "apikey", API_KEY)
-    state, _ = _solve(browser, keyed, SOLVE_S)
+    state, public = _solve(browser, keyed, SOLVE_S)
     assert state == "failure" and "not an image format" in _text(browser, "#reason")
+    assert _get(f"{keyed.url}api/jobs/{public}")[0] == 200
+    # a private job: the page reads its answer (api/login's cookie), nobody else can
+    browser.find_element(By.ID, "private").click()
+    browser.find_element(By.ID, "file").send_keys(str(path))
+    state, private = _solve(browser, keyed, SOLVE_S, after=public)
+    assert state == "failure" and "not an image format" in _text(browser, "#reason")
+    assert keyed.request_of(private)["publicly_visible"] == "n"
+    with pytest.raises(urllib.error.HTTPError) as refused:
+        _get(f"{keyed.url}api/jobs/{private}/starnav")
+    assert refused.value.code == 404

@@ -13,8 +13,10 @@ whole solution: uncertainties, every star), ``json_file/N`` (the same as a downl
 
 A request's JSON comes as nova's clients send it: the form field ``request-json`` (URL-encoded
 or multipart body, or the query string). Errors are nova's ``{"status": "error",
-"errormessage": ...}``. Uploads need a session from ``api/login``; with ``api_key`` set, the
-login needs that key. A body over ``max_upload_bytes`` is refused (413) before it is read.
+"errormessage": ...}`` (``service.errors``: with which HTTP status). Uploads need a session
+from ``api/login``; with ``api_key`` set, the login needs that key, and a job uploaded with
+``publicly_visible`` "n" is read only with its session (``service.privacy``). A body over
+``max_upload_bytes`` is refused (413) before it is read.
 Files are stored under the data dir by job number with the service's own names.
 """
 
@@ -33,12 +35,20 @@ from pathlib import Path
 from starlette.applications import Starlette
 from starlette.exceptions import HTTPException
 from starlette.requests import Request
-from starlette.responses import FileResponse, JSONResponse, Response
+from starlette.responses import FileResponse
 from starlette.routing import Mount, Route
 from starlette.staticfiles import StaticFiles
 
 from starnav.runtime.pools import dask_client, one_blas_thread, process_pool
-from starnav.service import nova
+from starnav.service import nova, privacy
+from starnav.service.errors import (
+    EXCEPTION_HANDLERS,
+    NovaJSON,
+    RequestError,
+    echo,
+    error,
+    parse_request_json,
+)
 from starnav.service.fetch import (
     AllowedHosts,
     FetchBusy,
@@ -190,19 +200,6 @@ def _failed_answer(reason: str) -> dict:
     return {"solved": False, "reason": reason, "calibration": None, "result": None, "files": {}}
 
 
-class NovaJSON(JSONResponse):
-    """A JSON answer as nova sends it: ``text/plain`` (astrometry.net's net/api.py,
-    ``json_type``), which some clients check before they parse (astrometry-net-client
-    refuses anything else)."""
-
-    media_type = "text/plain"
-
-
-def error(message: str, status_code: int = 200) -> NovaJSON:
-    """nova's error answer (HTTP 200 like nova's, unless ``status_code`` says otherwise)."""
-    return NovaJSON({"status": "error", "errormessage": message}, status_code=status_code)
-
-
 def busy(message: str) -> NovaJSON:
     """503 with Retry-After: the server is at one of its limits now; the same request may
     succeed later."""
@@ -246,7 +243,8 @@ class _TooBig(Exception):
 
 
 async def _request_json(request: Request) -> tuple[dict | None, object]:
-    """The ``request-json`` of a request (None when absent) and its form (for the file)."""
+    """The ``request-json`` of a request (None when absent) and its form (for the file);
+    ``errors.RequestError`` when it is no JSON object or over a limit."""
     form = None
     raw = request.query_params.get("request-json")
     if request.method == "POST":
@@ -258,11 +256,7 @@ async def _request_json(request: Request) -> tuple[dict | None, object]:
         raw = form.get("request-json", raw)
     if raw is None:
         return None, form
-    try:
-        args = json.loads(raw if isinstance(raw, str) else await raw.read())
-    except (ValueError, UnicodeDecodeError):
-        return {"__bad__": str(raw)[:100]}, form
-    return args if isinstance(args, dict) else {"__bad__": str(raw)[:100]}, form
+    return parse_request_json(raw if isinstance(raw, str) else await raw.read()), form
 
 
 @dataclass(frozen=True)
@@ -316,14 +310,12 @@ class NovaApi:
         args, form = await _request_json(request)
         if args is None:
             return error("no json"), None, None
-        if "__bad__" in args:
-            return error(f'failed to parse JSON: "{args["__bad__"]}"'), None, None
         if session:
             key = args.get("session")
             if not key:
                 return error('no "session" in JSON.'), None, None
-            if not self.store.has_session(str(key)):
-                return error(f'no session with key "{key}"'), None, None
+            if not self.store.has_session(key):
+                return error(f'no session with key "{echo(key)}"'), None, None
         return None, args, form
 
     async def login(self, request: Request):
@@ -335,8 +327,11 @@ class NovaApi:
             return error('need "apikey"')
         if self.config.api_key is not None and str(key) != self.config.api_key:
             return error("bad apikey")
-        return NovaJSON({"status": "success", "message": "authenticated user: starnav",
-                             "session": self.store.new_session()})  # fmt: skip
+        session = self.store.new_session()
+        answer = NovaJSON({"status": "success", "message": "authenticated user: starnav",
+                           "session": session})  # fmt: skip
+        privacy.set_session_cookie(answer, session)
+        return answer
 
     def queue_full(self) -> NovaJSON | None:
         """503 "busy" when ``max_queued`` jobs wait for a worker, else None."""
@@ -368,7 +363,8 @@ class NovaApi:
             return error("the uploaded file is empty")
         if (full := self.queue_full()) is not None:
             return full
-        job_id = self.store.add_job("image", Path(original_filename).name, _hints_only(args))
+        job_id = self.store.add_job("image", Path(original_filename).name, _hints_only(args),
+                                    **privacy.access(args))  # fmt: skip
         name = input_name(data[:16])
         (self.store.job_dir(job_id) / name).write_bytes(data)
         self.store.set_input(job_id, name)
@@ -382,7 +378,10 @@ class NovaApi:
             return error('"x" and "y" lists must be the same length')
         if (full := self.queue_full()) is not None:
             return full
-        return self.accepted(self.store.add_job("xy", "json-xy", _hints_only(args, keep_xy=True)))
+        access = privacy.access(args)
+        return self.accepted(
+            self.store.add_job("xy", "json-xy", _hints_only(args, keep_xy=True), **access)
+        )
 
     async def url_upload(self, request: Request):
         bad, args, _ = await self.parsed(request, session=True)
@@ -400,21 +399,29 @@ class NovaApi:
         except FetchBusy as exc:
             return busy(str(exc))
         except FetchError as exc:
-            text = f"cannot fetch {url[:200]}: {exc}"  # a lone surrogate shown escaped
-            return error(text.encode("utf-8", "backslashreplace").decode("utf-8"))
+            return error(f"cannot fetch {echo(url)}: {echo(exc)}")
         return self.image_job(data, url.rsplit("/", 1)[-1], args)
 
-    def job_or_404(self, request: Request):
-        job = self.store.get(int(request.path_params["job_id"]))
+    async def job_or_404(self, request: Request):
+        """(the job, None), or (None, the 404 answer) for a job there is none of or that this
+        request may not read (``privacy``: private, and none of the sessions it presents is
+        the job's)."""
+        job = self.store.get(request.path_params["job_id"])
+        if job is not None and not privacy.open_to_all(job, self.config.api_key):
+            args = None
+            with contextlib.suppress(RequestError):  # no or bad request-json: no session in it
+                args, _ = await _request_json(request)
+            if job.owner not in privacy.presented_sessions(request, args):
+                job = None
         if job is None:
-            return None, NovaJSON({"status": "error", "errormessage": "no such job"}, 404)
+            return None, error("no such job", 404)
         return job, None
 
     def answer(self, view):
         """An endpoint answering ``view(job)`` (a function of the job record) as JSON."""
 
         async def endpoint(request: Request):
-            job, missing = self.job_or_404(request)
+            job, missing = await self.job_or_404(request)
             return missing or NovaJSON(view(job))
 
         return endpoint
@@ -424,20 +431,24 @@ class NovaApi:
         browser, with the job number in ``{}``)."""
 
         async def endpoint(request: Request):
-            job, missing = self.job_or_404(request)
+            job, missing = await self.job_or_404(request)
             if missing:
                 return missing
             path = self.store.job_dir(job.id) / name
             if not path.is_file():
-                return Response(f"job {job.id} has no such file ({job.status})\n", 404)
+                return error(f"job {job.id} has no such file ({job.status})", 404)
             filename = None if download is None else download.format(job.id)
             return FileResponse(path, media_type=media_type, filename=filename)
 
         return endpoint
 
     async def myjobs(self, request: Request):
-        bad, _, _ = await self.parsed(request, session=True)
-        return bad or NovaJSON({"jobs": self.store.job_ids(), "status": "success"})
+        """The session's jobs (with an API key; without one, every job, as before)."""
+        bad, args, _ = await self.parsed(request, session=True)
+        if bad:
+            return bad
+        owner = None if self.config.api_key is None else args["session"]
+        return NovaJSON({"jobs": self.store.job_ids(owner), "status": "success"})
 
     async def status(self, request: Request):
         return NovaJSON({"status": "success", "workers": self.config.workers,
@@ -450,7 +461,7 @@ class NovaApi:
     def routes(self) -> list:
         """Every route: GET and POST, with and without a trailing slash (a redirect would
         lose a POST), the page and its static files."""
-        job = "{job_id:int}"
+        job = "{job_id:job}"  # errors.JobNumber
         names = lambda key: self.answer(lambda j: {key: nova.star_names(j)})  # noqa: E731
         files = self.file_route
         api = {
@@ -504,7 +515,7 @@ def create_app(config: ServiceConfig) -> Starlette:
         store.close()
 
     api = NovaApi(config, store, jobs)
-    app = Starlette(routes=api.routes(), lifespan=lifespan)
+    app = Starlette(routes=api.routes(), lifespan=lifespan, exception_handlers=EXCEPTION_HANDLERS)
     app.state.store, app.state.jobs = store, jobs
     app.add_middleware(UploadLimit, limit=config.max_upload_bytes)
     return app

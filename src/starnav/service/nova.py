@@ -6,9 +6,9 @@ The shapes are those of astrometry.net's ``net/api.py`` (``upload_common``,
 ``scale_type`` "ul" (lower/upper) or "ev" (estimate ± error %), ``scale_lower``,
 ``scale_upper``, ``scale_est``, ``scale_err``, ``center_ra``, ``center_dec``, ``radius``,
 ``parity`` (0 pos, 1 neg, 2 both), ``downsample_factor``, ``positional_error`` (px),
-``crpix_center``), read as ``pipeline.plate.PlateHints``. Fields nova takes and starnav has no
-use for (``tweak_order``: the fit is ours; ``use_sextractor``, ``invert``, licence and
-visibility) are accepted and ignored.
+``crpix_center``), read as ``pipeline.plate.PlateHints``; ``publicly_visible`` is
+``service.privacy``'s. Fields nova takes and starnav has no use for (``tweak_order``: the fit
+is ours; ``use_sextractor``, ``invert``, licence) are accepted and ignored.
 """
 
 from __future__ import annotations

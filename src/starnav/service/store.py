@@ -12,6 +12,7 @@ gives back the ones still queued).
 from __future__ import annotations
 
 import json
+import re
 import secrets
 import sqlite3
 import threading
@@ -36,11 +37,18 @@ CREATE TABLE IF NOT EXISTS jobs (
     finished REAL,
     reason TEXT,
     calibration TEXT,                -- nova's calibration JSON (solved)
-    result TEXT                      -- starnav's JSON of the solve
+    result TEXT,                     -- starnav's JSON of the solve
+    owner TEXT,                      -- the session that submitted it (NULL: unknown)
+    public INTEGER NOT NULL DEFAULT 1  -- nova's publicly_visible: "y" 1, "n" 0
 );
 """
+# columns added since the first schema, with their definitions: an older starnav.sqlite gets
+# them when it is opened (its jobs: owner unknown, public unless their request said "n")
+ADDED_COLUMNS = {"owner": "TEXT", "public": "INTEGER NOT NULL DEFAULT 1"}
 STATUSES = ("queued", "solving", "success", "failure")
 INTERRUPTED = "interrupted: the server stopped while this job was solving"
+SESSION_KEY = re.compile(r"[0-9a-f]{32}")  # new_session's keys
+MAX_JOB_ID = 2**63 - 1  # SQLite's largest integer
 
 
 @dataclass(frozen=True)
@@ -59,6 +67,8 @@ class Job:
     reason: str | None
     calibration: dict | None
     result: dict | None
+    owner: str | None = None
+    public: bool = True
 
     @property
     def done(self) -> bool:
@@ -78,6 +88,23 @@ class JobStore:
         )
         self._db.execute("PRAGMA journal_mode=WAL")
         self._db.executescript(SCHEMA)
+        self._add_columns()
+
+    def _add_columns(self) -> None:
+        """Bring a starnav.sqlite of an older schema up to this one."""
+        have = {row[1] for row in self._db.execute("PRAGMA table_info(jobs)")}
+        missing = [name for name in ADDED_COLUMNS if name not in have]
+        if not missing:
+            return
+        self._db.execute("BEGIN IMMEDIATE")  # all or nothing: no job public by a crash
+        for name in missing:
+            self._db.execute(f"ALTER TABLE jobs ADD COLUMN {name} {ADDED_COLUMNS[name]}")
+            if name == "public":
+                self._db.execute(
+                    "UPDATE jobs SET public = 0 "
+                    "WHERE json_extract(request, '$.publicly_visible') = 'n'"
+                )
+        self._db.execute("COMMIT")
 
     def close(self) -> None:
         """Close the database."""
@@ -93,19 +120,32 @@ class JobStore:
         self._write("INSERT INTO sessions VALUES (?, ?)", (key, time.time()))
         return key
 
-    def has_session(self, key: str) -> bool:
-        """Whether ``key`` was given by ``new_session``."""
+    def has_session(self, key: object) -> bool:
+        """Whether ``key`` was given by ``new_session`` (False for anything not shaped like
+        one of its keys, which is never looked up)."""
+        if not isinstance(key, str) or not SESSION_KEY.fullmatch(key):
+            return False
         with self._lock:
             row = self._db.execute("SELECT 1 FROM sessions WHERE key = ?", (key,)).fetchone()
         return row is not None
 
-    def add_job(self, kind: str, original_filename: str, request: dict) -> int:
-        """A queued job; its directory is made. Returns its number."""
+    def add_job(
+        self,
+        kind: str,
+        original_filename: str,
+        request: dict,
+        *,
+        owner: str | None = None,
+        public: bool = True,
+    ) -> int:
+        """A queued job submitted by session ``owner`` (``public``: readable by anyone, nova's
+        ``publicly_visible``); its directory is made. Returns its number."""
         cur = self._write(
-            "INSERT INTO jobs (kind, original_filename, request, status, submitted) "
-            "VALUES (?, ?, ?, 'queued', ?)",
-            (kind, original_filename[:200], json.dumps(request), time.time()),
-        )
+            "INSERT INTO jobs (kind, original_filename, request, status, submitted, owner, "
+            "public) VALUES (?, ?, ?, 'queued', ?, ?, ?)",
+            (kind, _text(original_filename, printable=True)[:200], json.dumps(request),
+             time.time(), owner, int(public)),
+        )  # fmt: skip
         job_id = int(cur.lastrowid)
         self.job_dir(job_id).mkdir(parents=True, exist_ok=True)
         return job_id
@@ -135,7 +175,7 @@ class JobStore:
                 "success" if solved else "failure",
                 time.time(),
                 time.time(),
-                reason,
+                _text(reason),
                 None if calibration is None else json.dumps(calibration),
                 None if result is None else json.dumps(result),
                 job_id,
@@ -143,15 +183,21 @@ class JobStore:
         )
 
     def get(self, job_id: int) -> Job | None:
-        """Job ``job_id``, or None when there is none."""
+        """Job ``job_id``, or None when there is none (any integer: one outside SQLite's
+        range has none)."""
+        if not 0 < job_id <= MAX_JOB_ID:
+            return None
         with self._lock:
             row = self._db.execute("SELECT * FROM jobs WHERE id = ?", (int(job_id),)).fetchone()
         return None if row is None else _job(row)
 
-    def job_ids(self) -> list[int]:
-        """Every job's number, in order."""
+    def job_ids(self, owner: str | None = None) -> list[int]:
+        """Every job's number, in order (of session ``owner``'s jobs only, when given)."""
         with self._lock:
-            return [r[0] for r in self._db.execute("SELECT id FROM jobs ORDER BY id")]
+            if owner is None:
+                return [r[0] for r in self._db.execute("SELECT id FROM jobs ORDER BY id")]
+            rows = self._db.execute("SELECT id FROM jobs WHERE owner = ? ORDER BY id", (owner,))
+            return [r[0] for r in rows]
 
     def recover(self) -> list[int]:
         """After a restart: jobs that were solving are failed (``INTERRUPTED``); returns the
@@ -165,9 +211,18 @@ class JobStore:
             return [r[0] for r in rows]
 
 
+def _text(text: str, printable: bool = False) -> str:
+    """``text`` as SQLite can store it: a lone surrogate (which UTF-8 cannot encode) as its
+    escape; ``printable``: without control and format characters (a NUL, a right-to-left
+    mark) too, for a name shown to people."""
+    if printable:
+        text = "".join(c for c in text if c.isprintable())
+    return text.encode("utf-8", "backslashreplace").decode("utf-8")
+
+
 def _job(row: tuple) -> Job:
     (id_, kind, name, input_name, request, status, submitted, started, finished, reason, cal,
-     result) = row  # fmt: skip
+     result, owner, public) = row  # fmt: skip
     return Job(
         id_,
         kind,
@@ -181,4 +236,6 @@ def _job(row: tuple) -> Job:
         reason,
         None if cal is None else json.loads(cal),
         None if result is None else json.loads(result),
+        owner,
+        bool(public),
     )

@@ -57,6 +57,9 @@
     if (radius !== null && ra === null) throw new Error("Position: a radius needs RA and Dec.");
     if (ra !== null) Object.assign(out, { center_ra: ra, center_dec: dec });
     if (radius !== null) out.radius = radius;
+    // nova's field; the server's answers then need this session, which api/login's cookie
+    // gives every request of the page (its fetches, the picture, the downloads)
+    if ($("private").checked) out.publicly_visible = "n";
     return out;
   }
 
