@@ -39,6 +39,7 @@ from starlette.staticfiles import StaticFiles
 
 from starnav.runtime.pools import dask_client, one_blas_thread, process_pool
 from starnav.service import nova
+from starnav.service.files import clean_job_tmp
 from starnav.service.store import JobStore
 from starnav.service.worker import OUTPUTS, input_name, run_job
 
@@ -455,6 +456,7 @@ def create_app(config: ServiceConfig) -> Starlette:
         await jobs.start()
         yield
         await jobs.stop()
+        clean_job_tmp(config.data_dir)  # the stopped workers' inputs
         store.close()
 
     app = Starlette(routes=NovaApi(config, store, jobs).routes(), lifespan=lifespan)

@@ -41,6 +41,7 @@ CREATE TABLE IF NOT EXISTS jobs (
 """
 STATUSES = ("queued", "solving", "success", "failure")
 INTERRUPTED = "interrupted: the server stopped while this job was solving"
+UNSTORED = "interrupted: the server stopped before the upload was stored"
 
 
 @dataclass(frozen=True)
@@ -163,6 +164,20 @@ class JobStore:
         with self._lock:
             rows = self._db.execute("SELECT id FROM jobs WHERE status = 'queued' ORDER BY id")
             return [r[0] for r in rows]
+
+    def fail_unstored(self) -> list[int]:
+        """After a restart: image jobs whose upload was never stored (the server stopped
+        between making the job and recording its input) are failed (``UNSTORED``); returns
+        their numbers."""
+        with self._lock:
+            rows = self._db.execute(
+                "SELECT id FROM jobs WHERE kind = 'image' AND input_name IS NULL "
+                "AND status IN ('queued', 'solving') ORDER BY id"
+            )
+            ids = [r[0] for r in rows]
+        for job_id in ids:
+            self.finish(job_id, False, UNSTORED, None, None)
+        return ids
 
 
 def _job(row: tuple) -> Job:
