@@ -17,6 +17,7 @@ import numpy as np
 import pytest
 from astropy.io import fits
 
+from cli_helpers import run_cli
 from service_helpers import (
     Server,
     api,
@@ -200,3 +201,13 @@ def test_a_second_server_on_a_data_dir_is_refused_and_leftovers_are_cleaned(tmp_
     assert str(clean_leftovers(tmp_path)) == ""
     os.close(fd)  # the lock goes with it
     os.close(lock_data_dir(tmp_path))
+
+
+def test_serve_refuses_a_data_dir_in_use_and_a_negative_cache_limit(capsys, tmp_path):
+    fd = lock_data_dir(tmp_path)
+    code, out, err = run_cli(capsys, "serve", "--data-dir", str(tmp_path), "--port", "1")
+    assert code == 2 and out == ""
+    assert err.count("\n") == 1 and "is in use by another starnav serve" in err
+    os.close(fd)
+    code, _, err = run_cli(capsys, "serve", "--data-dir", str(tmp_path), "--cache-limit-mb", "-1")
+    assert code == 2 and "--cache-limit-mb must be 0 or more, got -1" in err
