@@ -5,6 +5,7 @@ clients that check each answer against its input."""
 
 from __future__ import annotations
 
+import functools
 import json
 import os
 import signal
@@ -22,8 +23,8 @@ from astropy.coordinates import SkyCoord
 from astropy.io import fits
 from astropy.wcs import WCS, FITSFixedWarning
 
+from shared_data import LYRA, PEER_FILES, peer_image
 from shared_data import PEER_REFERENCE as REFERENCE
-from shared_data import peer_image
 from starnav.service.app import wait_ready
 
 START_TIMEOUT_S = 60.0  # imports of a cold process on a shared machine
@@ -55,6 +56,7 @@ class Server:
         self.proc: subprocess.Popen | None = None
 
     def start(self) -> Server:
+        warm_tables(None if self.cache_dir is None else str(self.cache_dir))
         self.data_dir.mkdir(parents=True, exist_ok=True)
         cmd = [sys.executable, "-m", "starnav.cli", "serve", "--port", str(self.port),
                "--data-dir", str(self.data_dir), "--workers", str(self.workers),
@@ -98,6 +100,21 @@ class Server:
         os.killpg(self.proc.pid, signal.SIGKILL)
         self.proc.wait()
         self.proc = None
+
+
+@functools.cache
+def warm_tables(cache_dir: str | None) -> None:
+    """Solve the Lyra frame once per test process with the table cache the servers read
+    (``cache_dir``, or the user's): a server writes no table there (starnav.service.files), so
+    on a fresh machine each server's fresh data dir would build the default tables again."""
+    path = PEER_FILES[LYRA]
+    if not path.is_file():
+        return
+    env = {k: v for k, v in os.environ.items() if k != "STARNAV_CACHE_DIR"}
+    if cache_dir is not None:
+        env["STARNAV_CACHE_DIR"] = cache_dir
+    cmd = [sys.executable, "-m", "starnav.cli", "solve", str(path)]
+    subprocess.run(cmd, env=env, capture_output=True, timeout=600, check=False)
 
 
 def api(url: str, service: str, args: dict | None = None, timeout_s: float = 30.0) -> dict:
