@@ -60,10 +60,12 @@ def tmp_dir(data_dir: Path) -> Path:
 
 def lock_data_dir(data_dir: Path) -> int:
     """Hold ``DATA/lock`` for this process's life (a file descriptor the system releases when
-    the process ends, however it ends); ``StarnavError`` when another server holds it, since
-    the start-up cleaning would remove that server's files."""
-    import fcntl
-
+    the process ends, however it ends; -1 where there is no ``flock``); ``StarnavError`` when
+    another server holds it, since the start-up cleaning would remove that server's files."""
+    try:
+        import fcntl
+    except ImportError:  # no flock on this system: not locked
+        return -1
     fd = os.open(Path(data_dir) / "lock", os.O_RDWR | os.O_CREAT, 0o644)
     try:
         fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
@@ -147,8 +149,11 @@ def use_data_dir(data_dir: Path, cache_limit_mb: float = DEFAULT_CACHE_LIMIT_MB)
     shared_code = kernel_cache_dir(os.environ.get("NUMBA_CACHE_DIR", ""))
     home_dask = Path.home() / ".config" / "dask"
     env = service_environment(data_dir, cache_limit_mb)
-    link_tables(shared_tables, Path(env["STARNAV_CACHE_DIR"]))
-    link_tree(shared_code, kernel_cache_dir(env["NUMBA_CACHE_DIR"]))
+    try:
+        link_tables(shared_tables, Path(env["STARNAV_CACHE_DIR"]))
+        link_tree(shared_code, kernel_cache_dir(env["NUMBA_CACHE_DIR"]))
+    except OSError:  # no links here (or an unreadable cache): the workers build what they need
+        pass
     if "DASK_CONFIG" not in os.environ and home_dask.is_dir():
         env["DASK_CONFIG"] = str(home_dask)  # the operator's Dask settings, from the old home
     os.environ.update(env)
