@@ -5,6 +5,7 @@ clients that check each answer against its input."""
 
 from __future__ import annotations
 
+import functools
 import json
 import os
 import signal
@@ -22,8 +23,8 @@ from astropy.coordinates import SkyCoord
 from astropy.io import fits
 from astropy.wcs import WCS, FITSFixedWarning
 
+from shared_data import LYRA, PEER_FILES, peer_image
 from shared_data import PEER_REFERENCE as REFERENCE
-from shared_data import peer_image
 from starnav.service.app import wait_ready
 
 START_TIMEOUT_S = 60.0  # imports of a cold process on a shared machine
@@ -42,7 +43,7 @@ class Server:
     its output goes to ``data_dir/server.log``. ``start`` again after ``stop`` or ``kill`` to
     restart it on the same data dir and port. ``cache_dir``: its STARNAV_CACHE_DIR (None: the
     default cache); ``api_key``: its --api-key; ``options``: more of ``starnav serve``'s
-    options."""
+    options; ``env``: environment variables set (None: unset) for it."""
 
     def __init__(
         self,
@@ -53,14 +54,16 @@ class Server:
         cache_dir=None,
         api_key: str | None = None,
         options: tuple[str, ...] = (),
+        env: dict[str, str | None] | None = None,
     ):
         self.data_dir, self.workers, self.cache_dir = Path(data_dir), workers, cache_dir
-        self.api_key, self.options = api_key, options
+        self.api_key, self.options, self.env = api_key, tuple(options), dict(env or {})
         self.port = port or free_port()
         self.url = f"http://127.0.0.1:{self.port}"
         self.proc: subprocess.Popen | None = None
 
     def start(self) -> Server:
+        warm_tables(None if self.cache_dir is None else str(self.cache_dir))
         self.data_dir.mkdir(parents=True, exist_ok=True)
         cmd = [sys.executable, "-m", "starnav.cli", "serve", "--port", str(self.port),
                "--data-dir", str(self.data_dir), "--workers", str(self.workers),
@@ -70,6 +73,8 @@ class Server:
         env = {k: v for k, v in os.environ.items() if k != "STARNAV_CACHE_DIR"}
         if self.cache_dir is not None:
             env["STARNAV_CACHE_DIR"] = str(self.cache_dir)
+        env.update(self.env)
+        env = {k: v for k, v in env.items() if v is not None}
         log = (self.data_dir / "server.log").open("ab")
         # its own process group: a kill reaches the worker processes too
         self.proc = subprocess.Popen(
@@ -104,6 +109,21 @@ class Server:
         os.killpg(self.proc.pid, signal.SIGKILL)
         self.proc.wait()
         self.proc = None
+
+
+@functools.cache
+def warm_tables(cache_dir: str | None) -> None:
+    """Solve the Lyra frame once per test process with the table cache the servers read
+    (``cache_dir``, or the user's): a server writes no table there (starnav.service.files), so
+    on a fresh machine each server's fresh data dir would build the default tables again."""
+    path = PEER_FILES[LYRA]
+    if not path.is_file():
+        return
+    env = {k: v for k, v in os.environ.items() if k != "STARNAV_CACHE_DIR"}
+    if cache_dir is not None:
+        env["STARNAV_CACHE_DIR"] = cache_dir
+    cmd = [sys.executable, "-m", "starnav.cli", "solve", str(path)]
+    subprocess.run(cmd, env=env, capture_output=True, timeout=600, check=False)
 
 
 def api(url: str, service: str, args: dict | None = None, timeout_s: float = 30.0) -> dict:

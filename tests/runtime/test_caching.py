@@ -1,8 +1,11 @@
-"""The kernels' machine-code cache: keyed by all kernel sources together."""
+"""The kernels' machine-code cache: keyed by all kernel sources together; the tables' cache
+written only within its limit."""
 
 from __future__ import annotations
 
 import re
+
+import numpy as np
 
 from starnav.runtime import caching
 
@@ -58,3 +61,23 @@ def test_kernels_are_cached_in_their_folder_and_numba_config_is_restored():
     if before:
         assert cache.cache_path.startswith(str(caching.kernel_cache_dir(before)))
     assert numba.config.CACHE_DIR == before
+
+
+def test_a_table_is_written_only_within_the_cache_limit(monkeypatch, tmp_path):
+    save_cached, stored_bytes = caching.save_cached, caching.stored_bytes
+    outside = tmp_path / "big.npy"
+    np.save(outside, np.zeros(1_000_000))  # 8 MB, linked in: links are not counted
+    (tmp_path / "cache").mkdir()
+    (tmp_path / "cache" / "shared.npz").symlink_to(outside)
+    monkeypatch.setenv(caching.CACHE_LIMIT_ENV, "1")
+    first = save_cached(tmp_path / "cache" / "a.npz", x=np.zeros(60_000))  # 0.48 MB
+    second = save_cached(tmp_path / "cache" / "b.npz", x=np.zeros(80_000))  # 0.64 MB
+    assert first == tmp_path / "cache" / "a.npz"
+    assert np.array_equal(caching.load_cached(first)["x"], np.zeros(60_000))
+    assert second is None  # 1.12 MB with it: not written, no temporary file left
+    assert sorted(p.name for p in (tmp_path / "cache").iterdir()) == ["a.npz", "shared.npz"]
+    assert stored_bytes(tmp_path / "cache") == first.stat().st_size
+    monkeypatch.setenv(caching.CACHE_LIMIT_ENV, "0")
+    assert save_cached(tmp_path / "cache" / "c.npz", x=np.zeros(1)) is None
+    monkeypatch.delenv(caching.CACHE_LIMIT_ENV)
+    assert save_cached(tmp_path / "cache" / "b.npz", x=np.zeros(80_000)) is not None

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import ipaddress
+import signal
 import socket
 import sys
 from pathlib import Path
@@ -17,6 +18,12 @@ from starnav.cli.common import (
     positive_int,
 )
 from starnav.errors import StarnavError
+from starnav.service.files import (
+    DEFAULT_CACHE_LIMIT_MB,
+    clean_leftovers,
+    lock_data_dir,
+    use_data_dir,
+)
 from starnav.service.limits import DEFAULT_MAX_QUEUED, DEFAULT_URL_DEADLINE_S
 
 DEFAULT_PORT = 8080
@@ -47,6 +54,10 @@ def add_parser(subparsers: Subparsers) -> None:
     p.add_argument("--url-timeout", type=finite, default=DEFAULT_URL_DEADLINE_S,
                    metavar="SECONDS", help="limit of a whole URL fetch "
                    f"(s; default {DEFAULT_URL_DEADLINE_S:g})")  # fmt: skip
+    p.add_argument("--cache-limit-mb", type=finite, default=DEFAULT_CACHE_LIMIT_MB,
+                   help="tables the workers may write in DATA/cache (MB; default "
+                        f"{DEFAULT_CACHE_LIMIT_MB:g}; past it new ones stay in memory)",
+                   )  # fmt: skip
     add_time_budget(p)
     add_dask(p, "the jobs")
     p.add_argument("--json", action="store_true",
@@ -91,22 +102,28 @@ def run(args: argparse.Namespace) -> int:
         raise StarnavError(f"--max-upload-mb must be positive, got {args.max_upload_mb:g}")
     if args.url_timeout <= 0:
         raise StarnavError(f"--url-timeout must be positive, got {args.url_timeout:g}")
-    try:
-        import uvicorn
+    if args.cache_limit_mb < 0:
+        raise StarnavError(f"--cache-limit-mb must be 0 or more, got {args.cache_limit_mb:g}")
+    from starnav.service.fetch import AllowedHosts  # the standard library's only
 
-        from starnav.service.app import ServiceConfig, create_app
-        from starnav.service.fetch import AllowedHosts
-    except ImportError as exc:
-        raise StarnavError(
-            f"starnav serve needs the serve extra ({exc.name} is missing): "
-            "pip install 'starnav[serve]'"
-        ) from None
-    allowed = AllowedHosts.parse(args.allow_url_hosts)
+    allowed = AllowedHosts.parse(args.allow_url_hosts)  # a bad list before anything is made
     data_dir = Path(args.data_dir)
     try:
         data_dir.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise StarnavError(f"cannot make --data-dir {str(data_dir)!r}: {exc.strerror}") from None
+    lock_data_dir(data_dir)  # held until this process ends
+    cleaned = clean_leftovers(data_dir)
+    use_data_dir(data_dir, args.cache_limit_mb)  # before the imports below load numba
+    try:
+        import uvicorn
+
+        from starnav.service.app import ServiceConfig, create_app
+    except ImportError as exc:
+        raise StarnavError(
+            f"starnav serve needs the serve extra ({exc.name} is missing): "
+            "pip install 'starnav[serve]'"
+        ) from None
     config = ServiceConfig(
         data_dir=data_dir,
         workers=args.workers,
@@ -123,8 +140,18 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         import json
 
-        print(json.dumps({"url": url, "data_dir": str(data_dir.resolve())}), flush=True)
+        print(json.dumps({"url": url, "data_dir": str(data_dir.resolve()),
+                          "cleaned": str(cleaned)}), flush=True)  # fmt: skip
     else:
-        print(f"starnav serve: {url} (data in {data_dir.resolve()})", file=sys.stderr, flush=True)
+        said = f"; {cleaned}" if str(cleaned) else ""
+        print(f"starnav serve: {url} (data in {data_dir.resolve()}){said}", file=sys.stderr,
+              flush=True)  # fmt: skip
+    # uvicorn stops cleanly on SIGTERM, then raises it again: exit through Python then, so
+    # that multiprocessing removes its folder in DATA/tmp as it does after Ctrl-C
+    signal.signal(signal.SIGTERM, _exit_on_sigterm)
     uvicorn.run(create_app(config), host=args.host, port=args.port, log_level="warning")
     return EXIT_OK
+
+
+def _exit_on_sigterm(signum, frame) -> None:
+    raise SystemExit(128 + signal.SIGTERM)

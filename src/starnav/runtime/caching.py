@@ -1,7 +1,9 @@
 """Where starnav keeps what it computes once: the pair and pattern tables, the columns of the
 embedded Hipparcos catalog it reads, and the machine code of its numba kernels.
 
-They live under ``$STARNAV_CACHE_DIR`` (default ``~/.cache/starnav``). The machine code goes to
+They live under ``$STARNAV_CACHE_DIR`` (default ``~/.cache/starnav``). With
+``$STARNAV_CACHE_LIMIT_MB`` set (``starnav serve`` sets it), a table is written only while the
+tables there (its files, links left out) stay within that many MB. The machine code goes to
 ``numba/kernels-<hash>`` there (or under ``$NUMBA_CACHE_DIR`` when that is set), the hash taken
 over the sources of every kernel module together: numba invalidates a cached function when its
 own file changes, not when a function it calls in another file does (``pipeline.kernels``
@@ -21,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 PACKAGE = Path(__file__).resolve().parents[1]
+CACHE_LIMIT_ENV = "STARNAV_CACHE_LIMIT_MB"
 # every module with numba kernels (tests/runtime/test_caching.py checks the list against the
 # sources)
 KERNEL_SOURCES = (
@@ -57,15 +60,40 @@ def load_cached(path: Path) -> dict[str, np.ndarray] | None:
 
 def save_cached(path: Path, **arrays) -> Path | None:
     """Write a table's arrays to ``path`` (written then renamed, so a concurrent reader never
-    sees half a file); None when it cannot be written (a read-only home still works)."""
+    sees half a file); None when it cannot be written (a read-only home still works) or
+    when the folder's tables would pass ``$STARNAV_CACHE_LIMIT_MB`` with it."""
+    limit_mb = _limit_mb()
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         with tempfile.NamedTemporaryFile(dir=path.parent, suffix=".npz", delete=False) as fh:
             np.savez(fh, **arrays)
+        if limit_mb is not None and stored_bytes(path.parent) > limit_mb * 1e6:
+            os.unlink(fh.name)  # counted with the others: over the limit with it
+            return None
         os.replace(fh.name, path)
         return path
     except OSError:
         return None
+
+
+def _limit_mb() -> float | None:
+    text = os.environ.get(CACHE_LIMIT_ENV)
+    if not text:
+        return None
+    try:
+        return float(text)
+    except ValueError:
+        return 0.0  # unreadable: nothing written rather than no limit
+
+
+def stored_bytes(folder: Path) -> int:
+    """Bytes of the files directly in ``folder`` (links and subfolders left out)."""
+    total = 0
+    with os.scandir(folder) as entries:
+        for entry in entries:
+            if entry.is_file(follow_symlinks=False):
+                total += entry.stat(follow_symlinks=False).st_size
+    return total
 
 
 @functools.cache

@@ -56,6 +56,7 @@ from starnav.service.fetch import (
     FetchPolicy,
     FetchQueue,
 )
+from starnav.service.files import clean_job_tmp
 from starnav.service.limits import (
     DEFAULT_MAX_QUEUED,
     DEFAULT_URL_DEADLINE_S,
@@ -512,6 +513,7 @@ def create_app(config: ServiceConfig) -> Starlette:
         yield
         await jobs.stop()
         api.fetches.close()
+        clean_job_tmp(config.data_dir)  # the stopped workers' inputs
         store.close()
 
     api = NovaApi(config, store, jobs)

@@ -49,6 +49,7 @@ STATUSES = ("queued", "solving", "success", "failure")
 INTERRUPTED = "interrupted: the server stopped while this job was solving"
 SESSION_KEY = re.compile(r"[0-9a-f]{32}")  # new_session's keys
 MAX_JOB_ID = 2**63 - 1  # SQLite's largest integer
+UNSTORED = "interrupted: the server stopped before the upload was stored"
 
 
 @dataclass(frozen=True)
@@ -209,6 +210,20 @@ class JobStore:
         with self._lock:
             rows = self._db.execute("SELECT id FROM jobs WHERE status = 'queued' ORDER BY id")
             return [r[0] for r in rows]
+
+    def fail_unstored(self) -> list[int]:
+        """After a restart: image jobs whose upload was never stored (the server stopped
+        between making the job and recording its input) are failed (``UNSTORED``); returns
+        their numbers."""
+        with self._lock:
+            rows = self._db.execute(
+                "SELECT id FROM jobs WHERE kind = 'image' AND input_name IS NULL "
+                "AND status IN ('queued', 'solving') ORDER BY id"
+            )
+            ids = [r[0] for r in rows]
+        for job_id in ids:
+            self.finish(job_id, False, UNSTORED, None, None)
+        return ids
 
 
 def _text(text: str, printable: bool = False) -> str:

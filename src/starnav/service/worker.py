@@ -19,6 +19,7 @@ from starnav.catalog.names import star_names
 from starnav.detect.read import FITS_MAGIC, GZIP_MAGIC, TIFF_MAGICS
 from starnav.errors import StarnavError
 from starnav.pipeline.plate import XYList, read_xylist, solve_plate, write_plate_files
+from starnav.service.files import JOB_TMP_PREFIX
 from starnav.service.nova import plate_hints
 
 # magic bytes -> the name the input gets in the job's directory (never the client's name)
@@ -58,7 +59,8 @@ def run_job(data: bytes | None, xy: dict | None, request: dict, budget_s: float 
     (starnav's JSON, stars with names) and "files" (kind -> bytes: "wcs", "new_fits",
     "annotate")."""
     t0 = time.perf_counter()
-    with tempfile.TemporaryDirectory(prefix="starnav-job-") as tmp:
+    # in the system's temporary folder: ``starnav serve`` makes it DATA/tmp (service.files)
+    with tempfile.TemporaryDirectory(prefix=JOB_TMP_PREFIX) as tmp:
         try:
             answer = _solve(Path(tmp), data, xy, request, budget_s)
         except StarnavError as exc:
