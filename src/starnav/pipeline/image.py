@@ -164,7 +164,11 @@ def solve_image(
             hints=hints, failure=failure.kind,
         )  # fmt: skip
     if options.epoch_year is None and hints.epoch_year is not None and is_embedded(options.catalog):
-        options = replace(options, epoch_year=hints.epoch_year)  # Hipparcos' proper motion
+        # Hipparcos' proper motion to the image's year: the nearest whole year, as without a
+        # date, so that a service or an archive gets one set of pattern tables a year, not a
+        # set (~100 MB, ~20 s to build) for every date. Half a year of proper motion is 0.012″
+        # for the median star to Hp 8.5, 0.19″ at the 99th percentile, 3.5″ at most.
+        options = replace(options, epoch_year=float(round(hints.epoch_year)))
     if options.utc is None and hints.utc is not None:
         options = replace(options, utc=hints.utc)  # where the sky is, with the site
     if options.site is None and hints.site is not None:
