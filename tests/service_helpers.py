@@ -41,12 +41,14 @@ class Server:
     """One ``starnav serve`` process (``workers`` worker processes, jobs under ``data_dir``);
     its output goes to ``data_dir/server.log``. ``start`` again after ``stop`` or ``kill`` to
     restart it on the same data dir and port. ``cache_dir``: its STARNAV_CACHE_DIR (None: the
-    default cache)."""
+    default cache); ``args``: more options of ``starnav serve``; ``env``: more environment."""
 
     def __init__(
-        self, data_dir: Path, *, workers: int = 2, port: int | None = None, cache_dir=None
-    ):
+        self, data_dir: Path, *, workers: int = 2, port: int | None = None, cache_dir=None,
+        args: tuple[str, ...] = (), env: dict[str, str] | None = None,
+    ):  # fmt: skip
         self.data_dir, self.workers, self.cache_dir = Path(data_dir), workers, cache_dir
+        self.args, self.env = tuple(args), dict(env or {})
         self.port = port or free_port()
         self.url = f"http://127.0.0.1:{self.port}"
         self.proc: subprocess.Popen | None = None
@@ -54,8 +56,9 @@ class Server:
     def start(self) -> Server:
         self.data_dir.mkdir(parents=True, exist_ok=True)
         cmd = [sys.executable, "-m", "starnav.cli", "serve", "--port", str(self.port),
-               "--data-dir", str(self.data_dir), "--workers", str(self.workers)]  # fmt: skip
-        env = {k: v for k, v in os.environ.items() if k != "STARNAV_CACHE_DIR"}
+               "--data-dir", str(self.data_dir), "--workers", str(self.workers),
+               *self.args]  # fmt: skip
+        env = {k: v for k, v in os.environ.items() if k != "STARNAV_CACHE_DIR"} | self.env
         if self.cache_dir is not None:
             env["STARNAV_CACHE_DIR"] = str(self.cache_dir)
         log = (self.data_dir / "server.log").open("ab")

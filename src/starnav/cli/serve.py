@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import ipaddress
+import math
 import socket
 import sys
 from pathlib import Path
@@ -16,7 +17,9 @@ from starnav.cli.common import (
     finite,
     positive_int,
 )
+from starnav.detect.read import MAX_PIXELS
 from starnav.errors import StarnavError
+from starnav.runtime.pools import DEFAULT_WORKER_MEMORY_MB
 
 DEFAULT_PORT = 8080
 
@@ -38,6 +41,12 @@ def add_parser(subparsers: Subparsers) -> None:
     p.add_argument("--max-upload-mb", type=finite, default=100.0,
                    help="largest request body accepted (MB; default 100)")  # fmt: skip
     add_time_budget(p)
+    p.add_argument("--max-pixels-mp", type=_positive, default=MAX_PIXELS / 1e6,
+                   help="largest image a job reads, checked from its header (megapixels; "
+                   f"default {MAX_PIXELS / 1e6:g})")  # fmt: skip
+    p.add_argument("--max-job-mb", type=_megabytes, default=DEFAULT_WORKER_MEMORY_MB,
+                   help="memory of a worker process solving a job (MB; default "
+                   f"{DEFAULT_WORKER_MEMORY_MB:g}; 'none': no limit)")  # fmt: skip
     add_dask(p, "the jobs")
     p.add_argument("--json", action="store_true",
                    help="print one JSON line with the address when listening")  # fmt: skip
@@ -50,6 +59,19 @@ def _port(text: str) -> int:
     if value > 65535:
         raise argparse.ArgumentTypeError(f"a TCP port is 1-65535, got {text}")
     return value
+
+
+def _positive(text: str) -> float:
+    """Argument type: a positive finite number."""
+    value = finite(text)
+    if value <= 0:
+        raise argparse.ArgumentTypeError(f"must be a positive number, got {text}")
+    return value
+
+
+def _megabytes(text: str) -> float:
+    """Argument type: a positive number of MB, or "none" (``math.inf``: no limit)."""
+    return math.inf if text.strip().lower() == "none" else _positive(text)
 
 
 def check_host(host: str, api_key: str | None) -> None:
@@ -100,6 +122,8 @@ def run(args: argparse.Namespace) -> int:
         max_upload_bytes=int(args.max_upload_mb * 1e6),
         time_budget_s=args.time_budget,
         dask_address=args.dask,
+        max_pixels=max(int(args.max_pixels_mp * 1e6), 1),
+        max_job_bytes=None if math.isinf(args.max_job_mb) else int(args.max_job_mb * 1e6),
     )
     _check_port(args.host, args.port)
     url = f"http://{args.host}:{args.port}/"

@@ -11,7 +11,7 @@ from __future__ import annotations
 import functools
 import math
 import time
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -22,11 +22,11 @@ from starnav.camera import Camera, CameraModel, model_class
 from starnav.catalog import Catalog, is_embedded
 from starnav.detect.circle import ImageCircle, dark_corners, find_image_circle
 from starnav.detect.header import ImageHints, fits_hints, is_fits
-from starnav.detect.read import read_image
+from starnav.detect.read import MAX_PIXELS, read_image
 from starnav.detect.skymask import find_sky_mask
 from starnav.detect.stars import Detections, detect_stars
 from starnav.errors import CameraError, ImageError, StarnavError
-from starnav.pipeline.diagnose import Failure, diagnose
+from starnav.pipeline.diagnose import BUDGET, Failure, diagnose
 from starnav.pipeline.fov import diagonal_fov_deg, search_range
 from starnav.pipeline.options import (
     DEFAULT_FOV_RANGE_DEG,
@@ -39,7 +39,7 @@ from starnav.pipeline.options import (
 )
 from starnav.pipeline.stars import check_searched, exact_field, solve_stars
 from starnav.results import Solution
-from starnav.runtime.budget import check_budget, default_budget_s
+from starnav.runtime.budget import Deadline, check_budget, default_budget_s
 
 NO_HINTS = ImageHints()
 MIN_DETECTIONS = 4  # fewer detected stars than this: not solved, without a search
@@ -107,6 +107,9 @@ def solve_image(
     hints: ImageHints | None = None,
     position_hint_deg: tuple[float, float] | None = None,
     prior: np.ndarray | None = None,
+    max_pixels: int = MAX_PIXELS,
+    budget_from: Deadline | None = None,
+    on_budget: Callable[[float], None] | None = None,
     **option_fields: Any,
 ) -> ImageSolveResult:
     """Solve an image file (FITS, PNG, JPEG, TIFF) or a 2-D array (row 0 at the top) with
@@ -126,7 +129,10 @@ def solve_image(
     fails with the hinted FOV is tried again without it. ``position_hint_deg``: (RA, Dec)
     of the boresight, roughly (wins over the header's). ``prior``: the previous frame's
     attitude (``R_cam_from_icrs``) of a sequence, with its fitted ``camera``: tracking. The
-    time budget is the solve's (``starnav.runtime.budget``; detection is not counted).
+    time budget is the solve's (``starnav.runtime.budget``; detection is not counted) unless
+    ``budget_from`` (its start) says when it started: then reading and detection count and
+    the solve gets what is left; ``on_budget(seconds)`` is told what it gets, before it starts.
+    ``max_pixels``: the largest image read (``starnav.detect.read``).
     """
     options = SolveOptions.make(options, **option_fields)
     camera = options.camera
@@ -139,7 +145,7 @@ def solve_image(
         if pixels.ndim != 2 or pixels.size == 0:
             raise ImageError(f"an image array must be 2-D and not empty, got shape {image.shape}")
     else:
-        pixels = read_image(image)
+        pixels = read_image(image, max_pixels=max_pixels)
         read_ms = (time.perf_counter() - t0) * 1e3
         if hints is None:
             hints = fits_hints(image)
@@ -156,6 +162,18 @@ def solve_image(
     t1 = time.perf_counter()
     found = _detect_binned(pixels, options)
     detect_ms = (time.perf_counter() - t1) * 1e3
+    if budget_from is not None:  # the read and the detection count against the budget
+        spent_s = budget_from.spent_s()
+        if spent_s >= budget_s:
+            reason = (
+                f"time budget spent ({budget_s:g} s) reading and detecting the image "
+                f"({spent_s:.1f} s)"
+            )
+            return ImageSolveResult(None, reason, found, None, read_ms, detect_ms, 0.0,
+                                    hints=hints, failure=BUDGET)  # fmt: skip
+        budget_s -= spent_s
+    if on_budget is not None:
+        on_budget(budget_s)
     if len(found.xy) < MIN_DETECTIONS:
         reason = f"{len(found.xy)} stars detected, at least {MIN_DETECTIONS} are needed"
         failure = _diagnose(found, reason, options)

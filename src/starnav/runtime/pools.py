@@ -14,12 +14,17 @@ from __future__ import annotations
 
 import multiprocessing
 import os
+import signal
+import sys
 from collections.abc import Callable, Iterator
 from concurrent.futures import ProcessPoolExecutor
 from contextlib import contextmanager
 from typing import Literal
 
 from starnav.errors import StarnavError
+
+DEFAULT_WORKER_MEMORY_MB = 4000.0  # a worker solving a 200 MP image (decoded, detected, written)
+PR_SET_PDEATHSIG = 1  # linux/prctl.h
 
 
 def one_blas_thread() -> None:
@@ -28,6 +33,37 @@ def one_blas_thread() -> None:
     workers start, so their numpy reads it."""
     for name in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
         os.environ.setdefault(name, "1")
+
+
+def limit_memory(memory_bytes: int) -> None:
+    """Limit this process's memory to ``memory_bytes`` (``resource.RLIMIT_DATA``: its heap and
+    private mappings, what numpy's arrays take; ``RLIMIT_AS`` would also count the address
+    space numba's LLVM and the allocators reserve without using it): past it an allocation
+    raises ``MemoryError``. Not below the system's hard limit; nothing where there is no
+    ``resource`` module."""
+    try:
+        import resource
+    except ImportError:
+        return
+    hard = resource.getrlimit(resource.RLIMIT_DATA)[1]
+    if hard != resource.RLIM_INFINITY:
+        memory_bytes = min(memory_bytes, hard)
+    resource.setrlimit(resource.RLIMIT_DATA, (memory_bytes, hard))
+
+
+def die_with_parent(parent_pid: int) -> None:
+    """Ask the kernel for SIGKILL when the parent process dies (Linux's ``PR_SET_PDEATHSIG``,
+    which follows the parent's thread that started this process), and exit now if the parent
+    ``parent_pid`` is already gone. Elsewhere the caller watches ``os.getppid()``."""
+    if sys.platform.startswith("linux"):
+        import ctypes
+
+        try:
+            ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
+        except (OSError, AttributeError):
+            pass
+    if os.getppid() != parent_pid:
+        os._exit(0)
 
 
 def worker_count(workers: int | None) -> int:
