@@ -340,6 +340,27 @@ def _check_gzipped_fits(path: Path, name: str, max_pixels: int) -> None:
     _check_shape(name, shape, max(bitpix // 8, 1), max_pixels)
 
 
+def primary_fits_header(path: str | Path):
+    """The primary header (an astropy ``Header``) of a FITS file, plain or gzip-compressed,
+    read off the stream (astropy's open inflates a whole gzip stream first); None when the
+    file starts with no FITS header."""
+    import gzip
+    import zlib
+
+    path = Path(path)
+    try:
+        with path.open("rb") as fh:
+            gzipped = fh.read(2) == GZIP_MAGIC
+        with (gzip.open if gzipped else open)(path, "rb") as fh, warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            if fh.read(len(FITS_MAGIC)) != FITS_MAGIC:
+                return None
+            fh.seek(0)
+            return _next_fits_header(fh, str(path))
+    except (OSError, EOFError, zlib.error, ValueError, ImageError):
+        return None
+
+
 def _next_fits_header(fh, name: str):
     """The next FITS header of the stream ``fh`` (an astropy ``Header``; None at its end)."""
     from astropy.io import fits

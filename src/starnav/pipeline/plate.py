@@ -27,7 +27,7 @@ from astropy.wcs import WCS
 
 from starnav.catalog import Catalog
 from starnav.detect.header import ImageHints, fits_hints, is_fits
-from starnav.detect.read import MAX_PIXELS
+from starnav.detect.read import MAX_PIXELS, primary_fits_header
 from starnav.errors import StarnavError, shown
 from starnav.pipeline.fov import FOV_LIMITS_DEG
 from starnav.pipeline.image import (
@@ -296,6 +296,9 @@ def read_xylist(
     ``max_sources``: only the first (brightest) this many (solve-field's ``--objs``)."""
     path = Path(path)
     if not is_fits(path):
+        return None
+    primary = primary_fits_header(path)  # an image's: no list (astropy would inflate a .gz)
+    if primary is not None and str(primary.get("NAXIS", 0)).strip() not in ("0", ""):
         return None
     from astropy.io import fits
 

@@ -33,7 +33,7 @@ from starnav.runtime.budget import SCAN_BUDGET_S, SEARCH_BUDGET_S, compiled_s
 from starnav.runtime.pools import DEFAULT_WORKER_MEMORY_MB, die_with_parent, limit_memory
 from starnav.service.worker import run_job
 
-GRACE_S = 10.0  # past the budget before a worker is stopped
+GRACE_S = 15.0  # past the budget before a worker is stopped (a fresh worker loads its tables)
 WRITE_S = 120.0  # for writing a job's files once its solve is over (a 200 MP image's)
 WATCH_S = 0.5  # a worker looks for its parent this often
 
