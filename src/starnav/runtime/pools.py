@@ -2,10 +2,12 @@
 the Dask client.
 
 ``process_pool`` is every pool of worker processes (star-list batches, image batches, the
-evaluation, the service's workers), its start method named by the caller for its reason:
-"fork" shares a prepared solver's catalog, tables and machine code with the workers (spawn
-where there is no fork), "spawn" gives fresh interpreters, "forkserver" workers that inherit no
-threads or event loop. ``dask_client`` opens a client of a scheduler address, or of a
+evaluation), its start method named by the caller for its reason: "fork" shares a prepared
+solver's catalog, tables and machine code with the workers (spawn where there is no fork),
+"spawn" gives fresh interpreters, "forkserver" workers that inherit no threads or event loop.
+``worker_process`` is a process of its own with a pipe (each of the service's workers: one can
+be killed without breaking a pool), ``limit_memory`` and ``die_with_parent`` what such a
+process does first. ``dask_client`` opens a client of a scheduler address, or of a
 LocalCluster of ``workers`` processes for "local", with a one-line error when Dask is missing
 or the scheduler cannot be reached.
 """
@@ -33,6 +35,20 @@ def one_blas_thread() -> None:
     workers start, so their numpy reads it."""
     for name in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
         os.environ.setdefault(name, "1")
+
+
+def worker_process(target: Callable[..., None], args: tuple = (), *, name: str = "worker"):
+    """A process of its own (no pool) running ``target(conn, *args)``, started with "spawn"
+    (a fresh interpreter: nothing of the caller's threads or event loop), as a daemon (killed
+    when the caller exits normally), one BLAS thread; ``conn`` is its end of a pipe. Returns
+    the process and the caller's end."""
+    one_blas_thread()
+    context = multiprocessing.get_context("spawn")
+    here, there = context.Pipe()
+    process = context.Process(target=target, args=(there, *args), name=name, daemon=True)
+    process.start()
+    there.close()
+    return process, here
 
 
 def limit_memory(memory_bytes: int) -> None:

@@ -22,7 +22,6 @@ is killed and a new one started: the other slots' jobs go on.
 from __future__ import annotations
 
 import asyncio
-import multiprocessing
 import os
 import threading
 import time
@@ -30,7 +29,12 @@ from dataclasses import dataclass
 
 from starnav.detect.read import MAX_PIXELS
 from starnav.runtime.budget import SCAN_BUDGET_S, SEARCH_BUDGET_S, compiled_s
-from starnav.runtime.pools import DEFAULT_WORKER_MEMORY_MB, die_with_parent, limit_memory
+from starnav.runtime.pools import (
+    DEFAULT_WORKER_MEMORY_MB,
+    die_with_parent,
+    limit_memory,
+    worker_process,
+)
 from starnav.service.worker import run_job
 
 GRACE_S = 15.0  # past the budget before a worker is stopped (a fresh worker loads its tables)
@@ -76,20 +80,12 @@ class WorkerProcess:
 
     def __init__(self, limits: Limits):
         self.limits = limits
-        self._context = multiprocessing.get_context("spawn")
         self._start()
 
     def _start(self) -> None:
-        here, there = self._context.Pipe()
-        self.process = self._context.Process(
-            target=serve,
-            args=(there, os.getpid(), self.limits.memory_bytes),
-            name="starnav-worker",
-            daemon=True,
+        self.process, self.conn = worker_process(
+            serve, (os.getpid(), self.limits.memory_bytes), name="starnav-worker"
         )
-        self.process.start()
-        there.close()
-        self.conn = here
 
     async def run(self, args: tuple) -> dict:
         """The answer of ``run_job(*args, max_pixels=...)``, or a failed answer when the
