@@ -22,7 +22,7 @@ from starnav.camera import Camera, CameraModel, model_class
 from starnav.catalog import Catalog, is_embedded
 from starnav.detect.circle import ImageCircle, dark_corners, find_image_circle
 from starnav.detect.header import ImageHints, fits_hints, is_fits
-from starnav.detect.read import MAX_PIXELS, read_image
+from starnav.detect.read import read_image
 from starnav.detect.skymask import find_sky_mask
 from starnav.detect.stars import Detections, detect_stars
 from starnav.errors import CameraError, ImageError, StarnavError
@@ -46,6 +46,7 @@ MIN_DETECTIONS = 4  # fewer detected stars than this: not solved, without a sear
 FISHEYE_CIRCLE_CONTRAST = 0.5  # an image with nothing said is a fisheye's from this on (all-sky
 # frames measured 0.8-1.5, vignetted photographs and wide-field shots at most 0.3)
 AUTO_BIN_PIXELS = 4.2e6  # an image is detected binned to at most this many pixels
+SPENT_ADVICE = "a longer --time-budget, or a smaller image"  # a budget spent before the solve
 FEW_STARS_DEEPER = 15  # a fisheye sky with fewer stars than this is detected again, deeper
 DEEPER_THRESHOLDS_SIGMA = (4.0, 3.0)  # the thresholds of those detections, in turn
 
@@ -107,7 +108,6 @@ def solve_image(
     hints: ImageHints | None = None,
     position_hint_deg: tuple[float, float] | None = None,
     prior: np.ndarray | None = None,
-    max_pixels: int = MAX_PIXELS,
     budget_from: Deadline | None = None,
     on_budget: Callable[[float], None] | None = None,
     **option_fields: Any,
@@ -129,10 +129,7 @@ def solve_image(
     fails with the hinted FOV is tried again without it. ``position_hint_deg``: (RA, Dec)
     of the boresight, roughly (wins over the header's). ``prior``: the previous frame's
     attitude (``R_cam_from_icrs``) of a sequence, with its fitted ``camera``: tracking. The
-    time budget is the solve's (``starnav.runtime.budget``; detection is not counted) unless
-    ``budget_from`` (its start) says when it started: then reading and detection count and
-    the solve gets what is left; ``on_budget(seconds)`` is told what it gets, before it starts.
-    ``max_pixels``: the largest image read (``starnav.detect.read``).
+    time budget is the solve's (``starnav.runtime.budget``; ``budget_from``: ``_budget_left``).
     """
     options = SolveOptions.make(options, **option_fields)
     camera = options.camera
@@ -145,7 +142,7 @@ def solve_image(
         if pixels.ndim != 2 or pixels.size == 0:
             raise ImageError(f"an image array must be 2-D and not empty, got shape {image.shape}")
     else:
-        pixels = read_image(image, max_pixels=max_pixels)
+        pixels = read_image(image)
         read_ms = (time.perf_counter() - t0) * 1e3
         if hints is None:
             hints = fits_hints(image)
@@ -162,21 +159,10 @@ def solve_image(
     t1 = time.perf_counter()
     found = _detect_binned(pixels, options)
     detect_ms = (time.perf_counter() - t1) * 1e3
-    if budget_from is not None:  # the read and the detection count against the budget
-        spent_s = budget_from.spent_s()
-        if spent_s >= budget_s:
-            reason = (
-                f"time budget spent ({budget_s:g} s) reading and detecting the image "
-                f"({spent_s:.1f} s)"
-            )
-            return ImageSolveResult(None, reason, found, None, read_ms, detect_ms, 0.0,
-                                    hints=hints, failure=BUDGET)  # fmt: skip
-        budget_s -= spent_s
-    if on_budget is not None:
-        on_budget(budget_s)
-    if len(found.xy) < MIN_DETECTIONS:
-        reason = f"{len(found.xy)} stars detected, at least {MIN_DETECTIONS} are needed"
-        failure = _diagnose(found, reason, options)
+    budget_s, spent = _budget_left(budget_s, budget_from, on_budget)
+    if len(found.xy) < MIN_DETECTIONS or spent:
+        reason = spent or f"{len(found.xy)} stars detected, at least {MIN_DETECTIONS} are needed"
+        failure = Failure(BUDGET, SPENT_ADVICE) if spent else _diagnose(found, reason, options)
         return ImageSolveResult(
             None, failure.explain(reason), found, None, read_ms, detect_ms, 0.0,
             hints=hints, failure=failure.kind,
@@ -215,6 +201,23 @@ def solve_image(
         hints,
         failure,
     )
+
+
+def _budget_left(budget_s: float, budget_from, on_budget) -> tuple[float, str | None]:
+    """The budget (s) left to the solve of an image read and detected: all of ``budget_s``,
+    or, counted from ``budget_from`` (a ``Deadline``: the job's start, as in a service), what
+    is left, then told to ``on_budget(seconds)``; and the reason when none is left."""
+    if budget_from is not None:
+        spent_s = budget_from.spent_s()
+        if spent_s >= budget_s:
+            return 0.0, (
+                f"the budget of {budget_s:g} s went to reading and detecting the image "
+                f"({spent_s:.1f} s)"
+            )
+        budget_s -= spent_s
+    if on_budget is not None:
+        on_budget(budget_s)
+    return budget_s, None
 
 
 def _unsaid_fisheye(options: SolveOptions, pixels: np.ndarray) -> bool:
