@@ -17,9 +17,8 @@ from starnav.cli.common import (
     finite,
     positive_int,
 )
-from starnav.detect.read import MAX_PIXELS
 from starnav.errors import StarnavError
-from starnav.runtime.pools import DEFAULT_WORKER_MEMORY_MB
+from starnav.runtime.limits import DEFAULT_WORKER_MEMORY_MB, MAX_PIXELS
 
 DEFAULT_PORT = 8080
 

@@ -46,14 +46,13 @@ from pathlib import Path
 import numpy as np
 
 from starnav.errors import ImageError
+from starnav.runtime.limits import MAX_BYTES_PER_PIXEL, MAX_PIXELS
 
 REC709 = np.array([0.2126, 0.7152, 0.0722])
 FITS_SUFFIXES = (".fits", ".fit", ".fts", ".fits.gz", ".fit.gz", ".fts.gz", ".fz")
 FITS_MAGIC = b"SIMPLE  ="  # the first bytes of a FITS file
 GZIP_MAGIC = b"\x1f\x8b"  # of a gzip file
 PNM_MAGICS = (b"P5", b"P6")  # binary PGM and PPM
-MAX_PIXELS = 200_000_000  # the largest real sensors (100-200 MP); callers may set another
-MAX_BYTES_PER_PIXEL = 6  # decoded: 16-bit RGB (float64 grey, 8 bytes, only at 3/4 of the pixels)
 FITS_BLOCK = 2880  # bytes of a FITS header block
 MAX_FITS_HEADER_BLOCKS = 1000  # a header longer than this (2.9 MB, 36000 cards) is refused
 TIFF_MAGICS = (b"II*\x00", b"MM\x00*", b"II+\x00", b"MM\x00+")  # TIFF and BigTIFF

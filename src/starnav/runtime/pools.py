@@ -25,7 +25,6 @@ from typing import Literal
 
 from starnav.errors import StarnavError
 
-DEFAULT_WORKER_MEMORY_MB = 4000.0  # a worker solving a 200 MP image (decoded, detected, written)
 PR_SET_PDEATHSIG = 1  # linux/prctl.h
 
 

@@ -37,7 +37,8 @@ from starlette.routing import Mount, Route
 from starlette.staticfiles import StaticFiles
 
 from starnav.detect.read import MAX_PIXELS
-from starnav.runtime.pools import DEFAULT_WORKER_MEMORY_MB, dask_client, one_blas_thread
+from starnav.runtime.limits import DEFAULT_WORKER_MEMORY_MB
+from starnav.runtime.pools import dask_client, one_blas_thread
 from starnav.service import nova
 from starnav.service.processes import GRACE_S, Limits, WorkerProcess, failed_answer
 from starnav.service.store import JobStore

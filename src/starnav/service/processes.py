@@ -29,12 +29,8 @@ from dataclasses import dataclass
 
 from starnav.detect.read import MAX_PIXELS
 from starnav.runtime.budget import SCAN_BUDGET_S, SEARCH_BUDGET_S, compiled_s
-from starnav.runtime.pools import (
-    DEFAULT_WORKER_MEMORY_MB,
-    die_with_parent,
-    limit_memory,
-    worker_process,
-)
+from starnav.runtime.limits import DEFAULT_WORKER_MEMORY_MB
+from starnav.runtime.pools import die_with_parent, limit_memory, worker_process
 from starnav.service.worker import run_job
 
 GRACE_S = 15.0  # past the budget before a worker is stopped (a fresh worker loads its tables)
