@@ -64,9 +64,9 @@ def test_the_attack_files_fail_at_once_with_the_limit(budget_server, tmp_path):
 
 
 def test_a_read_past_the_budget_stops_its_worker_not_the_other_job(budget_server, tmp_path):
-    # a real 16-bit RGB PNG of 100 MP (600 MB decoded, within the limits) in ~0.6 MB: pypng
-    # reads it for far longer than the budget and its grace
-    slow = zero_png16(tmp_path / "slow.png", 10000, 10000).read_bytes()
+    # a real 16-bit RGB PNG of 40 MP (240 MB decoded, within the limits), Paeth-filtered, in
+    # ~0.3 MB: pypng reads it for far longer than the budget and its grace (~1.3 s a MP)
+    slow = zero_png16(tmp_path / "slow.png", 8000, 5000, paeth=True).read_bytes()
     url, session = budget_server.url, login(budget_server.url)
     t0 = time.monotonic()
     stopped = upload_image(url, session, "slow.png", slow)
@@ -83,8 +83,8 @@ def test_a_read_past_the_budget_stops_its_worker_not_the_other_job(budget_server
 
 
 def test_a_read_within_the_grace_still_counts_against_the_budget(budget_server, tmp_path):
-    # 12 MP of 16-bit RGB: a few seconds of pypng, past the 2 s budget, within its grace
-    png = zero_png16(tmp_path / "long.png", 4000, 3000).read_bytes()
+    # 4 MP of Paeth-filtered 16-bit RGB: ~5 s of pypng, past the 2 s budget, within its grace
+    png = zero_png16(tmp_path / "long.png", 2000, 2000, paeth=True).read_bytes()
     url = budget_server.url
     job_id = upload_image(url, login(url), "long.png", png)
     assert wait_done(url, job_id) == "failure"
@@ -124,7 +124,7 @@ def test_a_dask_job_past_its_deadline_is_failed_and_cancelled(tmp_path, monkeypa
     from starnav.service.app import ServiceConfig, create_app
 
     monkeypatch.setattr(processes, "WRITE_S", 0.0)
-    slow = zero_png16(tmp_path / "slow.png", 10000, 10000).read_bytes()
+    slow = zero_png16(tmp_path / "slow.png", 8000, 5000, paeth=True).read_bytes()
     config = ServiceConfig(data_dir=tmp_path / "data", workers=1, dask_address="local",
                            time_budget_s=BUDGET_S)  # fmt: skip
     with TestClient(create_app(config)) as client:

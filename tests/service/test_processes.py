@@ -49,7 +49,7 @@ def test_no_process_of_a_stopped_server_remains(tmp_path, sig):
                     args=("--time-budget", "none"), env={"STARNAV_TEST_RUN": marker})  # fmt: skip
     server.start()
     try:
-        slow = zero_png16(tmp_path / "slow.png", 10000, 10000).read_bytes()  # minutes of pypng
+        slow = zero_png16(tmp_path / "slow.png", 8000, 5000, paeth=True).read_bytes()  # ~1 min
         job_id = upload_image(server.url, login(server.url), "slow.png", slow)
         deadline = time.monotonic() + 60.0
         while api(server.url, f"jobs/{job_id}")["status"] != "solving":
