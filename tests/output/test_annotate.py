@@ -202,3 +202,20 @@ def test_bad_input_is_refused(orion):
         annotation_figure(**{**orion, "R_cam_from_icrs": np.eye(2)})
     with pytest.raises(StarnavError, match="residual_scale"):
         annotation_figure(**orion, residual_scale=0.0)
+
+
+def test_a_large_image_is_binned_before_it_is_drawn_in_place(tmp_path):
+    """A 6400 x 4800 image drawn 1600 px wide: binned 4 x 4 before matplotlib (no full-size
+    copies), a bright 4 x 4 block still where it is, at a quarter of its coordinates."""
+    camera = Camera.from_fov(10.0, 6400, 4800)
+    image = np.random.default_rng(2).normal(100.0, 3.0, (4800, 6400)).astype(np.float32)
+    image[1200:1204, 3000:3004] = 5000.0  # edges 3000-3004, 1200-1204: centre (3002, 1202)
+    path = tmp_path / "large.png"
+    annotate_image(path, image, detected_xy=np.empty((0, 2)),
+                   R_cam_from_icrs=attitude_from_radec_roll(10.0, 20.0, 0.0), camera=camera,
+                   catalog=_far_catalog(), matched=[])  # fmt: skip
+    with Image.open(path) as png:
+        gray = np.asarray(png.convert("L"), dtype=float)
+    picture = gray[gray.shape[0] - 1200 :]  # below the title strip
+    hot = np.argwhere(picture > 0.9 * picture.max())
+    assert np.allclose(hot.mean(axis=0) + 0.5, [1202 / 4, 3002 / 4], atol=0.6)

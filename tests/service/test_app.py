@@ -130,7 +130,7 @@ def _png(width: int, height: int) -> bytes:
     [
         (lambda png: b"this is not an image\n" * 10, {}, "not an image format we read"),
         (lambda png: png[:20000], {}, "cannot read image file"),  # truncated
-        (lambda png: _png(20000, 20000), {}, "too large to decode safely"),  # 4e8 px in kBs
+        (lambda png: _png(20000, 20000), {}, "over the limit of 200 MP"),  # 4e8 px in kBs
         (
             lambda png: png,
             {"scale_units": "furlongs", "scale_lower": 1, "scale_upper": 2},

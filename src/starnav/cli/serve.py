@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import ipaddress
+import math
 import signal
 import socket
 import sys
@@ -18,6 +19,7 @@ from starnav.cli.common import (
     positive_int,
 )
 from starnav.errors import StarnavError
+from starnav.runtime.limits import DEFAULT_WORKER_MEMORY_MB, MAX_PIXELS
 from starnav.service.files import (
     DEFAULT_CACHE_LIMIT_MB,
     clean_leftovers,
@@ -59,6 +61,12 @@ def add_parser(subparsers: Subparsers) -> None:
                         f"{DEFAULT_CACHE_LIMIT_MB:g}; past it new ones stay in memory)",
                    )  # fmt: skip
     add_time_budget(p)
+    p.add_argument("--max-pixels-mp", type=_positive, default=MAX_PIXELS / 1e6,
+                   help="largest image a job reads, checked from its header (megapixels; "
+                   f"default {MAX_PIXELS / 1e6:g})")  # fmt: skip
+    p.add_argument("--max-job-mb", type=_megabytes, default=DEFAULT_WORKER_MEMORY_MB,
+                   help="memory of a worker process solving a job (MB; default "
+                   f"{DEFAULT_WORKER_MEMORY_MB:g}; 'none': no limit)")  # fmt: skip
     add_dask(p, "the jobs")
     p.add_argument("--json", action="store_true",
                    help="print one JSON line with the address when listening")  # fmt: skip
@@ -71,6 +79,19 @@ def _port(text: str) -> int:
     if value > 65535:
         raise argparse.ArgumentTypeError(f"a TCP port is 1-65535, got {text}")
     return value
+
+
+def _positive(text: str) -> float:
+    """Argument type: a positive finite number."""
+    value = finite(text)
+    if value <= 0:
+        raise argparse.ArgumentTypeError(f"must be a positive number, got {text}")
+    return value
+
+
+def _megabytes(text: str) -> float:
+    """Argument type: a positive number of MB, or "none" (``math.inf``: no limit)."""
+    return math.inf if text.strip().lower() == "none" else _positive(text)
 
 
 def check_host(host: str, api_key: str | None) -> None:
@@ -134,6 +155,8 @@ def run(args: argparse.Namespace) -> int:
         max_queued=args.max_queued,
         url_deadline_s=args.url_timeout,
         allow_url_hosts=allowed,
+        max_pixels=max(int(args.max_pixels_mp * 1e6), 1),
+        max_job_bytes=None if math.isinf(args.max_job_mb) else int(args.max_job_mb * 1e6),
     )
     _check_port(args.host, args.port)
     url = f"http://{args.host}:{args.port}/"

@@ -25,24 +25,36 @@ way. Only the mirror parity of the solution depends on it, and the solver report
 
 Values are stored values (BSCALE/BZERO applied for FITS); non-finite values come back as NaN
 (``starnav.detect.stars`` masks them).
+
+Size limits, checked from each format's header before its pixels are decoded (a small file can
+claim a huge image: 190 kB of gzip-compressed FITS hold 14000 x 14000 px): at most
+``max_pixels`` (width x height; default ``MAX_PIXELS``, 200 MP, the largest real sensors), and
+at most ``MAX_BYTES_PER_PIXEL`` bytes a pixel decoded (samples x bytes a sample, every plane of
+a cube counted: a 200 MP 16-bit RGB image fits, a 200 MP float64 one does not). A gzip-compressed
+FITS file's header is read from the gzip stream, before astropy inflates it.
 """
 
 from __future__ import annotations
 
 import functools
+import logging
+import math
+import threading
 import warnings
 from pathlib import Path
 
 import numpy as np
 
 from starnav.errors import ImageError
+from starnav.runtime.limits import MAX_BYTES_PER_PIXEL, MAX_PIXELS
 
 REC709 = np.array([0.2126, 0.7152, 0.0722])
 FITS_SUFFIXES = (".fits", ".fit", ".fts", ".fits.gz", ".fit.gz", ".fts.gz", ".fz")
 FITS_MAGIC = b"SIMPLE  ="  # the first bytes of a FITS file
 GZIP_MAGIC = b"\x1f\x8b"  # of a gzip file
 PNM_MAGICS = (b"P5", b"P6")  # binary PGM and PPM
-MAX_GUNZIPPED_BYTES = 2**31  # a gzip file holding more than 2 GiB is refused (a bomb)
+FITS_BLOCK = 2880  # bytes of a FITS header block
+MAX_FITS_HEADER_BLOCKS = 1000  # a header longer than this (2.9 MB, 36000 cards) is refused
 TIFF_MAGICS = (b"II*\x00", b"MM\x00*", b"II+\x00", b"MM\x00+")  # TIFF and BigTIFF
 # formats Pillow opens that ``read_image`` does not read as pictures: MPEG (no decoder), EPS
 # (needs Ghostscript), IPTC (metadata); Pillow's stubs (BUFR, GRIB, HDF5, WMF) are left out by
@@ -64,12 +76,15 @@ _COLOUR_MODES = (
 )
 
 
-def read_image(path: str | Path) -> np.ndarray:
+def read_image(path: str | Path, *, max_pixels: int = MAX_PIXELS) -> np.ndarray:
     """The picture in ``path`` as a 2-D float32 array (luminance for colour), C order, native
     byte order, row 0 = top of the picture. ``ImageError`` (one line, naming the file) for a
-    missing, unreadable or corrupt file, an empty or 1-D image, or one with no finite pixel."""
+    missing, unreadable or corrupt file, an empty or 1-D image, one with no finite pixel, or
+    one larger than ``max_pixels`` (width x height) or ``max_pixels`` x
+    ``MAX_BYTES_PER_PIXEL`` bytes decoded (checked from the header, before decoding)."""
     path = Path(path)
     name = str(path)
+    check_max_pixels(max_pixels)
     if not path.exists():
         raise ImageError(f"image file {name!r} does not exist")
     if not path.is_file():
@@ -83,38 +98,84 @@ def read_image(path: str | Path) -> np.ndarray:
         raise ImageError(f"image file {name!r} is empty (0 bytes)")
     fits_name = path.name.lower().endswith(FITS_SUFFIXES)
     if head.startswith(FITS_MAGIC) or (fits_name and head.startswith(GZIP_MAGIC)):
-        data = _read_fits(path, name)
+        data = _read_fits(path, name, max_pixels)
     elif fits_name:
         raise ImageError(f"cannot read image file {name!r}: not a FITS file (no SIMPLE card)")
     elif head.startswith(GZIP_MAGIC):
-        data = _read_gzipped(path, name)
+        data = _read_gzipped(path, name, max_pixels)
     elif head.startswith(PNM_MAGICS) and _pnm_maxval(head) > 255:
-        data = _read_deep_pnm(head + path.read_bytes()[len(head) :], name)
+        with path.open("rb") as fh:
+            data = _read_deep_pnm(fh, name, max_pixels)
     else:
-        data = _read_pillow(path, name)
+        data = _read_pillow(path, name, max_pixels)
     return _finish(data, name)
 
 
-def _read_gzipped(path: Path, name: str) -> np.ndarray:
-    """The picture in a gzip-compressed file of any format read here (FITS, PGM, PNG, ...)."""
+def check_max_pixels(max_pixels: object) -> int:
+    """``max_pixels`` if it is a positive whole number, else a one-line ``ImageError``."""
+    if isinstance(max_pixels, bool) or not isinstance(max_pixels, int) or max_pixels <= 0:
+        raise ImageError(f"max_pixels must be a positive whole number, got {max_pixels!r}")
+    return max_pixels
+
+
+def check_size(name: str, width: int, height: int, nbytes: int, max_pixels: int) -> None:
+    """A one-line ``ImageError`` when an image of ``width`` x ``height`` px, ``nbytes`` bytes
+    decoded (every sample and plane), passes the limits (the module's docstring)."""
+    pixels = width * height
+    if pixels > max_pixels:
+        raise ImageError(
+            f"image file {name!r} is {width} x {height} px ({pixels / 1e6:.4g} MP), over the "
+            f"limit of {max_pixels / 1e6:g} MP"
+        )
+    limit = max_pixels * MAX_BYTES_PER_PIXEL
+    if nbytes > limit:
+        raise ImageError(
+            f"image file {name!r} decodes to {nbytes / 1e6:.0f} MB ({width} x {height} px, "
+            f"{nbytes / max(pixels, 1):.3g} bytes a pixel), over the limit of "
+            f"{limit / 1e6:.0f} MB ({MAX_BYTES_PER_PIXEL} bytes a pixel of "
+            f"{max_pixels / 1e6:g} MP)"
+        )
+
+
+def _check_shape(name: str, shape: tuple[int, ...], itemsize: int, max_pixels: int) -> None:
+    """``check_size`` of an array shape: the two longest axes are the picture (a cube's
+    planes and a stack's frames counted in its bytes)."""
+    dims = [int(n) for n in shape]
+    longest = sorted(sorted(range(len(dims)), key=lambda k: -dims[k])[:2])  # in numpy order
+    height, width = ([1, 1] + [dims[k] for k in longest])[-2:]
+    check_size(name, width, height, math.prod(dims) * itemsize, max_pixels)
+
+
+def _read_gzipped(path: Path, name: str, max_pixels: int) -> np.ndarray:
+    """The picture in a gzip-compressed file of any format read here (FITS, PGM, PNG, ...),
+    its size checked before it is inflated whole."""
     import gzip
     import io
     import zlib
 
+    limit = max_pixels * MAX_BYTES_PER_PIXEL
     try:
         with gzip.open(path, "rb") as fh:
-            raw = fh.read(MAX_GUNZIPPED_BYTES + 1)
+            head = fh.read(80)
+            if head.startswith(FITS_MAGIC):
+                raw = None
+            elif head.startswith(PNM_MAGICS) and _pnm_maxval(head) > 255:
+                fh.seek(0)
+                return _read_deep_pnm(fh, name, max_pixels)
+            else:  # a picture Pillow reads: its header is checked once it is opened
+                raw = head + fh.read(limit + 1 - len(head))
     except (OSError, EOFError, zlib.error) as exc:
         raise ImageError(f"cannot read gzip file {name!r}: {_one_line(exc)}") from None
-    if len(raw) > MAX_GUNZIPPED_BYTES:
-        raise ImageError(f"image file {name!r} unpacks to more than 2 GiB: too large to read")
+    if raw is None:
+        return _read_fits(path, name, max_pixels)
+    if len(raw) > limit:
+        raise ImageError(
+            f"image file {name!r} unpacks to more than {limit / 1e6:.0f} MB, the limit "
+            f"({MAX_BYTES_PER_PIXEL} bytes a pixel of {max_pixels / 1e6:g} MP)"
+        )
     if not raw:
         raise ImageError(f"image file {name!r} holds an empty gzip stream")
-    if raw.startswith(FITS_MAGIC):
-        return _read_fits(io.BytesIO(raw), name)
-    if raw.startswith(PNM_MAGICS) and _pnm_maxval(raw[:80]) > 255:
-        return _read_deep_pnm(raw, name)
-    return _read_pillow(io.BytesIO(raw), name)
+    return _read_pillow(io.BytesIO(raw), name, max_pixels)
 
 
 def _pnm_header(raw: bytes) -> tuple[list[int], int] | None:
@@ -148,18 +209,22 @@ def _pnm_maxval(head: bytes) -> int:
     return parsed[0][2] if parsed else 0
 
 
-def _read_deep_pnm(raw: bytes, name: str) -> np.ndarray:
-    """A binary PGM / PPM of more than 8 bits (two big-endian bytes a sample), as stored."""
-    parsed = _pnm_header(raw)
+def _read_deep_pnm(fh, name: str, max_pixels: int) -> np.ndarray:
+    """A binary PGM / PPM of more than 8 bits (two big-endian bytes a sample), as stored,
+    from the file object ``fh`` at its start (its size checked before its pixels are read)."""
+    head = fh.read(1024)
+    parsed = _pnm_header(head)
     if parsed is None:
         raise ImageError(f"cannot read PNM file {name!r}: malformed header")
     (width, height, maxval), offset = parsed
-    planes = 3 if raw.startswith(b"P6") else 1
+    planes = 3 if head.startswith(b"P6") else 1
     if not (0 < width and 0 < height and maxval < 65536):
         raise ImageError(
             f"cannot read PNM file {name!r}: bad header ({width} x {height}, maxval {maxval})"
         )
     need = width * height * planes * 2
+    check_size(name, width, height, need, max_pixels)
+    raw = head + fh.read(offset + need - len(head))
     if len(raw) - offset < need:
         raise ImageError(
             f"cannot read PNM file {name!r}: truncated ({len(raw) - offset} bytes of pixels, "
@@ -205,25 +270,36 @@ def luminance(rgb: np.ndarray) -> np.ndarray:
     return out
 
 
-def _read_fits(source, name: str) -> np.ndarray:
-    """The first image of a FITS file (``source``: a path or a file object): a 2-D image, a
-    colour cube's luminance or a stack's first frame (the module's docstring)."""
+def _read_fits(source: Path, name: str, max_pixels: int) -> np.ndarray:
+    """The first image of a FITS file (also gzip-compressed): a 2-D image, a colour cube's
+    luminance or a stack's first frame (the module's docstring). Each image's size is checked
+    from its header before its data is read."""
     from astropy.io import fits
 
+    with source.open("rb") as fh:
+        gzipped = fh.read(2) == GZIP_MAGIC
+    if gzipped:
+        _check_gzipped_fits(source, name, max_pixels)
     shapes = []
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # non-standard cards are common; the pixels matter
             with fits.open(source, memmap=False) as hdul:
                 for hdu in hdul:
-                    if not hdu.is_image or hdu.data is None:  # tables, empty primaries
+                    if not hdu.is_image or not hdu.shape:  # tables, empty primaries
+                        continue
+                    bitpix = abs(int(hdu.header.get("BITPIX", 8)))
+                    _check_shape(name, hdu.shape, max(bitpix // 8, 1), max_pixels)
+                    if hdu.data is None:
                         continue
                     data = np.asarray(hdu.data)
                     image = _cube_image(data.reshape([n for n in data.shape if n != 1] or [1]))
                     if image is not None:
                         return image
                     shapes.append(data.shape)
-    except (OSError, ValueError, TypeError, IndexError, KeyError) as exc:
+    except ImageError:
+        raise
+    except (OSError, ValueError, TypeError, IndexError, KeyError, EOFError) as exc:
         raise ImageError(f"cannot read FITS file {name!r}: {_one_line(exc)}") from None
     if shapes:
         raise ImageError(
@@ -231,6 +307,75 @@ def _read_fits(source, name: str) -> np.ndarray:
             f"{', '.join(str(s) for s in shapes)})"
         )
     raise ImageError(f"FITS file {name!r} holds no image data")
+
+
+def _check_gzipped_fits(path: Path, name: str, max_pixels: int) -> None:
+    """The size of a gzip-compressed FITS file's first image, from its header read off the
+    gzip stream (astropy inflates the whole stream when it opens one): headers without data
+    are passed, the first with data is checked if it is an image (plain or tile-compressed;
+    astropy's reader checks an image after a table)."""
+    import gzip
+    import zlib
+
+    try:
+        with gzip.open(path, "rb") as fh, warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            header = _next_fits_header(fh, name)
+            while header is not None and int(header.get("NAXIS", 0)) == 0:
+                header = _next_fits_header(fh, name)  # no data: the next header follows
+    except (OSError, EOFError, zlib.error, ValueError) as exc:
+        raise ImageError(f"cannot read FITS file {name!r}: {_one_line(exc)}") from None
+    if header is None:
+        return
+    prefix = "Z" if header.get("ZIMAGE") else ""  # a tile-compressed image: its own axes
+    if not prefix and str(header.get("XTENSION", "IMAGE")).strip() != "IMAGE":
+        return
+    try:
+        naxis = int(header.get(f"{prefix}NAXIS", 0))
+        shape = tuple(int(header.get(f"{prefix}NAXIS{k}", 0)) for k in range(naxis, 0, -1))
+        bitpix = abs(int(header.get(f"{prefix}BITPIX", 8)))
+    except (TypeError, ValueError):
+        raise ImageError(f"cannot read FITS file {name!r}: malformed NAXIS or BITPIX") from None
+    _check_shape(name, shape, max(bitpix // 8, 1), max_pixels)
+
+
+def primary_fits_header(path: str | Path):
+    """The primary header (an astropy ``Header``) of a FITS file, plain or gzip-compressed,
+    read off the stream (astropy's open inflates a whole gzip stream first); None when the
+    file starts with no FITS header."""
+    import gzip
+    import zlib
+
+    path = Path(path)
+    try:
+        with path.open("rb") as fh:
+            gzipped = fh.read(2) == GZIP_MAGIC
+        with (gzip.open if gzipped else open)(path, "rb") as fh, warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            if fh.read(len(FITS_MAGIC)) != FITS_MAGIC:
+                return None
+            fh.seek(0)
+            return _next_fits_header(fh, str(path))
+    except (OSError, EOFError, zlib.error, ValueError, ImageError):
+        return None
+
+
+def _next_fits_header(fh, name: str):
+    """The next FITS header of the stream ``fh`` (an astropy ``Header``; None at its end)."""
+    from astropy.io import fits
+
+    blocks = []
+    for _ in range(MAX_FITS_HEADER_BLOCKS):
+        block = fh.read(FITS_BLOCK)
+        if not block.strip(b"\0 "):
+            return None
+        blocks.append(block)
+        if any(block[k : k + 8] == b"END     " for k in range(0, len(block), 80)):
+            return fits.Header.fromstring(b"".join(blocks).decode("ascii", "replace"))
+    raise ImageError(
+        f"cannot read FITS file {name!r}: no END card in its first {MAX_FITS_HEADER_BLOCKS} "
+        "header blocks"
+    )
 
 
 def _cube_image(data: np.ndarray) -> np.ndarray | None:
@@ -248,19 +393,48 @@ def _cube_image(data: np.ndarray) -> np.ndarray | None:
     return data[0]
 
 
-def _read_pillow(path, name: str) -> np.ndarray:
+_PILLOW_LIMIT = threading.Lock()  # guards Pillow's global pixel limit while one opens
+
+
+def _pillow_open(path):
+    """Pillow's lazy open (the header only) without Pillow's own pixel limit, a global that
+    would refuse images of 179-200 MP: ours is checked from the size it reads."""
+    from PIL import Image
+
+    with _PILLOW_LIMIT:
+        saved, Image.MAX_IMAGE_PIXELS = Image.MAX_IMAGE_PIXELS, None
+        try:
+            return Image.open(path)
+        finally:
+            Image.MAX_IMAGE_PIXELS = saved
+
+
+def _check_pillow_size(img, name: str, max_pixels: int) -> None:
+    """``check_size`` of an opened (not yet decoded) Pillow image: its size, bands and bytes
+    a sample (2 for colour of more than 8 bits, read by pypng or tifffile)."""
+    from PIL import ImageMode
+
+    width, height = img.size
+    mode = ImageMode.getmode(img.mode)
+    sample = 2 if _deeper_than_pillow(img) else max(int(mode.typestr[-1]), 1)
+    check_size(name, width, height, width * height * len(mode.bands) * sample, max_pixels)
+
+
+def _read_pillow(path, name: str, max_pixels: int) -> np.ndarray:
     """The picture Pillow reads from ``path`` (a path or a file object)."""
     from PIL import Image, ImageOps, UnidentifiedImageError
 
     try:
-        with Image.open(path) as img:
+        with _pillow_open(path) as img, warnings.catch_warnings():
+            warnings.simplefilter("ignore", Image.DecompressionBombWarning)
+            _check_pillow_size(img, name, max_pixels)
             if _deeper_than_pillow(img):
-                return _read_deep_colour(path, img.format, name)
+                return _read_deep_colour(path, img.format, name, max_pixels)
             img.load()
             return _pillow_to_array(ImageOps.exif_transpose(img))
     except UnidentifiedImageError:
         if _is_tiff(path):  # a TIFF that Pillow does not decode (e.g. float colour)
-            return _read_deep_colour(path, "TIFF", name)
+            return _read_deep_colour(path, "TIFF", name, max_pixels)
         raise ImageError(
             f"cannot read image file {name!r}: not an image format we read "
             "(FITS, PNG, JPEG, TIFF, ...)"
@@ -301,8 +475,9 @@ def _deeper_than_pillow(img) -> bool:
     return False
 
 
-def _read_deep_colour(path, fmt: str | None, name: str) -> np.ndarray:
-    """A colour PNG or TIFF of more than 8 bits a channel (``path``: a path or a file object)."""
+def _read_deep_colour(path, fmt: str | None, name: str, max_pixels: int) -> np.ndarray:
+    """A colour PNG or TIFF of more than 8 bits a channel (``path``: a path or a file object;
+    a PNG's size is checked by the caller, a TIFF's here from its first page's header)."""
     if hasattr(path, "seek"):
         path.seek(0)
     if fmt == "PNG":
@@ -327,8 +502,15 @@ def _read_deep_colour(path, fmt: str | None, name: str) -> np.ndarray:
                 f"cannot read {name!r}: colour TIFF with more than 8 bits per channel needs the "
                 "'tifffile' package"
             ) from None
+        # tifffile logs what it finds amiss in a file; the reason is our one line
+        logging.getLogger("tifffile").setLevel(logging.ERROR)
         try:
-            data = np.asarray(tifffile.imread(path, key=0))
+            with tifffile.TiffFile(path) as tif:
+                page = tif.pages.first
+                _check_shape(name, page.shape, np.dtype(page.dtype).itemsize, max_pixels)
+                data = np.asarray(page.asarray())
+        except ImageError:
+            raise
         except Exception as exc:  # tifffile raises many types (incl. a missing codec)
             raise ImageError(f"cannot read TIFF file {name!r}: {_one_line(exc)}") from None
         if data.ndim == 3 and data.shape[0] in (3, 4) and data.shape[-1] not in (3, 4):

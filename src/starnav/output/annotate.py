@@ -228,6 +228,9 @@ def image_figure(gray: np.ndarray, fig_w: int, fig_h: int, title_lines: int) -> 
     # 0.01 px of slack: matplotlib truncates figsize * dpi to whole pixels
     fig = Figure(figsize=((fig_w + 0.01) / DPI, (fig_h + 0.01) / DPI), dpi=DPI, facecolor="white")
     image_h = fig_h - (TITLE_PAD_PX + TITLE_LINE_PX * title_lines)
+    # matplotlib resamples what it is given in several full-size copies: a 200 MP image took
+    # gigabytes; binned to about the figure's pixels first, it draws the same picture
+    gray = _binned(gray, max(1, min(width // max(fig_w, 1), height // max(image_h, 1))))
     ax = fig.add_axes((0.0, 0.0, 1.0, image_h / fig_h))
     ax.set_axis_off()
     ax.imshow(
@@ -236,6 +239,19 @@ def image_figure(gray: np.ndarray, fig_w: int, fig_h: int, title_lines: int) -> 
     ax.set_xlim(0, width)
     ax.set_ylim(height, 0)
     return fig, ax
+
+
+def _binned(gray: np.ndarray, factor: int) -> np.ndarray:
+    """``gray`` averaged in ``factor`` x ``factor`` blocks (the last partial ones dropped), a
+    row of blocks at a time (no full-size temporary); itself for ``factor`` 1."""
+    if factor <= 1:
+        return gray
+    rows, cols = gray.shape[0] // factor, gray.shape[1] // factor
+    out = np.empty((rows, cols))
+    for r in range(rows):
+        block = gray[r * factor : (r + 1) * factor, : cols * factor]
+        out[r] = block.reshape(factor, cols, factor).mean(axis=(0, 2))
+    return out
 
 
 def _catalog_markers(

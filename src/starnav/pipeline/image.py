@@ -11,7 +11,7 @@ from __future__ import annotations
 import functools
 import math
 import time
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -26,7 +26,7 @@ from starnav.detect.read import read_image
 from starnav.detect.skymask import find_sky_mask
 from starnav.detect.stars import Detections, detect_stars
 from starnav.errors import CameraError, ImageError, StarnavError
-from starnav.pipeline.diagnose import Failure, diagnose
+from starnav.pipeline.diagnose import BUDGET, Failure, diagnose
 from starnav.pipeline.fov import diagonal_fov_deg, search_range
 from starnav.pipeline.options import (
     DEFAULT_FOV_RANGE_DEG,
@@ -39,13 +39,14 @@ from starnav.pipeline.options import (
 )
 from starnav.pipeline.stars import check_searched, exact_field, solve_stars
 from starnav.results import Solution
-from starnav.runtime.budget import check_budget, default_budget_s
+from starnav.runtime.budget import Deadline, check_budget, default_budget_s
 
 NO_HINTS = ImageHints()
 MIN_DETECTIONS = 4  # fewer detected stars than this: not solved, without a search
 FISHEYE_CIRCLE_CONTRAST = 0.5  # an image with nothing said is a fisheye's from this on (all-sky
 # frames measured 0.8-1.5, vignetted photographs and wide-field shots at most 0.3)
 AUTO_BIN_PIXELS = 4.2e6  # an image is detected binned to at most this many pixels
+SPENT_ADVICE = "a longer --time-budget, or a smaller image"  # a budget spent before the solve
 FEW_STARS_DEEPER = 15  # a fisheye sky with fewer stars than this is detected again, deeper
 DEEPER_THRESHOLDS_SIGMA = (4.0, 3.0)  # the thresholds of those detections, in turn
 
@@ -100,6 +101,15 @@ class ImageSolveResult:
         return out
 
 
+def catalog_year(epoch_year: float) -> float:
+    """The year Hipparcos' proper motion is taken to for an image dated ``epoch_year`` (decimal
+    year): the nearest whole year, as without a date, so that a service or an archive gets one
+    set of pattern tables a year, not a set (~100 MB, ~20 s to build) for every date. Half a
+    year of proper motion is 0.012″ for the median star to Hp 8.5, 0.19″ at the 99th
+    percentile, 3.5″ at most."""
+    return float(round(epoch_year))
+
+
 def solve_image(
     image: str | Path | np.ndarray,
     options: SolveOptions | None = None,
@@ -107,6 +117,8 @@ def solve_image(
     hints: ImageHints | None = None,
     position_hint_deg: tuple[float, float] | None = None,
     prior: np.ndarray | None = None,
+    budget_from: Deadline | None = None,
+    on_budget: Callable[[float], None] | None = None,
     **option_fields: Any,
 ) -> ImageSolveResult:
     """Solve an image file (FITS, PNG, JPEG, TIFF) or a 2-D array (row 0 at the top) with
@@ -126,7 +138,7 @@ def solve_image(
     fails with the hinted FOV is tried again without it. ``position_hint_deg``: (RA, Dec)
     of the boresight, roughly (wins over the header's). ``prior``: the previous frame's
     attitude (``R_cam_from_icrs``) of a sequence, with its fitted ``camera``: tracking. The
-    time budget is the solve's (``starnav.runtime.budget``; detection is not counted).
+    time budget is the solve's (``starnav.runtime.budget``; ``budget_from``: ``_budget_left``).
     """
     options = SolveOptions.make(options, **option_fields)
     camera = options.camera
@@ -156,19 +168,16 @@ def solve_image(
     t1 = time.perf_counter()
     found = _detect_binned(pixels, options)
     detect_ms = (time.perf_counter() - t1) * 1e3
-    if len(found.xy) < MIN_DETECTIONS:
-        reason = f"{len(found.xy)} stars detected, at least {MIN_DETECTIONS} are needed"
-        failure = _diagnose(found, reason, options)
+    budget_s, spent = _budget_left(budget_s, budget_from, on_budget)
+    if len(found.xy) < MIN_DETECTIONS or spent:
+        reason = spent or f"{len(found.xy)} stars detected, at least {MIN_DETECTIONS} are needed"
+        failure = Failure(BUDGET, SPENT_ADVICE) if spent else _diagnose(found, reason, options)
         return ImageSolveResult(
             None, failure.explain(reason), found, None, read_ms, detect_ms, 0.0,
             hints=hints, failure=failure.kind,
         )  # fmt: skip
     if options.epoch_year is None and hints.epoch_year is not None and is_embedded(options.catalog):
-        # Hipparcos' proper motion to the image's year: the nearest whole year, as without a
-        # date, so that a service or an archive gets one set of pattern tables a year, not a
-        # set (~100 MB, ~20 s to build) for every date. Half a year of proper motion is 0.012″
-        # for the median star to Hp 8.5, 0.19″ at the 99th percentile, 3.5″ at most.
-        options = replace(options, epoch_year=float(round(hints.epoch_year)))
+        options = replace(options, epoch_year=catalog_year(hints.epoch_year))
     if options.utc is None and hints.utc is not None:
         options = replace(options, utc=hints.utc)  # where the sky is, with the site
     if options.site is None and hints.site is not None:
@@ -201,6 +210,23 @@ def solve_image(
         hints,
         failure,
     )
+
+
+def _budget_left(budget_s: float, budget_from, on_budget) -> tuple[float, str | None]:
+    """The budget (s) left to the solve of an image read and detected: all of ``budget_s``,
+    or, counted from ``budget_from`` (a ``Deadline``: the job's start, as in a service), what
+    is left, then told to ``on_budget(seconds)``; and the reason when none is left."""
+    if budget_from is not None:
+        spent_s = budget_from.spent_s()
+        if spent_s >= budget_s:
+            return 0.0, (
+                f"the budget of {budget_s:g} s went to reading and detecting the image "
+                f"({spent_s:.1f} s)"
+            )
+        budget_s -= spent_s
+    if on_budget is not None:
+        on_budget(budget_s)
+    return budget_s, None
 
 
 def _unsaid_fisheye(options: SolveOptions, pixels: np.ndarray) -> bool:

@@ -27,6 +27,7 @@ from astropy.wcs import WCS
 
 from starnav.catalog import Catalog
 from starnav.detect.header import ImageHints, fits_hints, is_fits
+from starnav.detect.read import MAX_PIXELS, primary_fits_header
 from starnav.errors import StarnavError, shown
 from starnav.pipeline.fov import FOV_LIMITS_DEG
 from starnav.pipeline.image import (
@@ -39,6 +40,7 @@ from starnav.pipeline.image import (
 from starnav.pipeline.options import DEFAULT_FOV_RANGE_DEG, DEFAULT_PATTERN_STARS, SolveOptions
 from starnav.pipeline.stars import solve_stars
 from starnav.results import Solution
+from starnav.runtime.budget import Deadline
 
 SCALE_UNITS = ("degwidth", "arcminwidth", "arcsecperpix", "focalmm")
 FULL_FRAME_WIDTH_MM = 36.0  # "focalmm" is the focal length of a 35 mm camera's 36 mm width
@@ -295,6 +297,9 @@ def read_xylist(
     path = Path(path)
     if not is_fits(path):
         return None
+    primary = primary_fits_header(path)  # an image's: no list (astropy would inflate a .gz)
+    if primary is not None and str(primary.get("NAXIS", 0)).strip() not in ("0", ""):
+        return None
     from astropy.io import fits
 
     try:
@@ -428,21 +433,27 @@ def solve_plate(
     hints: PlateHints | Callable[[int, int], PlateHints] = PlateHints(),
     *,
     time_budget_s: float | None = None,
+    max_pixels: int = MAX_PIXELS,
+    budget_from: Deadline | None = None,
+    on_budget: Callable[[float], None] | None = None,
 ) -> PlateResult:
     """Solve an image file (FITS, PNG, JPEG, TIFF) or a source list with a client's ``hints``
     (``PlateHints``, or a function of the image's width and height in px giving them, for
     scales in arcsec per pixel; they win over the FITS header's). ``time_budget_s``: the solve's
-    (``starnav.runtime.budget`` defaults). The WCS is fitted to the matched stars
+    (``starnav.runtime.budget`` defaults); with ``budget_from`` (when it started) the image's
+    read and detection count against it (``solve_image``: ``on_budget`` is told what the
+    solve gets). ``max_pixels``: the largest image read
+    (``starnav.detect.read``). The WCS is fitted to the matched stars
     (``starnav.pipeline.image.fitted_wcs``)."""
     if isinstance(source, XYList):
         return _solve_plate(source, None, hints, time_budget_s)
     from starnav.detect.read import read_image
 
-    pixels = read_image(source)
-    return _solve_plate(Path(source), pixels, hints, time_budget_s)
+    pixels = read_image(source, max_pixels=max_pixels)
+    return _solve_plate(Path(source), pixels, hints, time_budget_s, (budget_from, on_budget))
 
 
-def _solve_plate(source, pixels, hints, time_budget_s) -> PlateResult:
+def _solve_plate(source, pixels, hints, time_budget_s, clock=(None, None)) -> PlateResult:
     if callable(hints):
         size = (source.width, source.height) if pixels is None else pixels.shape[::-1]
         hints = hints(*size)
@@ -487,7 +498,8 @@ def _solve_plate(source, pixels, hints, time_budget_s) -> PlateResult:
     if hints.ra_deg is not None:
         header = ImageHints(float(hints.ra_deg) % 360.0, float(hints.dec_deg), header.fov_deg,
                             header.epoch_year, (*header.sources, "client"))  # fmt: skip
-    res = solve_image(pixels, hints=header, downsample=hints.downsample, **options)
+    res = solve_image(pixels, hints=header, downsample=hints.downsample,
+                      budget_from=clock[0], on_budget=clock[1], **options)  # fmt: skip
     height, width = pixels.shape
     return _result(res.solution, res.camera, res.reason, width, height, res.total_ms,
                    hints.crpix_fits, pixels=pixels, image=res, xy=res.detections.xy,

@@ -133,6 +133,16 @@ class Deadline:
         (a kernel reads its clock against it)."""
         return self.start + self.budget_s + (_COMPILE_S[0] - self.compile_s)
 
+    @classmethod
+    def now(cls, budget_s: float) -> Deadline:
+        """A deadline ``budget_s`` seconds (``math.inf``: none) from now, kept as a start too:
+        ``spent_s`` counts from it (a job's read and detection against its budget)."""
+        return cls(budget_s, time.perf_counter(), compiled_s())
+
+    def spent_s(self) -> float:
+        """Seconds since the start, the compilations since left out."""
+        return time.perf_counter() - self.start - (compiled_s() - self.compile_s)
+
     def expired(self) -> bool:
         """Whether the budget is spent."""
         return time.perf_counter() >= self.end_time

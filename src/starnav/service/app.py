@@ -23,7 +23,6 @@ Files are stored under the data dir by job number with the service's own names.
 from __future__ import annotations
 
 import asyncio
-import concurrent.futures
 import contextlib
 import json
 import logging
@@ -39,7 +38,8 @@ from starlette.responses import FileResponse
 from starlette.routing import Mount, Route
 from starlette.staticfiles import StaticFiles
 
-from starnav.runtime.pools import dask_client, one_blas_thread, process_pool
+from starnav.runtime.limits import DEFAULT_WORKER_MEMORY_MB, MAX_PIXELS
+from starnav.runtime.pools import dask_client, one_blas_thread
 from starnav.service import nova, privacy
 from starnav.service.errors import (
     EXCEPTION_HANDLERS,
@@ -62,6 +62,7 @@ from starnav.service.limits import (
     DEFAULT_URL_DEADLINE_S,
     DEFAULT_URL_FETCHES,
 )
+from starnav.service.processes import GRACE_S, Limits, WorkerProcess, failed_answer
 from starnav.service.store import JobStore
 from starnav.service.worker import OUTPUTS, input_name, run_job
 
@@ -79,9 +80,11 @@ class ServiceConfig:
     """How the service runs: ``data_dir`` (SQLite file and job directories), ``workers``
     (processes solving at once; with ``dask_address``, jobs at once on that cluster),
     ``api_key`` (None: any key logs in), ``max_upload_bytes``, ``time_budget_s`` per job
-    (None: starnav's defaults); ``max_queued`` jobs waiting for a worker before uploads are
-    answered 503 "busy"; URL uploads (``starnav.service.fetch``): ``url_deadline_s`` for a
-    whole fetch, ``url_fetches`` at once, from public hosts and those ``allow_url_hosts``."""
+    (None: starnav's defaults; reading and detecting count), ``max_pixels`` of an image,
+    ``max_job_bytes`` of a worker process's memory (None: no limit); ``max_queued`` jobs
+    waiting for a worker before uploads are answered 503 "busy"; URL uploads
+    (``starnav.service.fetch``): ``url_deadline_s`` for a whole fetch, ``url_fetches`` at
+    once, from public hosts and those ``allow_url_hosts``."""
 
     data_dir: Path
     workers: int = 1
@@ -93,11 +96,20 @@ class ServiceConfig:
     url_deadline_s: float = DEFAULT_URL_DEADLINE_S
     url_fetches: int = DEFAULT_URL_FETCHES
     allow_url_hosts: AllowedHosts = field(default_factory=AllowedHosts)
+    max_pixels: int = MAX_PIXELS
+    max_job_bytes: int | None = int(DEFAULT_WORKER_MEMORY_MB * 1e6)
+
+    @property
+    def limits(self) -> Limits:
+        """A job's limits (``starnav.service.processes``)."""
+        return Limits(self.time_budget_s, self.max_pixels, self.max_job_bytes)
 
 
 class Jobs:
     """The queue: each job waits for a free worker, is marked solving, runs (``run_job``) in
-    a worker process or on the Dask cluster, and its answer and files are stored."""
+    a worker process (``starnav.service.processes``: stopped and replaced past the job's
+    deadline) or on the Dask cluster (cancelled past it), and its answer and files are
+    stored."""
 
     def __init__(self, config: ServiceConfig, store: JobStore):
         self.config, self.store = config, store
@@ -105,7 +117,8 @@ class Jobs:
         self._tasks: set[asyncio.Task] = set()
         self._dask = None
         self._stack = contextlib.ExitStack()
-        self._pool: concurrent.futures.ProcessPoolExecutor | None = None
+        self._idle: list[WorkerProcess] = []
+        self._workers: list[WorkerProcess] = []
         self.running = 0
 
     async def start(self) -> None:
@@ -115,7 +128,8 @@ class Jobs:
             self._dask = await asyncio.get_running_loop().run_in_executor(None, self._connect)
         else:
             one_blas_thread()  # before the worker processes start
-            self._pool = self._new_pool()
+            self._workers = [WorkerProcess(self.config.limits) for _ in range(self.config.workers)]
+            self._idle = list(self._workers)
         for job_id in self.store.recover():
             self.enqueue(job_id)
 
@@ -125,21 +139,13 @@ class Jobs:
         )
         return client
 
-    def _new_pool(self) -> concurrent.futures.ProcessPoolExecutor:
-        # forkserver: a worker must not inherit the server's event loop and threads
-        return process_pool(self.config.workers, start="forkserver")
-
     async def stop(self) -> None:
-        """Stop: running jobs stay "solving" and are failed as interrupted at the next start."""
+        """Stop: running jobs stay "solving" and are failed as interrupted at the next start;
+        the worker processes are killed."""
         for task in list(self._tasks):
             task.cancel()
-        if self._pool is not None:
-            # the workers are the forkserver's children, not ours: a solving one would go on
-            # until its budget ran out after the server stopped (Python 3.11's pool has no
-            # public way to stop them; 3.14 adds terminate_workers)
-            for process in list(getattr(self._pool, "_processes", {}).values()):
-                process.terminate()
-            self._pool.shutdown(wait=False, cancel_futures=True)
+        for worker in self._workers:
+            worker.stop()
         self._stack.close()  # the Dask client (and a local cluster)
 
     @property
@@ -173,17 +179,23 @@ class Jobs:
 
     async def _solve(self, data, xy, request) -> dict:
         args = (data, xy, request, self.config.time_budget_s)
+        if self._dask is None:
+            worker = self._idle.pop()  # one is free: the slots count them
+            try:
+                return await worker.run(args)
+            finally:
+                self._idle.append(worker)
+        limits = self.config.limits
         loop = asyncio.get_running_loop()
+        future = self._dask.submit(run_job, *args, max_pixels=limits.max_pixels, pure=False)
         try:
-            if self._dask is not None:
-                future = self._dask.submit(run_job, *args, pure=False)
-                return await loop.run_in_executor(None, future.result)
-            return await loop.run_in_executor(self._pool, run_job, *args)
-        except concurrent.futures.process.BrokenProcessPool:
-            self._pool = self._new_pool()  # a worker died (killed, out of memory)
-            return _failed_answer("error: the worker process solving this job died")
+            # no word from a Dask worker mid-job: the longest a job may take
+            return await asyncio.wait_for(loop.run_in_executor(None, future.result), limits.whole_s)
+        except TimeoutError:
+            future.cancel()
+            return failed_answer(limits.overrun(limits.whole_s - GRACE_S, "running on Dask"))
         except Exception as exc:  # the cluster lost the task, ...
-            return _failed_answer(f"error: the worker failed: {type(exc).__name__}: {exc}")
+            return failed_answer(f"error: the worker failed: {type(exc).__name__}: {exc}")
 
     def _store_answer(self, job_id: int, answer: dict) -> None:
         jdir = self.store.job_dir(job_id)
@@ -195,10 +207,6 @@ class Jobs:
             (jdir / RESULT_FILE).write_text(json.dumps(result, indent=1))
         self.store.finish(job_id, answer["solved"], answer["reason"], answer["calibration"],
                           result)  # fmt: skip
-
-
-def _failed_answer(reason: str) -> dict:
-    return {"solved": False, "reason": reason, "calibration": None, "result": None, "files": {}}
 
 
 def busy(message: str) -> NovaJSON:

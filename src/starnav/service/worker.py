@@ -13,12 +13,14 @@ import os
 import tempfile
 import time
 import traceback
+from collections.abc import Callable
 from pathlib import Path
 
 from starnav.catalog.names import star_names
-from starnav.detect.read import FITS_MAGIC, GZIP_MAGIC, TIFF_MAGICS
+from starnav.detect.read import FITS_MAGIC, GZIP_MAGIC, MAX_PIXELS, TIFF_MAGICS
 from starnav.errors import StarnavError
 from starnav.pipeline.plate import XYList, read_xylist, solve_plate, write_plate_files
+from starnav.runtime.budget import Deadline
 from starnav.service.files import JOB_TMP_PREFIX
 from starnav.service.nova import plate_hints
 
@@ -51,10 +53,21 @@ def input_name(head: bytes) -> str:
     return "input.bin"
 
 
-def run_job(data: bytes | None, xy: dict | None, request: dict, budget_s: float | None) -> dict:
+def run_job(
+    data: bytes | None,
+    xy: dict | None,
+    request: dict,
+    budget_s: float | None,
+    *,
+    max_pixels: int = MAX_PIXELS,
+    told: Callable[[str, float | None], None] | None = None,
+) -> dict:
     """Solve an upload (``data``: the file's bytes) or a source list (``xy``: "x", "y" FITS
     pixels, "image_width", "image_height"; without a size, nova's: the list's extent) with the
-    nova ``request``'s hints, within the time budget ``budget_s`` (None: starnav's default).
+    nova ``request``'s hints, within the time budget ``budget_s`` (None: starnav's default),
+    which the image's read and detection count against; images of at most ``max_pixels``.
+    ``told(event, value)`` hears how it goes: ("budget", seconds the solve gets) once the
+    image is read and detected, ("solved", None) when the files are written next.
     Returns "solved", "reason", "calibration" (nova's, None when unsolved), "result"
     (starnav's JSON, stars with names) and "files" (kind -> bytes: "wcs", "new_fits",
     "annotate")."""
@@ -62,11 +75,11 @@ def run_job(data: bytes | None, xy: dict | None, request: dict, budget_s: float 
     # in the system's temporary folder: ``starnav serve`` makes it DATA/tmp (service.files)
     with tempfile.TemporaryDirectory(prefix=JOB_TMP_PREFIX) as tmp:
         try:
-            answer = _solve(Path(tmp), data, xy, request, budget_s)
+            answer = _solve(Path(tmp), data, xy, request, budget_s, max_pixels, told)
         except StarnavError as exc:
             answer = _failed(f"error: {exc}")
         except MemoryError:
-            answer = _failed("error: the image is too large for this server's memory")
+            answer = _failed(f"error: {out_of_memory()}")
         except Exception as exc:  # a bug must fail the job, never the server
             where = traceback.extract_tb(exc.__traceback__)[-1]
             answer = _failed(
@@ -79,11 +92,26 @@ def run_job(data: bytes | None, xy: dict | None, request: dict, budget_s: float 
     return answer
 
 
+def out_of_memory() -> str:
+    """The reason of a job that ran out of memory, with this process's limit when it has one
+    (``resource.RLIMIT_DATA``, set by ``starnav.service.processes``)."""
+    text = "the image is too large for this server's memory"
+    try:
+        import resource
+
+        limit = resource.getrlimit(resource.RLIMIT_DATA)[0]
+    except (ImportError, OSError, ValueError):
+        return text
+    if limit == resource.RLIM_INFINITY:
+        return text
+    return f"{text}: the job needed more than its limit of {limit / 1e6:.0f} MB (--max-job-mb)"
+
+
 def _failed(reason: str) -> dict:
     return {"solved": False, "reason": reason, "calibration": None, "result": None, "files": {}}
 
 
-def _solve(tmp: Path, data, xy, request, budget_s) -> dict:
+def _solve(tmp: Path, data, xy, request, budget_s, max_pixels, told) -> dict:
     if xy is not None:
         x, y = xy.get("x") or [], xy.get("y") or []
         source = XYList.make(x, y, xy.get("image_width") or _extent(x),
@@ -99,7 +127,11 @@ def _solve(tmp: Path, data, xy, request, budget_s) -> dict:
     def hints(width: int, height: int):  # the width converts arcsec per pixel
         return plate_hints(request, width)
 
-    res = solve_plate(source, hints, time_budget_s=budget_s)
+    started = Deadline.now(math.inf if budget_s is None else budget_s)
+    told = told or (lambda event, value: None)
+    res = solve_plate(source, hints, time_budget_s=budget_s, max_pixels=max_pixels,
+                      budget_from=started, on_budget=lambda s: told("budget", s))  # fmt: skip
+    told("solved", None)
     targets = {k: tmp / name for k, name in OUTPUTS.items()}
     if path is None:
         for kind in IMAGE_ONLY:
