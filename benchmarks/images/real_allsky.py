@@ -248,6 +248,15 @@ class Reference:
         fisheye is extrapolated towards its edges (1.6° off at the edge of one MAGIC crop that
         the next crop, matched there, puts right; 0.7° at 11 % from the edge of the KHO
         frame's centre crop, 0.3° at 21 %). None outside every crop's inner half."""
+        best = self.holding(x, y)
+        if best is None:
+            return None
+        ra, dec = best[1].all_pix2world(best[2], best[3], 1)
+        return _unit(float(ra), float(dec))
+
+    def holding(self, x: float, y: float):
+        """(crop, its WCS, crop FITS x, y) of the crop ``sky_at`` reads pixel (x, y) through,
+        or None."""
         best, margin = None, 0.0
         for crop, wcs in self.crops:
             stretch = crop.get("stretch", 1.0)  # rows resampled for non-square pixels
@@ -256,10 +265,7 @@ class Reference:
             inside /= min(crop["width"], crop["height"])
             if inside > max(margin, CROP_EDGE):
                 best, margin = (crop, wcs, fx, fy), inside
-        if best is None:
-            return None
-        ra, dec = best[1].all_pix2world(best[2], best[3], 1)
-        return _unit(float(ra), float(dec))
+        return best
 
 
 def score(answer: dict, ref: Reference, catalog) -> dict:
