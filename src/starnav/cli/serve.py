@@ -19,14 +19,19 @@ from starnav.cli.common import (
     positive_int,
 )
 from starnav.errors import StarnavError
-from starnav.runtime.limits import DEFAULT_WORKER_MEMORY_MB, MAX_PIXELS
+from starnav.runtime.limits import (
+    DEFAULT_MAX_QUEUED,
+    DEFAULT_MAX_UPLOAD_MB,
+    DEFAULT_URL_DEADLINE_S,
+    DEFAULT_WORKER_MEMORY_MB,
+    MAX_PIXELS,
+)
 from starnav.service.files import (
     DEFAULT_CACHE_LIMIT_MB,
     clean_leftovers,
     lock_data_dir,
     use_data_dir,
 )
-from starnav.service.limits import DEFAULT_MAX_QUEUED, DEFAULT_URL_DEADLINE_S
 
 DEFAULT_PORT = 8080
 
@@ -45,8 +50,9 @@ def add_parser(subparsers: Subparsers) -> None:
     p.add_argument("--workers", type=positive_int, default=1,
                    help="jobs solved at once (worker processes; default 1)")  # fmt: skip
     p.add_argument("--api-key", help="the key api/login asks for (needed off the loopback)")
-    p.add_argument("--max-upload-mb", type=finite, default=100.0,
-                   help="largest request body accepted (MB; default 100)")  # fmt: skip
+    p.add_argument("--max-upload-mb", type=finite, default=DEFAULT_MAX_UPLOAD_MB,
+                   help="largest request body accepted "
+                   f"(MB; default {DEFAULT_MAX_UPLOAD_MB:g})")  # fmt: skip
     p.add_argument("--max-queued", type=positive_int, default=DEFAULT_MAX_QUEUED,
                    help="jobs waiting for a worker before uploads are answered 503 busy "
                    f"(default {DEFAULT_MAX_QUEUED})")  # fmt: skip

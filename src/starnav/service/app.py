@@ -38,7 +38,14 @@ from starlette.responses import FileResponse
 from starlette.routing import Mount, Route
 from starlette.staticfiles import StaticFiles
 
-from starnav.runtime.limits import DEFAULT_WORKER_MEMORY_MB, MAX_PIXELS
+from starnav.runtime.limits import (
+    DEFAULT_MAX_QUEUED,
+    DEFAULT_MAX_UPLOAD_MB,
+    DEFAULT_URL_DEADLINE_S,
+    DEFAULT_URL_FETCHES,
+    DEFAULT_WORKER_MEMORY_MB,
+    MAX_PIXELS,
+)
 from starnav.runtime.pools import dask_client, one_blas_thread
 from starnav.service import nova, privacy
 from starnav.service.errors import (
@@ -57,11 +64,6 @@ from starnav.service.fetch import (
     FetchQueue,
 )
 from starnav.service.files import clean_job_tmp
-from starnav.service.limits import (
-    DEFAULT_MAX_QUEUED,
-    DEFAULT_URL_DEADLINE_S,
-    DEFAULT_URL_FETCHES,
-)
 from starnav.service.processes import GRACE_S, Limits, WorkerProcess, failed_answer
 from starnav.service.store import JobStore
 from starnav.service.worker import OUTPUTS, input_name, run_job
@@ -70,7 +72,6 @@ STATIC_DIR = Path(__file__).parent / "static"
 # python-multipart logs each body it refuses; astrometry.net's client.py sends one on every
 # upload, which _lenient_multipart then reads: not worth a warning per upload
 logging.getLogger("python_multipart").setLevel(logging.ERROR)
-DEFAULT_MAX_UPLOAD_MB = 100.0
 RETRY_AFTER_S = 5
 RESULT_FILE = "result.json"
 

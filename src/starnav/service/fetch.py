@@ -29,7 +29,7 @@ import urllib.parse
 from dataclasses import dataclass, field
 
 from starnav.errors import StarnavError
-from starnav.service.limits import DEFAULT_URL_DEADLINE_S, DEFAULT_URL_FETCHES
+from starnav.runtime.limits import DEFAULT_URL_DEADLINE_S, DEFAULT_URL_FETCHES
 
 QUEUE_WAIT_S = 1.0  # the longest a URL upload waits for a fetch slot before it is told "busy"
 MAX_REDIRECTS = 5
