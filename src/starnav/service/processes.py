@@ -31,7 +31,7 @@ from starnav.detect.read import MAX_PIXELS
 from starnav.runtime.budget import SCAN_BUDGET_S, SEARCH_BUDGET_S, compiled_s
 from starnav.runtime.limits import DEFAULT_WORKER_MEMORY_MB
 from starnav.runtime.pools import die_with_parent, limit_memory, worker_process
-from starnav.service.worker import run_job
+from starnav.service.worker import failed_answer, run_job
 
 GRACE_S = 15.0  # past the budget before a worker is stopped (a fresh worker loads its tables)
 WRITE_S = 120.0  # for writing a job's files once its solve is over (a 200 MP image's)
@@ -130,11 +130,6 @@ class WorkerProcess:
             self.process.kill()
         self.process.join(5.0)
         self.conn.close()
-
-
-def failed_answer(reason: str) -> dict:
-    """A job's answer when it failed outside ``run_job``."""
-    return {"solved": False, "reason": reason, "calibration": None, "result": None, "files": {}}
 
 
 def serve(conn, parent_pid: int, memory_bytes: int | None) -> None:

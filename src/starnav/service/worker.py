@@ -77,12 +77,12 @@ def run_job(
         try:
             answer = _solve(Path(tmp), data, xy, request, budget_s, max_pixels, told)
         except StarnavError as exc:
-            answer = _failed(f"error: {exc}")
+            answer = failed_answer(f"error: {exc}")
         except MemoryError:
-            answer = _failed(f"error: {out_of_memory()}")
+            answer = failed_answer(f"error: {out_of_memory()}")
         except Exception as exc:  # a bug must fail the job, never the server
             where = traceback.extract_tb(exc.__traceback__)[-1]
-            answer = _failed(
+            answer = failed_answer(
                 f"error: internal {type(exc).__name__}: {exc} ({Path(where.filename).name}:"
                 f"{where.lineno})"
             )
@@ -107,7 +107,8 @@ def out_of_memory() -> str:
     return f"{text}: the job needed more than its limit of {limit / 1e6:.0f} MB (--max-job-mb)"
 
 
-def _failed(reason: str) -> dict:
+def failed_answer(reason: str) -> dict:
+    """A job's answer when it failed, with the ``reason`` (here or where it ran)."""
     return {"solved": False, "reason": reason, "calibration": None, "result": None, "files": {}}
 
 
