@@ -12,6 +12,7 @@ from starnav.camera import MODELS
 from starnav.cli.common import EXIT_OK, Subparsers, check_parent_dir, finite, int_at_least
 from starnav.cli.field import add_fov_search, check_fov
 from starnav.cli.output import print_json
+from starnav.cli.site import site_of
 from starnav.errors import StarnavError
 
 
@@ -84,17 +85,6 @@ def _times(args: argparse.Namespace) -> list | None:
     return times
 
 
-def _site(args: argparse.Namespace) -> tuple[float, float, float] | None:
-    from starnav.navigation.mount import check_site
-
-    if (args.lat is None) != (args.lon is None):
-        raise StarnavError("give both --lat and --lon (the site), or neither")
-    if args.lat is None:
-        return None
-    check_site(args.lat, args.lon, args.height_m)
-    return (args.lat, args.lon, args.height_m)
-
-
 def run(args: argparse.Namespace) -> int:
     """Calibrate on every image, write the camera file (and the plot), print the fit."""
     from tqdm import tqdm
@@ -108,7 +98,7 @@ def run(args: argparse.Namespace) -> int:
         check_parent_dir("--plot", args.plot)
         if not args.plot.lower().endswith(".png"):
             raise StarnavError("--plot writes a PNG file: give a name ending in .png")
-    site = _site(args)
+    site = site_of(args)
     times = _times(args) if site is not None else None
     with tqdm(total=len(args.images), desc="calibrate", unit="image", file=sys.stderr) as bar:
         cal = calibrate(

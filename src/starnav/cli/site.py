@@ -50,14 +50,25 @@ def add_sky_options(p: argparse.ArgumentParser) -> None:
 def sky_options(args: argparse.Namespace) -> dict:
     """The ``SolveOptions`` fields of ``add_sky_options``'s arguments; a one-line error for a
     site without both coordinates or a focal length without the pixel pitch."""
-    if (args.lat is None) != (args.lon is None):
-        raise StarnavError("--lat and --lon go together (the site)")
     return {
         "circle_fov_deg": args.circle_fov_deg,
         "focal_px": _focal_px(args),
-        "site": None if args.lat is None else (args.lat, args.lon, args.height_m),
+        "site": site_of(args),
         "utc": getattr(args, "utc", None),
     }
+
+
+def site_of(args: argparse.Namespace) -> tuple[float, float, float] | None:
+    """(latitude, longitude, height) of ``--lat``, ``--lon``, ``--height-m`` (degrees, m), or
+    None without them; a one-line error for half a site or one that cannot be."""
+    if (args.lat is None) != (args.lon is None):
+        raise StarnavError("give both --lat and --lon (the site), or neither")
+    if args.lat is None:
+        return None
+    from starnav.catalog.sky import Site
+
+    Site(args.lat, args.lon, args.height_m)  # checks it
+    return (args.lat, args.lon, args.height_m)
 
 
 def _focal_px(args: argparse.Namespace) -> float | None:

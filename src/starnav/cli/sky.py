@@ -12,6 +12,7 @@ from pathlib import Path
 from starnav.cli.common import EXIT_NOT_SOLVED, EXIT_OK, Subparsers, check_parent_dir, finite
 from starnav.cli.field import add_image_solve_options, check_fov, image_solve_options
 from starnav.cli.output import print_json
+from starnav.cli.site import site_of
 from starnav.errors import StarnavError
 
 SKY_CATALOG_MAG = 7.5  # the stars tested: deeper than any all-sky camera's clear-sky limit
@@ -65,9 +66,8 @@ def _site(args: argparse.Namespace, path: Path):
     longitude; one-line errors for half a site or a site without a time."""
     from starnav.sky import Site
 
-    if (args.lat is None) != (args.lon is None):
-        raise StarnavError("give both --lat and --lon (or neither)")
-    if args.lat is None:
+    where = site_of(args)
+    if where is None:
         if args.utc is not None:
             raise StarnavError("--utc needs the site: give --lat and --lon too")
         return None
@@ -87,7 +87,7 @@ def _site(args: argparse.Namespace, path: Path):
     from starnav.navigation.frames import parse_utc
 
     parse_utc(utc)  # a bad time fails here, before the solve
-    return Site(args.lat, args.lon, args.height_m, utc)
+    return Site(*where, utc)
 
 
 def run(args: argparse.Namespace) -> int:
