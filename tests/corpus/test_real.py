@@ -88,7 +88,7 @@ KNOWN_FAILURES = {
     "granasat_pleyades_8sec.jpg": "not solved since the detection for real skies: clipped star"
     " glows are no longer taken as saturated stars; 'no hypothesis agreed with enough stars'",
     "astrometrynet_apod2.jpg": "not solved: a processed 4.5° photograph of the Horsehead; the"
-    " 3-5° range searched after 5-40° finds no convincing hypothesis, nor does --fov-range 4 5",
+    " 1-5° range searched after 5-40° finds no convincing hypothesis, nor does --fov-range 4 5",
     "astrometrynet_apod3.jpg": "not solved: bright nebulosity (Vela) among the detections;"
     " 'no hypothesis agreed with enough stars'",
     "astrometrynet_apod4.jpg": "not solved since the detection for real skies: a processed"

@@ -16,6 +16,7 @@ from starnav.catalog import GAIA_EPOCH_YEAR, load_catalog, load_gaia
 from starnav.errors import CatalogError
 from starnav.geometry import attitude_difference_deg, attitude_from_radec_roll
 from starnav.pipeline.image import solve_image
+from starnav.pipeline.plate import fov_range_from_scale
 from starnav.simulate.render import RenderSettings, render_frame
 
 
@@ -121,9 +122,36 @@ def test_starnav_solve_field_solves_a_narrow_fits_frame_with_a_position_hint(
 
 
 def test_a_field_under_1_degree_is_refused_in_one_line_naming_the_limit():
-    with pytest.raises(Exception, match="a 1° field holds about 8 stars") as info:
-        solve_image(np.zeros((100, 150)), fov_range_deg=(0.5, 0.8))
+    with pytest.raises(Exception, match="1° along the image's longer side") as info:
+        solve_image(np.zeros((100, 150)), fov_range_deg=(0.4, 0.8))
     assert "\n" not in str(info.value)
+    with pytest.raises(Exception, match="outside the fields starnav solves"):
+        fov_range_from_scale("degwidth", 0.6, 0.8, 1920, 1080)  # landscape: 0.6° x 0.34°
+
+
+def test_the_narrowest_field_is_along_the_longer_side_of_a_portrait_image():
+    """1° along the longer side: a landscape image's horizontal field, a portrait image's
+    vertical one (a Seestar S50's 1080 x 1920 px frames are 0.71° x 1.27°)."""
+    assert fov.fov_limits_deg("pinhole", (1920, 1080)) == (1.0, 100.0)
+    lo, _ = fov.fov_limits_deg("pinhole", (1080, 1920))
+    assert lo == pytest.approx(0.5625, rel=1e-4)
+    assert fov.fov_limits_deg("equidistant", (1080, 1920)) == fov.LENS_FOV_LIMITS_DEG
+    assert fov_range_from_scale("degwidth", 0.65, 0.78, 1080, 1920) == (0.65, 0.78)
+
+
+def test_a_portrait_telescope_frame_under_1_degree_across_is_solved_near_its_hint():
+    """A Seestar-like 1080 x 1920 px frame, 0.71° across and 1.27° high, in Cepheus (NGC
+    7023), the Gaia stars to G 10 rendered: solved with the width it was refused before."""
+    camera = Camera.from_fov(0.71, 1080, 1920)
+    R = attitude_from_radec_roll(315.4, 68.2, 20.0)
+    frame = render_frame(load_gaia(), camera, R, RenderSettings(exposure_s=1.0, seed=39))
+    res = solve_image(frame.image, fov_deg=0.71,
+                      position_hint_deg=(317.0, 67.0), position_radius_deg=5.0)  # fmt: skip
+    s = res.solution
+    assert s is not None, res.reason
+    bore, roll = attitude_difference_deg(s.R_cam_from_icrs, R)
+    assert bore * 3600 < 2.0 and roll < 0.05, (bore, roll)
+    assert s.fov_deg == pytest.approx(0.71, rel=2e-3)
 
 
 @pytest.mark.slow

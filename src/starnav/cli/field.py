@@ -18,7 +18,7 @@ from starnav.camera import MODELS
 from starnav.cli.common import add_deep_mag_limit, add_time_budget, finite, int_at_least
 from starnav.cli.site import add_sky_options, sky_options
 from starnav.errors import StarnavError
-from starnav.pipeline.fov import fov_limits_deg, search_range
+from starnav.pipeline.fov import FOV_LIMITS_DEG, LENS_FOV_LIMITS_DEG, UNREAD_SHAPE, search_range
 from starnav.pipeline.options import (
     DEFAULT_FOV_RANGE_DEG,
     DEFAULT_LENS_FOV_RANGE_DEG,
@@ -30,8 +30,8 @@ from starnav.pipeline.options import (
 )
 
 FOV_LIMITS_HELP = "{:g}-{:g} for the pinhole lens, {:g}-{:g} for a fisheye".format(
-    *fov_limits_deg("pinhole"), *fov_limits_deg("equidistant")
-)  # the fields --fov-deg and --fov-range take
+    *FOV_LIMITS_DEG, *LENS_FOV_LIMITS_DEG
+)  # the fields --fov-deg and --fov-range take; a portrait image's pinhole limit is its height's
 
 if TYPE_CHECKING:
     from starnav.navigation.mount import MountPrior
@@ -96,7 +96,7 @@ def check_fov(args: argparse.Namespace, lens: str, *, exact: bool = False) -> No
     if exact and args.fov_deg is not None:
         return
     searched = tuple(args.fov_range) if args.fov_range else default_fov_range_deg(lens)
-    search_range(fov_deg, searched, None, facts_model(lens))
+    search_range(fov_deg, searched, None, facts_model(lens), UNREAD_SHAPE)
 
 
 def solve_mounted(

@@ -292,7 +292,7 @@ def _hints(args, width: int, height: int) -> PlateHints:
         half = math.radians(args.fov) / 2.0
         width_deg = math.degrees(2.0 * math.atan(math.tan(half) * width / height))
         lo, hi = width_deg * (1 - FOV_TOLERANCE), width_deg * (1 + FOV_TOLERANCE)
-        fov_range = fov_range_from_scale("degwidth", lo, hi, width)
+        fov_range = fov_range_from_scale("degwidth", lo, hi, width, height)
     position: dict = {}
     radius = BLIND_RADIUS_DEG if args.r is None else args.r
     if args.ra is not None and args.spd is not None and radius < BLIND_RADIUS_DEG:

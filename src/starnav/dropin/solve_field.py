@@ -478,7 +478,7 @@ def _solve_one(infile: Path, number: int, count: int, args, common: dict) -> Non
     print(f'Reading input file {number} of {count}: "{infile}"...', flush=True)
 
     def hints(width: int, height: int) -> PlateHints:  # the scale needs the width
-        return PlateHints(fov_range_deg=_fov_range(args, width),
+        return PlateHints(fov_range_deg=_fov_range(args, width, height),
                           crpix_fits=_crpix(args, width, height), **common)  # fmt: skip
 
     xylist, result = None, None
@@ -523,7 +523,7 @@ def _crpix(args, width: int, height: int) -> tuple[float, float] | None:
     return (x, y)
 
 
-def _fov_range(args, width: int) -> tuple[float, float] | None:
+def _fov_range(args, width: int, height: int) -> tuple[float, float] | None:
     if args.scale_low is None and args.scale_high is None:
         return None
     low = args.scale_low if args.scale_low is not None else args.scale_high
@@ -531,7 +531,7 @@ def _fov_range(args, width: int) -> tuple[float, float] | None:
     units = SCALE_UNIT_NAMES[args.scale_units.lower()]
     from starnav.pipeline.plate import fov_range_from_scale
 
-    return fov_range_from_scale(units, low, high, width)
+    return fov_range_from_scale(units, low, high, width, height)
 
 
 def _extracts(args) -> bool:

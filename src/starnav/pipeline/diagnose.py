@@ -110,6 +110,7 @@ def diagnose(
         OUTSIDE,
         f"no pattern of the brightest stars matches the catalog {where}: the field lies "
         f"outside that (give it: --fov-deg, or --fov-range within {lo:g}-{hi:g}° for the "
-        f"pinhole lens; narrower than {lo:g}° is beyond the embedded catalogs), or the brightest "
+        f"pinhole lens; narrower than {lo:g}° along the image's longer side is beyond the "
+        "embedded catalogs), or the brightest "
         "points are not the brightest stars (a processed or stacked picture, a nebula, noise)",
     )

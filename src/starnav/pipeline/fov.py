@@ -54,10 +54,13 @@ from starnav.starlist import StarList, check_star_list
 if TYPE_CHECKING:  # the detection stack (sep) is not loaded for a star list's solve
     from starnav.detect.circle import ImageCircle
 
-# the narrowest horizontal field searched: 1°, where the embedded Gaia DR3 (G <= 10) holds
-# about 8 stars in a 1° x 0.67° image (docs/narrow_fields.md); the whole-sky pattern tables
-# of narrower bands would take 4x more lattice fields per halving
+# the narrowest field searched: 1° along the image's longer side, where the embedded Gaia DR3
+# (G <= 10) holds about 8 stars in a 1° x 0.67° image (docs/narrow_fields.md); the whole-sky
+# pattern tables of narrower bands would take 4x more lattice fields per halving
 FOV_LIMITS_DEG = Camera.fov_limits_deg  # (the lens classes hold the limits: these name them)
+# before an image is read, its field is checked as if it were twice as tall as wide (the
+# narrowest a portrait image may be across); the search checks it again on the image's shape
+UNREAD_SHAPE = (1.0, 2.0)
 LENS_FOV_LIMITS_DEG = Fisheye.fov_limits_deg  # the focal scan of a fisheye model
 SCAN_STARS = 60  # the focal scan identifies the brightest this many stars,
 SCAN_HYPOTHESES = 2000  # testing at most this many hypotheses per trial focal length
@@ -338,9 +341,10 @@ def near_bands(
 
 
 def check_fov_range(
-    fov_range_deg: tuple[float, float], limits_deg: tuple[float, float]
+    fov_range_deg: tuple[float, float], limits_deg: tuple[float, float], lens: str = "pinhole"
 ) -> tuple[float, float]:
-    """The range as two floats within ``limits_deg``, or a one-line error."""
+    """The range as two floats within ``limits_deg`` (the ``lens`` model's), or a one-line
+    error."""
     try:
         lo, hi = (float(v) for v in fov_range_deg)
     except (TypeError, ValueError):
@@ -349,43 +353,62 @@ def check_fov_range(
         ) from None
     a, b = limits_deg
     if not (a <= lo < hi <= b):
+        a, b = model_class(lens).fov_limits_deg  # as the model states them: _narrower_why
         raise StarnavError(
             f"fov range must satisfy {a:g} <= low < high <= {b:g} degrees, got {lo:g} {hi:g}"
-            + _narrower_why(lo, limits_deg)
+            + _narrower_why(lo, lens)
         )
     return lo, hi
 
 
-def _narrower_why(fov_deg: float, limits_deg: tuple[float, float]) -> str:
-    """Why the pinhole search stops at ``FOV_LIMITS_DEG[0]``, for an error about a
-    narrower ``fov_deg`` (degrees); empty otherwise."""
-    if tuple(limits_deg) != tuple(Camera.fov_limits_deg) or not fov_deg < limits_deg[0]:
+def _narrower_why(fov_deg: float, lens: str) -> str:
+    """Why the pinhole search stops where it does (the limits the errors state are the
+    model's: a portrait image's is narrower across), for an error about a ``fov_deg``
+    (degrees) under the model's; empty otherwise."""
+    lo = model_class(lens).fov_limits_deg[0]
+    if model_class(lens).kind != "pinhole" or not fov_deg < lo:
         return ""
     return (
-        f" (the narrowest field searched: a {limits_deg[0]:g}° field holds about 8 stars of "
-        "the embedded Gaia DR3 catalog, G <= 10, and whole-sky pattern tables of narrower "
-        "fields would take 4x the lattice fields per halving)"
+        f" (the narrowest field searched is {lo:g}° along the image's longer side: it holds "
+        "about 8 stars of the embedded Gaia DR3 catalog, G <= 10, and whole-sky pattern "
+        "tables of narrower fields would take 4x the lattice fields per halving)"
     )
 
 
-def fov_limits_deg(lens: str = "pinhole") -> tuple[float, float]:
+def fov_limits_deg(
+    lens: str = "pinhole", shape: tuple[float, float] | None = None
+) -> tuple[float, float]:
     """The horizontal fields of view (degrees) a given or searched FOV may take with the
     ``lens`` model: ``FOV_LIMITS_DEG`` for the pinhole (its FOV search),
     ``LENS_FOV_LIMITS_DEG`` for the fisheye models (their focal scan). The one definition
     ``search_range`` (images, plates, unknown-FOV lists) and the commands that take
-    ``--fov-deg`` / ``--fov-range`` (``solve``, ``identify``, ``calibrate``) check against."""
-    return tuple(model_class(lens).fov_limits_deg)
+    ``--fov-deg`` / ``--fov-range`` (``solve``, ``identify``, ``calibrate``) check against.
+
+    The pinhole's narrowest field is along its image's longer side: a portrait image
+    (``shape``: width, height in px; taller than wide) may be narrower across, as a Seestar
+    S50's 1080 x 1920 px frames are (0.71° x 1.27°), since the tables are cut on the
+    diagonal. No ``shape``: the limits the model states (a landscape image's); a check made
+    before the image is read passes ``UNREAD_SHAPE``."""
+    lo, hi = model_class(lens).fov_limits_deg
+    if model_class(lens).kind != "pinhole" or shape is None:
+        return lo, hi
+    tall = max(1.0, shape[1] / shape[0])
+    across = math.degrees(2.0 * math.atan(math.tan(math.radians(lo) / 2.0) / tall))
+    return across, hi
 
 
-def check_fov_deg(fov_deg: float, lens: str = "pinhole") -> float:
+def check_fov_deg(
+    fov_deg: float, lens: str = "pinhole", shape: tuple[float, float] | None = None
+) -> float:
     """``fov_deg`` (horizontal, degrees) as a float when the ``lens`` model takes it
-    (``fov_limits_deg``), else a one-line error saying the range (and, below the pinhole's
-    3°, why)."""
-    lo, hi = fov_limits_deg(lens)
+    (``fov_limits_deg``; ``shape``: the image's width, height in px, when known), else a
+    one-line error saying the range (and, below the pinhole's narrowest, why)."""
+    lo, hi = fov_limits_deg(lens, shape)
     if not (np.isfinite(fov_deg) and lo <= fov_deg <= hi):
+        lo, hi = model_class(lens).fov_limits_deg  # as the model states them: _narrower_why
         raise StarnavError(
             f"fov_deg must be within {lo:g}..{hi:g} degrees for the {lens} lens model, got "
-            f"{shown(fov_deg)}" + _narrower_why(fov_deg, (lo, hi))
+            f"{shown(fov_deg)}" + _narrower_why(fov_deg, lens)
         )
     return float(fov_deg)
 
@@ -395,17 +418,19 @@ def search_range(
     fov_range_deg: tuple[float, float],
     camera: CameraModel | None,
     lens: str = "pinhole",
+    shape: tuple[float, float] | None = None,
 ) -> tuple[float, float]:
     """The horizontal FOV range searched (degrees): within 1 % of a calibrated ``camera``,
-    5 % of ``fov_deg``, or ``fov_range_deg``, each within ``fov_limits_deg(lens)``; a
-    one-line error for a bad one."""
+    5 % of ``fov_deg``, or ``fov_range_deg``, each within ``fov_limits_deg(lens, shape)``
+    (``shape``: the image's width, height in px, when known); a one-line error for a bad
+    one."""
     if camera is not None:
         f = camera.fov_deg
         return f * (1 - CAMERA_FOV_TOLERANCE), f * (1 + CAMERA_FOV_TOLERANCE)
     if fov_deg is not None:
-        check_fov_deg(fov_deg, lens)
+        check_fov_deg(fov_deg, lens, shape)
         return fov_deg * (1 - GIVEN_FOV_TOLERANCE), fov_deg * (1 + GIVEN_FOV_TOLERANCE)
-    return check_fov_range(fov_range_deg, fov_limits_deg(lens))
+    return check_fov_range(fov_range_deg, fov_limits_deg(lens, shape), lens)
 
 
 def solve_unknown_field(
@@ -439,8 +464,9 @@ def solve_unknown_field(
     if camera is not None:
         width, height = camera.width, camera.height
     lens = options.lens_model
-    lo, hi = search_range(options.fov_deg, options.search_range_deg, camera, lens)
     height = width if height is None else height
+    shape = None if width is None else (width, height)
+    lo, hi = search_range(options.fov_deg, options.search_range_deg, camera, lens, shape)
     if camera is not None:
         base = camera
     elif not options.scans_focal:
@@ -470,7 +496,10 @@ def solve_unknown_field(
     near = _near(position_hint_deg, options.position_radius_deg)
     ranges = [(lo, hi)]
     if options.fov_deg is None and camera is None:
-        ranges += [r for r in options.searched_ranges_deg[1:] if r != (lo, hi)]
+        # the narrowest range reaches the image's own limit (a portrait image's is narrower)
+        floor, stated = fov_limits_deg(lens, shape)[0], model_class(lens).fov_limits_deg[0]
+        extended = [(floor if a == stated else a, b) for a, b in options.searched_ranges_deg[1:]]
+        ranges += [r for r in extended if r != (lo, hi)]
     results, left_s = [], budget_s
     for k, (a, b) in enumerate(ranges):
         # the budget counts once the range's tables are loaded (built on first use); the

@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from starnav.camera import Camera, CameraModel, model_class
+from starnav.camera import CameraModel, model_class
 from starnav.catalog import Catalog, is_embedded
 from starnav.detect.circle import ImageCircle, dark_corners, find_image_circle
 from starnav.detect.header import ImageHints, fits_hints, is_fits
@@ -27,7 +27,7 @@ from starnav.detect.skymask import find_sky_mask
 from starnav.detect.stars import Detections, detect_stars
 from starnav.errors import CameraError, ImageError, StarnavError
 from starnav.pipeline.diagnose import BUDGET, Failure, diagnose
-from starnav.pipeline.fov import diagonal_fov_deg, search_range
+from starnav.pipeline.fov import UNREAD_SHAPE, diagonal_fov_deg, fov_limits_deg, search_range
 from starnav.pipeline.options import (
     DEFAULT_FOV_RANGE_DEG,
     DEFAULT_MAX_STARS,
@@ -142,7 +142,9 @@ def solve_image(
     """
     options = SolveOptions.make(options, **option_fields)
     camera = options.camera
-    search_range(options.fov_deg, options.search_range_deg, camera, options.lens_model)
+    search_range(
+        options.fov_deg, options.search_range_deg, camera, options.lens_model, UNREAD_SHAPE
+    )
     if not exact_field(options, images=True):  # bad options fail before any work
         check_searched(options, prior=prior is not None)
     t0 = time.perf_counter()
@@ -320,9 +322,10 @@ def _solve_hinted(
     """The detections ``xy`` of an image of ``size`` (width, height px) solved
     (``pipeline.stars.solve_stars``) with the ``hints`` of a pinhole search: the position
     searched first (unless ``position`` is given); the FOV, when the default range is searched
-    and the FOV lies within the pinhole's limits (1-100°: a telescope's 1.5° too), tried first
-    and, if that fails, the whole range on what is left of the budget. ``circle``: a fisheye's
-    image circle found in the image (``detect.circle``), where its focal scan starts."""
+    and the FOV lies within the pinhole's limits (``fov_limits_deg``: a telescope's 1.5° too),
+    tried first and, if that fails, the whole range on what is left of the budget.
+    ``circle``: a fisheye's image circle found in the image (``detect.circle``), where its
+    focal scan starts."""
     if position is None and hints.ra_deg is not None and hints.dec_deg is not None:
         position = (hints.ra_deg, hints.dec_deg)
     width, height = size
@@ -340,7 +343,7 @@ def _solve_hinted(
         )
 
     hinted = None
-    lo, hi = Camera.fov_limits_deg
+    lo, hi = fov_limits_deg("pinhole", size)
     if options.fov_range_deg in (None, DEFAULT_FOV_RANGE_DEG) and hints.fov_deg:
         if lo <= hints.fov_deg <= hi:
             hinted = hints.fov_deg  # else ignored: outside what the search is for

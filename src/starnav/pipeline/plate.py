@@ -29,7 +29,7 @@ from starnav.catalog import Catalog
 from starnav.detect.header import ImageHints, fits_hints, is_fits
 from starnav.detect.read import MAX_PIXELS, primary_fits_header
 from starnav.errors import StarnavError, shown
-from starnav.pipeline.fov import FOV_LIMITS_DEG
+from starnav.pipeline.fov import FOV_LIMITS_DEG, fov_limits_deg
 from starnav.pipeline.image import (
     ImageSolveResult,
     annotate_solution,
@@ -93,17 +93,19 @@ def width_deg_from_scale(units: str, value: float, width_px: float) -> float:
 
 
 def fov_range_from_scale(
-    units: str, lower: float, upper: float, width_px: float
+    units: str, lower: float, upper: float, width_px: float, height_px: float | None = None
 ) -> tuple[float, float]:
     """The horizontal FOV range (degrees) of a scale range (``width_deg_from_scale``), clipped
     to where starnav searches: the default range when the scale range holds all of it (a
     client's catch-all 0.1-180° searches what the default search does), else the part inside
-    ``FOV_LIMITS_DEG`` (a 4.3-5.3° hint is searched whole, not cut at the default's 5°).
-    ``StarnavError`` when nothing is left."""
+    the pinhole's limits for an image ``width_px`` x ``height_px`` (``fov_limits_deg``: a
+    portrait image may be narrower across; a 4.3-5.3° hint is searched whole, not cut at the
+    default's 5°). ``StarnavError`` when nothing is left."""
     ends = sorted(width_deg_from_scale(units, v, width_px) for v in (lower, upper))
     if ends[0] <= DEFAULT_FOV_RANGE_DEG[0] and ends[1] >= DEFAULT_FOV_RANGE_DEG[1]:
         return DEFAULT_FOV_RANGE_DEG
-    lo, hi = FOV_LIMITS_DEG
+    shape = None if height_px is None else (width_px, height_px)
+    lo, hi = fov_limits_deg("pinhole", shape) if shape else FOV_LIMITS_DEG
     clipped = (max(ends[0], lo), min(ends[1], hi))
     if clipped[0] <= clipped[1]:
         if clipped[0] == clipped[1]:  # one value: search around it, within the limits
@@ -111,7 +113,8 @@ def fov_range_from_scale(
         return clipped
     raise StarnavError(
         f"the scale range {ends[0]:.3g}-{ends[1]:.3g}° wide is outside the fields starnav "
-        f"solves ({FOV_LIMITS_DEG[0]:g}-{FOV_LIMITS_DEG[1]:g}°)"
+        f"solves ({lo:.3g}-{hi:g}° wide{' for this image' if shape else ''}; "
+        f"{FOV_LIMITS_DEG[0]:g}° at least along the longer side)"
     )
 
 

@@ -50,22 +50,23 @@ def _flag(request: dict, key: str) -> bool:
     return bool(value)
 
 
-def plate_hints(request: dict, width_px: float) -> PlateHints:
+def plate_hints(request: dict, width_px: float, height_px: float | None = None) -> PlateHints:
     """The hints of a nova request (``StarnavError`` naming a bad one) for an image
-    ``width_px`` wide (for "arcsecperpix")."""
+    ``width_px`` x ``height_px`` (the width for "arcsecperpix"; both for the narrowest field
+    searched, ``pipeline.fov.fov_limits_deg``)."""
     units = request.get("scale_units") or DEFAULT_SCALE_UNITS
     stype = request.get("scale_type") or ("ev" if "scale_est" in request else "ul")
     fov_range = None
     if stype == "ev" and request.get("scale_est") is not None:
         lo, hi = scale_bounds(_number(request, "scale_est"), _number(request, "scale_err") or 20)
-        fov_range = fov_range_from_scale(units, lo, hi, width_px)
+        fov_range = fov_range_from_scale(units, lo, hi, width_px, height_px)
     elif stype == "ul" and (request.get("scale_lower") is not None
                             or request.get("scale_upper") is not None):  # fmt: skip
         lo = _number(request, "scale_lower")
         hi = _number(request, "scale_upper")
         if lo is None or hi is None:
             raise StarnavError("scale_lower and scale_upper go together")
-        fov_range = fov_range_from_scale(units, lo, hi, width_px)
+        fov_range = fov_range_from_scale(units, lo, hi, width_px, height_px)
     elif stype not in ("ul", "ev"):
         raise StarnavError(f"scale_type must be 'ul' or 'ev', got {stype!r}")
     ra, dec = _number(request, "center_ra"), _number(request, "center_dec")

@@ -126,7 +126,7 @@ def _solve(tmp: Path, data, xy, request, budget_s, max_pixels, told) -> dict:
         source = read_xylist(path) or path
 
     def hints(width: int, height: int):  # the width converts arcsec per pixel
-        return plate_hints(request, width)
+        return plate_hints(request, width, height)
 
     started = Deadline.now(math.inf if budget_s is None else budget_s)
     told = told or (lambda event, value: None)
