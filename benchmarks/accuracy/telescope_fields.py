@@ -49,6 +49,7 @@ from starnav.camera import Camera
 from starnav.catalog import Catalog, load_gaia
 from starnav.errors import StarnavError
 from starnav.geometry import attitude_from_radec_roll, radec_to_unit
+from starnav.pipeline.fov import fov_limits_deg
 from starnav.pipeline.image import solve_image
 from starnav.simulate.render import RenderSettings, render_frame
 
@@ -80,9 +81,12 @@ def width_range(fov_hint_deg: float) -> tuple[float, float]:
     return fov_hint_deg / (1.0 + SCALE_ERROR), fov_hint_deg / (1.0 - SCALE_ERROR)
 
 
-def solve_one(image, R_true: np.ndarray, fov_hint_deg: float, position) -> dict:
-    """One solve: its verdict, the whole call's and the solve's time (s), the reason."""
+def solve_one(image, R_true: np.ndarray, fov_hint_deg: float, position, shape) -> dict:
+    """One solve: its verdict, the whole call's and the solve's time (s), the reason. The
+    width range is clipped to the narrowest field the image's ``shape`` (width, height px)
+    allows (``fov_limits_deg``: 1° along its longer side)."""
     lo, hi = width_range(fov_hint_deg)
+    floor = fov_limits_deg("pinhole", shape)[0]
     kw = (
         {}
         if position is None
@@ -90,7 +94,7 @@ def solve_one(image, R_true: np.ndarray, fov_hint_deg: float, position) -> dict:
     )
     t0 = time.perf_counter()
     try:
-        res = solve_image(image, fov_range_deg=(max(lo, 1.0), max(hi, 1.0 + 1e-6)), **kw)
+        res = solve_image(image, fov_range_deg=(max(lo, floor), max(hi, floor + 1e-6)), **kw)
     except StarnavError as exc:
         return {
             "verdict": "refused",
@@ -121,6 +125,7 @@ def real_frames() -> list[dict]:
                     "set": "development",
                     "name": name,
                     "fov_deg": fov,
+                    "shape": (r["width"], r["height"]),
                     "R": np.array(r["R_cam_from_icrs"]),
                     "hints": nina_hints(name, r),
                 }
@@ -134,6 +139,7 @@ def real_frames() -> list[dict]:
                     "set": "held back",
                     "name": f["name"],
                     "fov_deg": r["fov_deg"],
+                    "shape": (r["width"], r["height"]),
                     "R": np.array(r["R_cam_from_icrs"]),
                     "hints": f.get("hints") or nina_hints(f["name"], r),
                 }
@@ -190,7 +196,7 @@ def run_real(args) -> None:
                 continue
             h = f["hints"]
             position = (h["ra_deg"], h["dec_deg"]) if mode == "hinted" else None
-            r = solve_one(path, f["R"], h["fov_deg"], position)
+            r = solve_one(path, f["R"], h["fov_deg"], position, f["shape"])
             rows.append(
                 {
                     **r,
@@ -272,7 +278,7 @@ def run_renders(args) -> None:
             )
             for mode in ("hinted",) if args.skip_blind else ("hinted", "blind"):
                 position = (h["ra_deg"], h["dec_deg"]) if mode == "hinted" else None
-                r = solve_one(frame.image, R, h["fov_deg"], position)
+                r = solve_one(frame.image, R, h["fov_deg"], position, frame.image.shape[::-1])
                 rows.append(
                     {
                         **r,
