@@ -32,7 +32,13 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from starnav.cli.parser import EXIT_BAD_INPUT, Parser, collector_paused, freeze_at_exit
+from starnav.cli.parser import (
+    EXIT_BAD_INPUT,
+    Parser,
+    collector_paused,
+    exit_now,
+    freeze_at_exit,
+)
 from starnav.errors import StarnavError
 
 if TYPE_CHECKING:  # numpy and the solver are imported when a file is solved: --help needs neither
@@ -263,10 +269,14 @@ class _Ignored(argparse.Action):
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run solve-field's command line without the cyclic garbage collector
-    (``starnav.cli.parser.collector_paused``); the exit status."""
+    (``starnav.cli.parser.collector_paused``); the exit status (the console script's
+    process ends at once: ``exit_now``)."""
     freeze_at_exit()
     with collector_paused():
-        return _main(argv)
+        code = _main(argv)
+    if argv is None:  # the console script: its process ends here (``exit_now``)
+        exit_now(code)
+    return code
 
 
 def _main(argv: Sequence[str] | None) -> int:
