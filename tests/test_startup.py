@@ -143,3 +143,71 @@ def test_the_public_names_are_there_when_first_used():
     assert starnav.solve is api.solve and starnav.solve_image is api.solve_image
     with pytest.raises(AttributeError, match="no attribute 'no_such_name'"):
         starnav.no_such_name  # noqa: B018
+
+
+def test_the_star_fit_of_a_plate_solve_loads_no_scipy_special():
+    """The WCS fitted to a drop-in call's matched stars (``fit_wcs_to_stars``, its F-tests)
+    does not import scipy.special (30-50 ms of a call)."""
+    code = (
+        "import numpy as np\n"
+        "from starnav.camera import Camera\n"
+        "from starnav.geometry import attitude_from_radec_roll\n"
+        "from starnav.output.wcs import fit_wcs_to_stars\n"
+        "camera = Camera(1280, 960, focal_px=3000.0, k1=-0.05)\n"
+        "R = attitude_from_radec_roll(10.0, 60.0, 0.0)\n"
+        "rng = np.random.default_rng(2)\n"
+        "xy = rng.uniform((0, 0), (1280, 960), (60, 2))\n"
+        "fit = fit_wcs_to_stars(xy, camera.pixels_to_bearings(xy) @ R, 1280, 960)\n"
+        "assert fit.order >= 2, fit.order\n"
+    )
+    assert _loaded(code, ("scipy.special",)) == set()
+
+
+@pytest.mark.parametrize("module", ["starnav.dropin.solve_field", "starnav.dropin.astap"])
+def test_a_drop_in_runs_without_the_garbage_collector_and_gives_it_back(module, monkeypatch):
+    """A drop-in call runs with the cyclic garbage collector paused (its collections walked
+    every object numpy, astropy, scipy and numba made, again and again: ~0.2 s of a call), and
+    the caller gets it back as it was, also when the call raises."""
+    import gc
+    import importlib
+
+    dropin = importlib.import_module(module)
+    seen = []
+
+    def run(argv):
+        seen.append(gc.isenabled())
+        if argv == ["raise"]:
+            raise RuntimeError("stop")
+        return 0
+
+    monkeypatch.setattr(dropin, "_main", run)
+    assert gc.isenabled()
+    assert dropin.main(["x"]) == 0
+    with pytest.raises(RuntimeError, match="stop"):
+        dropin.main(["raise"])
+    assert seen == [False, False] and gc.isenabled()
+
+
+@pytest.mark.parametrize(
+    ("module", "argv", "code", "said"),
+    [
+        ("starnav.dropin.solve_field", ["--version"], 0, "starnav "),
+        ("starnav.dropin.solve_field", ["/no/such/image.jpg"], 2, "no/such/image.jpg"),
+        ("starnav.dropin.astap", ["-f", "/no/such/image.jpg"], 2, "no/such/image.jpg"),
+    ],
+)
+def test_a_drop_in_console_call_ends_at_once_with_its_output(module, argv, code, said):
+    """Run as its console script runs it (``main()``, sys.argv), a drop-in ends its process
+    itself (``exit_now``: no interpreter teardown) with its exit status, what it printed
+    flushed; nothing after ``main()`` runs."""
+    script = (
+        "import sys\n"
+        f"sys.argv = ['prog', *{argv!r}]\n"
+        f"from {module} import main\n"
+        "main()\n"
+        "print('after main')\n"
+    )
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True)
+    assert done.returncode == code, done.stderr
+    assert said in done.stdout + done.stderr
+    assert "after main" not in done.stdout and "Traceback" not in done.stderr

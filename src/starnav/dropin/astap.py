@@ -33,7 +33,13 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from starnav.cli.parser import EXIT_BAD_INPUT, Parser, freeze_at_exit
+from starnav.cli.parser import (
+    EXIT_BAD_INPUT,
+    Parser,
+    collector_paused,
+    exit_now,
+    freeze_at_exit,
+)
 from starnav.errors import CatalogError, ImageError, StarnavError
 
 if TYPE_CHECKING:  # numpy, astropy and the solver are imported when a file is solved: -h needs none
@@ -153,8 +159,18 @@ def build_parser() -> Parser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run ASTAP's command line; ASTAP's exit code."""
+    """Run ASTAP's command line without the cyclic garbage collector
+    (``starnav.cli.parser.collector_paused``); ASTAP's exit code (the console script's
+    process ends at once: ``exit_now``)."""
     freeze_at_exit()
+    with collector_paused():
+        code = _main(argv)
+    if argv is None:  # the console script: its process ends here (``exit_now``)
+        exit_now(code)
+    return code
+
+
+def _main(argv: Sequence[str] | None) -> int:
     program = sys.argv[0] if argv is None else PROG  # ASTAP's CMDLINE starts with its path
     argv = list(sys.argv[1:] if argv is None else argv)
     parser = build_parser()

@@ -32,7 +32,13 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from starnav.cli.parser import EXIT_BAD_INPUT, Parser, freeze_at_exit
+from starnav.cli.parser import (
+    EXIT_BAD_INPUT,
+    Parser,
+    collector_paused,
+    exit_now,
+    freeze_at_exit,
+)
 from starnav.errors import StarnavError
 
 if TYPE_CHECKING:  # numpy and the solver are imported when a file is solved: --help needs neither
@@ -262,8 +268,18 @@ class _Ignored(argparse.Action):
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run solve-field's command line; the exit status."""
+    """Run solve-field's command line without the cyclic garbage collector
+    (``starnav.cli.parser.collector_paused``); the exit status (the console script's
+    process ends at once: ``exit_now``)."""
     freeze_at_exit()
+    with collector_paused():
+        code = _main(argv)
+    if argv is None:  # the console script: its process ends here (``exit_now``)
+        exit_now(code)
+    return code
+
+
+def _main(argv: Sequence[str] | None) -> int:
     parser = build_parser()
     args = parser.parse_args(getopt_argv(parser, sys.argv[1:] if argv is None else argv))
     if args.version:

@@ -104,14 +104,16 @@ def pinhole_bearings(xy: np.ndarray, cx: float, cy: float, focal: np.ndarray) ->
 
     shape = np.broadcast_shapes(xy.shape[:-1], np.shape(focal))
     rows = int(np.prod(shape[:-1])) if len(shape) > 1 else 1
-    pixels = np.ascontiguousarray(np.broadcast_to(xy, (*shape, 2)), dtype=np.float64)
-    focals = np.ascontiguousarray(np.broadcast_to(focal, shape), dtype=np.float64)
+    # writable C-ordered copies: one signature of the kernel (read-only or strided arrays
+    # would each load another compiled version of it, ~10 ms a process)
+    pixels = np.array(np.broadcast_to(xy, (*shape, 2)), dtype=np.float64, order="C")
+    focals = np.array(np.broadcast_to(focal, shape), dtype=np.float64, order="C")
     params = np.array([1.0, cx, cy, 0.0, 0.0])  # [focal_px, cx, cy, k1, k2], focal per row
     out = kernels.bearings_at_focals(
         Camera.model_code,
         params,
         pixels.reshape(rows, -1, 2),
-        focals.reshape(rows, -1)[:, 0],
+        np.ascontiguousarray(focals.reshape(rows, -1)[:, 0]),
     )
     return out.reshape(*shape, 3)
 
