@@ -145,24 +145,6 @@ def test_the_public_names_are_there_when_first_used():
         starnav.no_such_name  # noqa: B018
 
 
-def test_the_star_fit_of_a_plate_solve_loads_no_scipy_special():
-    """The WCS fitted to a drop-in call's matched stars (``fit_wcs_to_stars``, its F-tests)
-    does not import scipy.special (30-50 ms of a call)."""
-    code = (
-        "import numpy as np\n"
-        "from starnav.camera import Camera\n"
-        "from starnav.geometry import attitude_from_radec_roll\n"
-        "from starnav.output.wcs import fit_wcs_to_stars\n"
-        "camera = Camera(1280, 960, focal_px=3000.0, k1=-0.05)\n"
-        "R = attitude_from_radec_roll(10.0, 60.0, 0.0)\n"
-        "rng = np.random.default_rng(2)\n"
-        "xy = rng.uniform((0, 0), (1280, 960), (60, 2))\n"
-        "fit = fit_wcs_to_stars(xy, camera.pixels_to_bearings(xy) @ R, 1280, 960)\n"
-        "assert fit.order >= 2, fit.order\n"
-    )
-    assert _loaded(code, ("scipy.special",)) == set()
-
-
 @pytest.mark.parametrize("module", ["starnav.dropin.solve_field", "starnav.dropin.astap"])
 def test_a_drop_in_runs_without_the_garbage_collector_and_gives_it_back(module, monkeypatch):
     """A drop-in call runs with the cyclic garbage collector paused (its collections walked

@@ -27,7 +27,6 @@ needs no entry here: its class declares both facts.
 from __future__ import annotations
 
 import datetime as _dt
-import math
 import re
 import warnings
 from dataclasses import dataclass
@@ -479,6 +478,8 @@ def fit_wcs_to_stars(
     if not np.isfinite(world).all():
         raise StarnavError("the stars of a WCS fit must lie within 90° of the field centre")
     n = len(xy)
+    from scipy.special import fdtrc  # survival function of the F distribution
+
     order = 1
     best = _star_poly(uv, world, 1, scale, vectors, reference)
     p_values: dict[int, float] = {}
@@ -492,7 +493,7 @@ def fit_wcs_to_stars(
             p = 0.0
         else:
             statistic = ((best[2] - trial[2]) / extra) / (trial[2] / dof)
-            p = f_survival_even(extra, dof, statistic)
+            p = float(fdtrc(extra, dof, statistic))
         p_values[candidate] = p
         if p < STAR_FIT_P_VALUE:
             order, best = candidate, trial
@@ -521,31 +522,6 @@ def fit_wcs_to_stars(
     residual = fitted - xy
     rms = float(np.sqrt(np.mean(np.sum(residual**2, axis=1))))
     return StarFitWcs(wcs, order, inverse_order, n, residual, rms, p_values, inverse_error)
-
-
-def f_survival_even(d1: int, d2: int, f: float) -> float:
-    """P(F > ``f``) for an F distribution of ``d1`` (even) and ``d2`` degrees of freedom, as
-    scipy's ``fdtrc`` (to ~1e-12 relative above 1e-8: tests/output/test_star_fit_wcs.py). It is
-    the regularized incomplete beta I_x(d2/2, d1/2) at x = d2 / (d2 + d1 f), for an integer
-    d1/2 = m the finite sum x^a sum_{k<m} Γ(a+k) / (Γ(a) k!) (1-x)^k with a = d2/2. The star
-    fit's F-tests have even d1 (two axes' terms): importing scipy.special for them cost a drop-in
-    call 30-50 ms."""
-    if d1 < 2 or d1 % 2 or d2 <= 0:
-        raise StarnavError(f"f_survival_even needs an even d1 >= 2 and d2 > 0, got {d1}, {d2}")
-    if not f >= 0.0:  # NaN or negative: no probability, as fdtrc's NaN
-        return math.nan
-    if f == 0.0:
-        return 1.0
-    if math.isinf(f):
-        return 0.0
-    a = d2 / 2.0
-    x = d2 / (d2 + d1 * f)
-    log_x, log_rest, log_gamma_a = math.log(x), math.log1p(-x), math.lgamma(a)
-    terms = (
-        a * log_x + math.lgamma(a + k) - log_gamma_a - math.lgamma(k + 1.0) + k * log_rest
-        for k in range(d1 // 2)
-    )
-    return min(1.0, math.fsum(math.exp(t) for t in terms))
 
 
 def _fit_inverse(a, b, order: int, crpix: np.ndarray, width: int, height: int):
