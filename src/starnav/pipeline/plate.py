@@ -182,9 +182,9 @@ UNRANKED_WHY = {False: "the list is in detection order with no brightness column
 class XYList:
     """A source list: FITS pixel coordinates (1-based) of stars in an image ``width`` x
     ``height`` px (astrometry.net's xylist). ``ordered``: whether the rows are brightest first
-    (sorted by a brightness column, or given so); when False the solve weighs no brightness
-    and takes the points spread over the image (``uniform_order``). ``sorted_by``: the column
-    the rows were sorted by (None: as given)."""
+    (sorted by a brightness column, or given so; with no column that is not known); when
+    False (detection order) the solve weighs no brightness (``pipeline.unordered``).
+    ``sorted_by``: the column the rows were sorted by (None: as given; ``_solve_list``)."""
 
     x: np.ndarray
     y: np.ndarray
