@@ -84,6 +84,19 @@ def plain_xylist(path: Path, order: np.ndarray | None = None) -> Path:
     return path
 
 
+def random_xylist(path: Path) -> Path:
+    """An xylist of X and Y only, as many points as the frame's detections but placed at
+    random over it (seed 3), in detection order: a list no solver can solve."""
+    x, _, _, width, height = pleiades_sources()
+    rng = np.random.default_rng(3)
+    rx, ry = rng.uniform(0.5, width + 0.5, len(x)), np.sort(rng.uniform(0.5, height + 0.5, len(x)))
+    columns = [fits.Column("X", "D", array=rx), fits.Column("Y", "D", array=ry)]
+    table = fits.BinTableHDU.from_columns(columns)
+    table.header["IMAGEW"], table.header["IMAGEH"] = width, height
+    fits.HDUList([fits.PrimaryHDU(), table]).writeto(path)
+    return path
+
+
 def centre_offset_arcmin(ra_deg: float, dec_deg: float, name: str = PLEIADES) -> float:
     """Angle (arcmin) from astrometry.net's image centre of ``name`` to (ra, dec)."""
     ref = REAL_REFERENCE[name]

@@ -1,17 +1,21 @@
 """Source lists in any order: the real photographs' detections solved as x, y lists sorted
-by brightness, in detection order and shuffled, for docs/dropin.md ("Source lists in any
-order").
+by brightness, in detection order and shuffled, blind and with a client's hints, for
+docs/dropin.md ("Source lists in any order").
 
     nice python benchmarks/images/source_order.py [--budget 10] [--write]
 
 Every image of ``$STARNAV_REAL_CORPUS`` (else ``../shared/data/real``) that astrometry.net
 solved (tests/data/real/reference.json) is read and its stars detected (``detect_stars``,
 every detection, as image2xy or SExtractor list them); the list (FITS pixels) is then solved
-by ``solve_plate`` with no hint, ``--budget`` seconds each, four ways: brightest first with
-its flux column; in detection order (rows by y) with the flux column (read_xylist's case:
-sorted by it); in detection order with no brightness; shuffled (seed 1) with no brightness.
-A solve is scored by the image centre against astrometry.net's: correct within 0.1°, wrong
-0.5° or more off. Prints the table; ``--write`` puts it in docs/dropin.md.
+by ``solve_plate``, ``--budget`` seconds each, four ways: brightest first with its flux
+column; in detection order (rows by y) with the flux column (read_xylist's case: sorted by
+it); in detection order with no brightness; shuffled (seed 1) with no brightness. Each with
+no hint (``HINTS`` "blind"); brightest first and the two without brightness also with the
+scale hinted (the width within ±10 % of astrometry.net's, as N.I.N.A. and solve-field's
+-L/-H send it: "scale") and with the scale and a position 2° from astrometry.net's centre,
+searched within 5° ("scale + position"). A solve is scored by the image centre against
+astrometry.net's: correct within 0.1°, wrong 0.5° or more off. Prints the table;
+``--write`` puts it in docs/dropin.md.
 """
 
 from __future__ import annotations
@@ -34,6 +38,13 @@ from starnav.pipeline.plate import PlateHints, XYList, solve_plate
 
 REFERENCE = Path(__file__).resolve().parents[2] / "tests" / "data" / "real" / "reference.json"
 ORDERS = ("brightest first", "detection order + flux", "detection order", "shuffled")
+HINTS = ("blind", "scale", "scale + position")
+# (order, hints) solved: every order blind, those of interest with hints
+RUNS = [(o, "blind") for o in ORDERS] + [
+    (o, h) for h in HINTS[1:] for o in (ORDERS[0], ORDERS[2], ORDERS[3])
+]
+SCALE_ERROR = 0.10  # the width hinted within ±10 %
+POSITION_OFF_DEG, POSITION_RADIUS_DEG = 2.0, 5.0
 CORRECT_DEG, WRONG_DEG = 0.1, 0.5
 
 
@@ -55,6 +66,23 @@ def lists(x, y, flux, width, height) -> dict[str, XYList]:
     }
 
 
+def hints_for(kind: str, ref: dict) -> PlateHints:
+    """The client's hints of a run: none, the width within ``SCALE_ERROR``, or that and a
+    position ``POSITION_OFF_DEG`` north of astrometry.net's centre (south above Dec 80°)."""
+    if kind == "blind":
+        return PlateHints()
+    fov = (ref["fov_deg"] * (1.0 - SCALE_ERROR), ref["fov_deg"] * (1.0 + SCALE_ERROR))
+    if kind == "scale":
+        return PlateHints(fov_range_deg=fov)
+    step = POSITION_OFF_DEG if ref["dec_deg"] < 80.0 else -POSITION_OFF_DEG
+    return PlateHints(fov_range_deg=fov, ra_deg=ref["ra_deg"], dec_deg=ref["dec_deg"] + step,
+                      radius_deg=POSITION_RADIUS_DEG)  # fmt: skip
+
+
+def run_name(order: str, hints: str) -> str:
+    return order if hints == "blind" else f"{order}, {hints}"
+
+
 def offset_deg(ra1, dec1, ra2, dec2) -> float:
     r1, d1, r2, d2 = (math.radians(v) for v in (ra1, dec1, ra2, dec2))
     c = math.sin(d1) * math.sin(d2) + math.cos(d1) * math.cos(d2) * math.cos(r1 - r2)
@@ -74,9 +102,11 @@ def run(budget_s: float) -> tuple[list[dict], str]:
         height, width = pixels.shape
         x, y = found.xy[:, 0] + 0.5, found.xy[:, 1] + 0.5
         row = {"file": name, "n": len(x)}
-        for order, source in lists(x, y, found.flux, width, height).items():
+        sources = lists(x, y, found.flux, width, height)
+        for order, kind in RUNS:
+            source = sources[order]
             t0 = time.perf_counter()
-            res = solve_plate(source, PlateHints(), time_budget_s=budget_s)
+            res = solve_plate(source, hints_for(kind, refs[name]), time_budget_s=budget_s)
             seconds = time.perf_counter() - t0
             verdict = "none"
             if res.plate is not None:
@@ -85,17 +115,21 @@ def run(budget_s: float) -> tuple[list[dict], str]:
                 verdict = (
                     "correct" if off < CORRECT_DEG else "wrong" if off >= WRONG_DEG else "inexact"
                 )
-            row[order] = (verdict, seconds)
-            print(f"{name} {len(x)} {order}: {verdict} {seconds:.2f} s", flush=True)
+            row[run_name(order, kind)] = (verdict, seconds)
+            print(f"{name} {len(x)} {run_name(order, kind)}: {verdict} {seconds:.2f} s",
+                  flush=True)  # fmt: skip
         rows.append(row)
     return rows, machine(load, load_at_end=True)
 
 
 def table(rows: list[dict], machine_line: str, budget_s: float) -> str:
-    out = [f"Machine: {machine_line}. Budget {budget_s:g} s a solve, no hints; "
-           f"{len(rows)} photographs.", ""]  # fmt: skip
-    out += table_head("order", "solved (correct)", "wrong", "median time, s", "max time, s")
-    for order in ORDERS:
+    out = [f"Machine: {machine_line}. Budget {budget_s:g} s a solve; {len(rows)} "
+           f"photographs; scale: the width within ±{100 * SCALE_ERROR:g} %; position: "
+           f"{POSITION_OFF_DEG:g}° off, searched within {POSITION_RADIUS_DEG:g}°.", ""]  # fmt: skip
+    names = [run_name(o, h) for o, h in RUNS]
+    out += table_head("order, hints", "solved (correct)", "wrong", "median time, s",
+                      "max time, s")  # fmt: skip
+    for order in names:
         cells = [r[order] for r in rows]
         correct = sum(v == "correct" for v, _ in cells)
         solved = sum(v != "none" for v, _ in cells)
@@ -104,9 +138,9 @@ def table(rows: list[dict], machine_line: str, budget_s: float) -> str:
         out.append(table_row(order, f"{solved} of {len(cells)} ({correct})", wrong,
                              f"{np.median(times):.2f}", f"{max(times):.2f}"))  # fmt: skip
     out += ["", "Per photograph (detections; the verdicts in the order above):", ""]
-    out += table_head("file", "detections", *ORDERS)
+    out += table_head("file", "detections", *names)
     for r in rows:
-        out.append(table_row(r["file"], r["n"], *(f"{r[o][0]} {r[o][1]:.1f} s" for o in ORDERS)))
+        out.append(table_row(r["file"], r["n"], *(f"{r[o][0]} {r[o][1]:.1f} s" for o in names)))
     return "\n".join(out)
 
 

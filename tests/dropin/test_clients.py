@@ -33,6 +33,7 @@ from source_lists import (
     pleiades_fits,
     pleiades_path,
     pleiades_sources,
+    random_xylist,
     siril_xylist,
     stellarsolver_xylist,
 )
@@ -118,6 +119,19 @@ def test_siril_xylist(tmp_path):
     assert not (tmp_path / "IMG.new").exists()
 
 
+def test_xylist_without_brightness_in_detection_order(tmp_path):
+    """An xylist of X and Y only, rows in detection order (image2xy's and SExtractor's, and
+    what astrometry.net's client.py --upload-xy sends), with the scale as Siril sends it:
+    solved without brightness (issue 36.2), the centre and the .wcs as for a sorted list."""
+    plain_xylist(tmp_path / "IMG.xyls")
+    argv = ["-p", "-O", "--crpix-center", "-u", "arcsecperpix", "-L", f"{SCALE * 0.9:.3f}",
+            "-H", f"{SCALE * 1.1:.3f}", "-l", "10", "IMG.xyls"]  # fmt: skip
+    done = _run("solve_field", argv, tmp_path)
+    assert done.returncode == 0, done.stderr
+    _check_centre(*_solved_lines(done.stdout))
+    _check_centre(*_wcs_centre(tmp_path / "IMG.wcs"))
+
+
 def test_siril_issue_line_on_the_image(tmp_path):
     """The line of issue 36 (Siril's, on an image rather than a list: starnav detects)."""
     shutil.copy(pleiades_path(), tmp_path / "IMG.jpg")
@@ -142,9 +156,9 @@ def test_siril_cancel_file_stops_the_solve(tmp_path):
 
 
 def test_cancel_file_created_while_solving(tmp_path):
-    """-C FILE created during a solve (a list without brightness, which runs to its 30 s
-    budget unsolved) stops it within a second or two, as Siril's cancel button does."""
-    plain_xylist(tmp_path / "IMG.xyls")
+    """-C FILE created during a solve (points at random, which run to the 30 s budget
+    unsolved) stops it within a second or two, as Siril's cancel button does."""
+    random_xylist(tmp_path / "IMG.xyls")
     cmd = [sys.executable, "-m", "starnav.dropin.solve_field", "-C", "stop", "-p", "-O",
            "-l", "30", "IMG.xyls"]  # fmt: skip
     proc = subprocess.Popen(cmd, cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE,

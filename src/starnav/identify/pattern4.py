@@ -219,7 +219,31 @@ def _field_patterns(
         top[field[keep], pos[keep]] = members[keep]
         sets.append(np.sort(top, axis=1))
     # neighbouring fields of an oversampled lattice mostly hold the same stars
-    top = _unique(np.concatenate(sets))
+    return _distinct_patterns(_unique(np.concatenate(sets)), stars_per_field, n_cat)
+
+
+def _local_patterns(
+    database: PairDatabase, group: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The distinct 4-subsets of every catalog star's neighbourhood: the star and its
+    ``group - 1`` nearest (``_field_patterns``' return, a neighbourhood as a field). They
+    do not depend on the brightness order of the stars within reach, nor on the field of
+    view: what a list of points in no brightness order is matched against
+    (``starnav.pipeline.unordered``)."""
+    n_cat = len(database.catalog)
+    k = min(group, n_cat)
+    _, rows = database.tree.query(database.catalog.vectors, k=k)
+    top = np.full((n_cat, group), n_cat, dtype=np.int64)
+    top[:, :k] = np.asarray(rows, dtype=np.int64).reshape(n_cat, k)
+    return _distinct_patterns(_unique(np.sort(top, axis=1)), group, n_cat)
+
+
+def _distinct_patterns(
+    top: np.ndarray, stars_per_field: int, n_cat: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``_field_patterns``' answer for the fields ``top`` (f, stars_per_field: catalog rows
+    ascending, padded with ``n_cat``): the fields some pattern points to, and for each
+    distinct 4-subset one field holding it and its subset number."""
     combos = breadth_first_combinations(stars_per_field)
     if len(top) * len(combos) > _MAX_PATTERN_ROWS:
         raise CatalogError(
@@ -310,12 +334,15 @@ def build_pattern_table(
     bins: int = 50,
     use_cache: bool = True,
     region: tuple[np.ndarray, float] | None = None,
+    local: bool = False,
 ) -> PatternTable:
     """The pattern table for ``database``'s catalog and field (its ``max_angle_rad`` is the
     field diagonal). Lattice fields have a radius of ``field_radius_fraction`` times half the
     diagonal (0.85: a little larger than the circle inscribed in a square field, 0.71).
     ``region``: (unit vector, radius in rad): only the lattice fields centred within it (a
-    table of the sky near a position hint; never cached).
+    table of the sky near a position hint; never cached). ``local``: the patterns of each
+    star's neighbourhood of ``stars_per_field`` (``_local_patterns``) instead of the lattice
+    fields' brightest (``field_radius_fraction``, ``oversampling`` and ``region`` unused).
 
     Kept in memory per (catalog, angle, options) and cached on disk next to the pair
     databases.
@@ -323,7 +350,11 @@ def build_pattern_table(
     use_cache = use_cache and region is None
     catalog = database.catalog
     options = (stars_per_field, round(field_radius_fraction, 6), round(oversampling, 6), bins)
+    if local:  # (the lattice tables' keys as they were)
+        options = ("local", stars_per_field, bins)
     mem_key = (catalog.fingerprint, round(float(np.degrees(database.max_angle_rad)), 3), options)
+    if local:  # a neighbourhood does not depend on the field
+        mem_key = (catalog.fingerprint, options)
     if use_cache and mem_key in _TABLES:
         return _TABLES[mem_key]
     key = hashlib.sha1(f"{_FORMAT_VERSION}|{mem_key}".encode()).hexdigest()[:20]
@@ -346,7 +377,12 @@ def build_pattern_table(
         return table
     t0 = time.perf_counter()
     radius = 0.5 * field_radius_fraction * database.max_angle_rad
-    fields, field, subset = _field_patterns(database, stars_per_field, radius, oversampling, region)
+    if local:
+        fields, field, subset = _local_patterns(database, stars_per_field)
+    else:
+        fields, field, subset = _field_patterns(
+            database, stars_per_field, radius, oversampling, region
+        )
     keys, codes, largest = _pattern_keys(catalog.vectors, fields, field, subset, bins)
     step = float(largest.max()) / _EDGE_STEPS if len(largest) and largest.max() > 0 else 1.0
     steps = np.rint(largest / step).astype(np.uint16)

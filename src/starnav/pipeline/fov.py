@@ -37,7 +37,7 @@ from starnav.identify.database import catalog_only
 from starnav.identify.pattern4 import FIELD_RADIUS_FRACTION, build_pattern_table
 from starnav.pipeline.conclude import elapsed_ms
 from starnav.pipeline.deep import DEEP_CHANCE, DEEP_MAG_LIMIT, MATCH_SIGMAS
-from starnav.pipeline.fov_search import BAND_FACTOR, Band, search_fov
+from starnav.pipeline.fov_search import BAND_FACTOR, Band, FovMatch, search_fov
 from starnav.pipeline.options import SolveOptions
 from starnav.pipeline.solver import Candidate, Solver, SolveSettings, first_use, fit_first
 from starnav.results import SolveResult
@@ -493,7 +493,7 @@ def solve_unknown_field(
     if options.scans_focal:
         starts = _scan_plan(base, camera, (lo, hi), options, image_circle)
         return _scan(stars, starts, options, settings, budget_s)
-    near = _near(position_hint_deg, options.position_radius_deg)
+    near = hint_cone(position_hint_deg, options.position_radius_deg)
     ranges = [(lo, hi)]
     if options.fov_deg is None and camera is None:
         # the narrowest range reaches the image's own limit (a portrait image's is narrower)
@@ -575,7 +575,9 @@ def _searched(results: list[SolveResult], ranges: list[tuple[float, float]]) -> 
     return replace(last, reason=reason, time_ms=ms, hypotheses=hypotheses)
 
 
-def _near(position_hint_deg, radius_deg: float):
+def hint_cone(
+    position_hint_deg: tuple[float, float] | None, radius_deg: float
+) -> tuple[np.ndarray, float] | None:
     """(unit vector, radius in rad) of a position hint (RA, Dec in degrees), or None."""
     if position_hint_deg is None:
         return None
@@ -897,7 +899,7 @@ def _search_and_fit(
             whole = deadline or Deadline.after(SEARCH_BUDGET_S)
             share = replace(whole, budget_s=HINT_BUDGET_SHARE * whole.budget_s)
         result = fit_first(
-            _candidates(
+            search_candidates(
                 search_fov(
                     xy_sorted[: MatchSettings.max_screen_stars],
                     bands,
@@ -930,7 +932,9 @@ def _search_and_fit(
     return result
 
 
-def _candidates(found_matches, order, base: Camera) -> Iterator[Candidate]:
+def search_candidates(
+    found_matches: Iterator[FovMatch], order: np.ndarray, base: Camera
+) -> Iterator[Candidate]:
     """The FOV search's matches as the fit's candidates (their stars' rows back in the
     list's order, the camera at the focal length each was found at)."""
     for found in found_matches:

@@ -52,6 +52,7 @@ MIN_PATTERN_TOLS = 10.0  # a pattern's longest edge spans at least this many pai
 _FIRST_LOOKUP = 16  # observed patterns of a band's first look-up when there is a deadline
 _FOCAL_STEPS = 3  # Gauss-Newton steps of a pattern's focal length
 _FIT_SLICE = 50_000  # pairings whose focal lengths are fitted at once
+_LOCAL_BATCH = 128  # observed patterns given (``search_fov``'s ``patterns``) looked up at once
 
 
 @dataclass(frozen=True, eq=False)
@@ -177,6 +178,9 @@ def search_fov(
     deadline: Deadline | None = None,
     near: tuple[np.ndarray, float] | None = None,
     point_mag: np.ndarray | None = None,
+    patterns: np.ndarray | None = None,
+    lookup_sigma_px: float | None = None,
+    screen: int | None = None,
 ) -> Iterator[FovMatch]:
     """Identify the stars at ``xy`` (n, 2, px, distortion removed, brightest first) with the
     focal length unknown within ``focal_range_px`` (px), searching ``bands``. Yields every
@@ -186,7 +190,11 @@ def search_fov(
     look-up and after each hypothesis). ``near``: (unit vector, radius in rad): only catalog
     patterns whose first star lies within the radius plus the band's half diagonal of the
     vector (a position hint) are hypotheses. ``sigma_px``: px, None if unknown; ``point_mag``:
-    the rows' magnitudes (they are in brightness order), None: not known."""
+    the rows' magnitudes (they are in brightness order), None: not known. ``patterns``: the
+    observed patterns to try instead of those of the brightest ``pattern_stars`` (``_observed``;
+    ``pipeline.unordered``); ``lookup_sigma_px``: the centroid sigma (px) of the look-up's
+    tolerances when not ``sigma_px`` (the verification's); ``screen``: a hypothesis is
+    verified on the first this many rows and its own (None: all; the fit takes in the rest)."""
     n = len(xy)
     if n < 4:
         yield FovMatch(None, "fewer than 4 stars", 0, float("nan"), None)
@@ -197,9 +205,8 @@ def search_fov(
     if not plans:
         yield FovMatch(None, "the FOV range holds no field of view", 0, float("nan"), None)
         return
-    stars = min(n, pattern_stars)
-    combos = breadth_first_combinations(stars)
-    ends = [math.comb(m, 4) for m in range(5, stars, 2)] + [len(combos)]
+    combos, ends = _observed(min(n, pattern_stars), patterns)
+    lookup_sigma = sigma_px if lookup_sigma_px is None else lookup_sigma_px
     tally = Tally()
     tester: HypothesisTester | None = None
     at_focal = functools.partial(_settings, sigma_px, max_false_match_probability, parity,
@@ -209,7 +216,7 @@ def search_fov(
     for end in ends:
         if end <= start:
             continue
-        rows = _informative(combos[start:end], xy, sigma_px)
+        rows = _informative(combos[start:end], xy, lookup_sigma)
         start = end
         for band, cells in plans:
             if expired(deadline):
@@ -217,7 +224,7 @@ def search_fov(
                 yield FovMatch(None, deadline.reason(tried), tally.hypotheses, math.nan, None)
                 return
             obs_rows, cat_rows, parities, f_fit = _band_hypotheses(
-                xy, rows, band, cells, sigma_px, parity, focal_range_px, (cx, cy), deadline
+                xy, rows, band, cells, lookup_sigma, parity, focal_range_px, (cx, cy), deadline
             )
             if near is not None:
                 keep = _near(band, cat_rows, near)
@@ -231,14 +238,9 @@ def search_fov(
             for h in range(len(f_fit)):
                 f = float(f_fit[h])
                 # each focal length its own bearings and tolerances, one tally for all
-                tester = HypothesisTester(
-                    pinhole_bearings(xy, cx, cy, f),
-                    band.database,
-                    at_focal(f),
-                    tally,
-                    work=work[id(band)],  # no order: the rows are brightest first
-                )
-                outcome = tester.test(obs_rows[h], cat_rows[h], int(parities[h]))
+                tester, outcome = _test(xy, (obs_rows[h], cat_rows[h], int(parities[h])), f,
+                                        band, at_focal(f), tally, work[id(band)], (cx, cy),
+                                        screen)  # fmt: skip
                 if outcome is not None:
                     yield FovMatch(
                         outcome.identification, outcome.reason, tally.hypotheses, f, band
@@ -258,6 +260,51 @@ def search_fov(
         )
         return
     yield FovMatch(None, tester.outcome().reason, tally.hypotheses, float("nan"), None)
+
+
+def _observed(stars: int, patterns: np.ndarray | None) -> tuple[np.ndarray, list[int]]:
+    """The observed patterns a search tries (rows of its points) and where its batches end:
+    the 4-subsets of the first ``stars`` breadth first, a batch ending where a new star
+    joins (C(m, 4) for m = 5, 7, 9, ...: most fields are identified by the first few), or the
+    ``patterns`` given, in batches of ``_LOCAL_BATCH``."""
+    if patterns is None:
+        combos = breadth_first_combinations(stars)
+        return combos, [math.comb(m, 4) for m in range(5, stars, 2)] + [len(combos)]
+    combos = np.asarray(patterns, dtype=np.intp).reshape(-1, 4)
+    return combos, [*range(_LOCAL_BATCH, len(combos), _LOCAL_BATCH), len(combos)]
+
+
+def _test(xy, hypothesis, focal_px, band, settings, tally, work, principal, screen):
+    """One ``hypothesis`` (rows of ``xy``, catalog rows, parity) verified with the bearings of
+    ``focal_px`` (on the ``screen`` rows and its own, when given: ``_screened``): the tester
+    and its outcome, the identification's rows those of ``xy``."""
+    own, cat_rows, parity = hypothesis
+    verified, points = None, xy
+    if screen is not None:
+        verified, own = _screened(screen, own, len(xy))
+        points = xy[verified]
+    tester = HypothesisTester(
+        pinhole_bearings(points, *principal, focal_px),
+        band.database,
+        settings,
+        tally,
+        work=work,  # no order: the rows are brightest first
+    )
+    outcome = tester.test(own, cat_rows, parity)
+    if outcome is not None and verified is not None and outcome.identification is not None:
+        found = outcome.identification
+        found = replace(found, obs_index=verified[found.obs_index])
+        outcome = replace(outcome, identification=found)
+    return tester, outcome
+
+
+def _screened(screen: int, own: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """The rows of ``n`` points a hypothesis is verified on: the first ``screen`` and the
+    hypothesis's ``own`` rows, and where those are among them."""
+    first = np.arange(min(screen, n))
+    extra = np.unique(own[own >= screen])
+    rows = np.concatenate([first, extra])
+    return rows, np.where(own < screen, own, screen + np.searchsorted(extra, own))
 
 
 def _informative(rows: np.ndarray, xy: np.ndarray, sigma_px: float | None) -> np.ndarray:

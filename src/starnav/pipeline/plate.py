@@ -39,8 +39,9 @@ from starnav.pipeline.image import (
 )
 from starnav.pipeline.options import DEFAULT_FOV_RANGE_DEG, DEFAULT_PATTERN_STARS, SolveOptions
 from starnav.pipeline.stars import solve_stars
-from starnav.results import Solution
-from starnav.runtime.budget import Deadline
+from starnav.pipeline.unordered import uniform_order
+from starnav.results import Solution, SolveResult
+from starnav.runtime.budget import Deadline, check_budget, default_budget_s
 
 SCALE_UNITS = ("degwidth", "arcminwidth", "arcsecperpix", "focalmm")
 FULL_FRAME_WIDTH_MM = 36.0  # "focalmm" is the focal length of a 35 mm camera's 36 mm width
@@ -173,15 +174,20 @@ BRIGHTNESS_COLUMNS = (("FLUX", False), ("FLUX_AUTO", False), ("FLUX_ISO", False)
 # a list whose consecutive rows step the same way in y (or x) this often was written in
 # detection order (a scan of the image), not by brightness
 DETECTION_ORDER_FRACTION = 0.9
+# a list with no brightness column in no detection order is solved brightest first for this
+# share of the time budget, then without brightness (``_solve_list``)
+GIVEN_ORDER_SHARE = 0.3
+UNRANKED_WHY = {False: "the list is in detection order with no brightness column",
+                True: "the list has no brightness column"}  # fmt: skip
 
 
 @dataclass(frozen=True)
 class XYList:
     """A source list: FITS pixel coordinates (1-based) of stars in an image ``width`` x
     ``height`` px (astrometry.net's xylist). ``ordered``: whether the rows are brightest first
-    (sorted by a brightness column, or given so); when False the solve weighs no brightness
-    and takes the points spread over the image (``uniform_order``). ``sorted_by``: the column
-    the rows were sorted by (None: as given)."""
+    (sorted by a brightness column, or given so; with no column that is not known); when
+    False (detection order) the solve weighs no brightness (``pipeline.unordered``).
+    ``sorted_by``: the column the rows were sorted by (None: as given; ``_solve_list``)."""
 
     x: np.ndarray
     y: np.ndarray
@@ -260,23 +266,6 @@ def in_detection_order(x: np.ndarray, y: np.ndarray) -> bool:
         if max((steps >= 0).mean(), (steps <= 0).mean()) >= DETECTION_ORDER_FRACTION:
             return True
     return False
-
-
-def uniform_order(xy: np.ndarray, width: float, height: float, boxes: int = 10) -> np.ndarray:
-    """The rows of a list whose order says nothing of brightness, spread over the image: about
-    ``boxes`` cells (astrometry.net's ``--uniformize``), their points taken in turn, one
-    from each cell, in the list's order within a cell, so the first points solved cover
-    the image rather than a strip of it."""
-    nx = max(1, round(math.sqrt(boxes * width / height)))
-    ny = max(1, round(boxes / nx))
-    col = np.clip((xy[:, 0] / width * nx).astype(int), 0, nx - 1)
-    row = np.clip((xy[:, 1] / height * ny).astype(int), 0, ny - 1)
-    cell = row * nx + col
-    turn = np.empty(len(xy), dtype=np.int64)
-    for c in np.unique(cell):
-        members = np.flatnonzero(cell == c)
-        turn[members] = np.arange(len(members))
-    return np.lexsort((cell, turn))
 
 
 def read_xylist(
@@ -478,21 +467,14 @@ def _solve_plate(source, pixels, hints, time_budget_s, clock=(None, None)) -> Pl
         if hints.ra_deg is not None:
             position = (float(hints.ra_deg), float(hints.dec_deg))
         xy = source.xy[source.solve_order()]  # the result's rows are these
-        res = solve_stars(
-            xy,
-            SolveOptions(fov_exact=False, **options),
-            width=source.width,
-            height=source.height,
-            position_hint_deg=position,
-            images=True,
-        )
+        res = _solve_list(source, xy, options, position)
         sol = res.solution
         cam = None if sol is None else sol.camera
         reason = res.reason
-        if sol is None and not source.ordered:
+        if sol is None and source.sorted_by is None:
             reason += (
-                " (the list is in detection order with no brightness column: solved "
-                "without brightness; name its flux or magnitude column to sort it)"
+                f" ({UNRANKED_WHY[source.ordered]}: solved without brightness, by the "
+                "patterns of neighbouring points; name its flux or magnitude column to sort it)"
             )
         return _result(sol, cam, reason, source.width, source.height, res.time_ms,
                        hints.crpix_fits, xy=xy, catalog=res.catalog)  # fmt: skip
@@ -507,6 +489,30 @@ def _solve_plate(source, pixels, hints, time_budget_s, clock=(None, None)) -> Pl
     return _result(res.solution, res.camera, res.reason, width, height, res.total_ms,
                    hints.crpix_fits, pixels=pixels, image=res, xy=res.detections.xy,
                    jpeglike=not is_fits(path), catalog=res.catalog)  # fmt: skip
+
+
+def _solve_list(source: XYList, xy: np.ndarray, options: dict, position) -> SolveResult:
+    """A source list's solve: brightest first when sorted by a brightness column, without
+    brightness (``solve_stars(ranked=False)``: ``pipeline.unordered``) when in detection
+    order; a list with no brightness column in another order (brightest first, or shuffled:
+    they cannot be told apart) is solved brightest first for ``GIVEN_ORDER_SHARE`` of the
+    time budget, then without brightness for the rest."""
+
+    def solve(ranked: bool, budget_s: float | None) -> SolveResult:
+        opts = SolveOptions(fov_exact=False, **{**options, "time_budget_s": budget_s})
+        return solve_stars(xy, opts, width=source.width, height=source.height,
+                           position_hint_deg=position, images=True, ranked=ranked)  # fmt: skip
+
+    budget_s = options.get("time_budget_s")
+    if source.sorted_by is not None or not source.ordered:
+        return solve(source.ordered, budget_s)
+    total_s = check_budget(budget_s, default_budget_s(known=False, scan=False))
+    first = solve(True, GIVEN_ORDER_SHARE * total_s)
+    left_s = total_s - first.time_ms / 1e3
+    if first.solution is not None or left_s <= 0:
+        return first
+    second = solve(False, left_s)
+    return replace(second, time_ms=first.time_ms + second.time_ms)
 
 
 def _result(sol, camera, reason, width, height, time_ms, crpix_fits, **kw) -> PlateResult:

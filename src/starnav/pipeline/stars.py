@@ -19,6 +19,7 @@ from starnav.identify import DEFAULT_ALGORITHM
 from starnav.pipeline.fov import known_field_depth, solve_unknown_field
 from starnav.pipeline.options import SolveOptions
 from starnav.pipeline.solver import Solver, SolveSettings, check_prior
+from starnav.pipeline.unordered import solve_unordered
 from starnav.results import Solution, SolveResult
 from starnav.runtime.budget import Deadline, check_budget, default_budget_s
 from starnav.runtime.caches import process_cache
@@ -132,6 +133,7 @@ def solve_stars(
     position_hint_deg: tuple[float, float] | None = None,
     images: bool = False,
     image_circle: ImageCircle | None = None,
+    ranked: bool = True,
 ) -> SolveResult:
     """Solve one star list (``xy`` (n, 2) px with ``brightness``, larger is brighter, and
     ``labels``, or a ``StarList``) in a ``width`` x ``height`` px image with ``options``.
@@ -141,7 +143,9 @@ def solve_stars(
     image (its given field is then approximate unless ``options.fov_exact``); ``image_circle``:
     a circular fisheye's image circle (``detect.circle``), where a focal scan starts. Options the
     FOV search cannot take (another algorithm, a magnitude limit, a prior without a field)
-    are refused, not ignored."""
+    are refused, not ignored. ``ranked``: whether the rows are brightest first when no
+    ``brightness`` is given; False (a source list in no brightness order): a searched field
+    is identified by the patterns of neighbouring points (``pipeline.unordered``)."""
     if isinstance(xy, StarList):
         xy, brightness, labels = xy.xy, xy.brightness, xy.labels
     R_prior = check_prior(prior)
@@ -159,6 +163,10 @@ def solve_stars(
             deadline=Deadline.after(budget_s),
         )
     check_searched(options, prior=R_prior is not None)
+    if not ranked and brightness is None and R_prior is None and not options.scans_focal:
+        return solve_unordered(
+            xy, options, width=width, height=height, position_hint_deg=position_hint_deg
+        )
     return solve_unknown_field(
         xy,
         options,
