@@ -494,12 +494,8 @@ def solve_unknown_field(
         starts = _scan_plan(base, camera, (lo, hi), options, image_circle)
         return _scan(stars, starts, options, settings, budget_s)
     near = hint_cone(position_hint_deg, options.position_radius_deg)
-    ranges = [(lo, hi)]
-    if options.fov_deg is None and camera is None:
-        # the narrowest range reaches the image's own limit (a portrait image's is narrower)
-        floor, stated = fov_limits_deg(lens, shape)[0], model_class(lens).fov_limits_deg[0]
-        extended = [(floor if a == stated else a, b) for a, b in options.searched_ranges_deg[1:]]
-        ranges += [r for r in extended if r != (lo, hi)]
+    known = options.fov_deg is not None or camera is not None
+    ranges = [(lo, hi)] if known else _ranges(options, (lo, hi), shape)
     results, left_s = [], budget_s
     for k, (a, b) in enumerate(ranges):
         # the budget counts once the range's tables are loaded (built on first use); the
@@ -534,6 +530,16 @@ def solve_unknown_field(
     if result.solution is None and near is not None and is_embedded(catalog):
         result = replace(result, reason=result.reason + _sparse_near(near, base, lo, hi))
     return result
+
+
+def _ranges(options: SolveOptions, first: tuple[float, float], shape) -> list[tuple[float, float]]:
+    """The horizontal FOV ranges (degrees) searched in turn for a field not given: ``first``,
+    then the lens model's extended ones, the narrowest reaching the image's own limit
+    (``fov_limits_deg`` of its ``shape``: a portrait image's is lower)."""
+    floor = fov_limits_deg(options.lens_model, shape)[0]
+    stated = options.lens_class.fov_limits_deg[0]
+    extended = [(floor if a == stated else a, b) for a, b in options.searched_ranges_deg[1:]]
+    return [first] + [r for r in extended if r != first]
 
 
 def _sparse_near(near: tuple[np.ndarray, float], base: Camera, lo: float, hi: float) -> str:

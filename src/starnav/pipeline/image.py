@@ -131,15 +131,13 @@ def solve_image(
     detections outside the image circle found in the image (``starnav.detect.circle``) are
     not made: the dark frame around an all-sky camera's disc often holds burned-in text.
     ``hints``: what the file's header says (``starnav.detect.header.fits_hints``; read from
-    a FITS file when None, none for an array): its FOV is searched (±5 %) when neither
-    ``fov_deg``, ``camera`` nor another range is given and it is within the pinhole's 1-100°,
-    its epoch used when ``epoch_year`` is not (for the embedded Hipparcos: a Gaia, CSV or
-    FITS catalog is used at its own epoch), its position searched first; a solve that
-    fails with the hinted FOV is tried again without it. ``position_hint_deg``: (RA, Dec)
-    of the boresight, roughly (wins over the header's). ``prior``: the previous frame's
-    attitude (``R_cam_from_icrs``) of a sequence, with its fitted ``camera``: tracking. The
-    time budget is the solve's (``starnav.runtime.budget``; ``budget_from``: ``_budget_left``).
-    """
+    a FITS file when None, none for an array): its FOV searched (±5 %) when no ``fov_deg``,
+    ``camera`` or other range is given and it is within the pinhole's limits, its epoch used
+    when ``epoch_year`` is not (for the embedded Hipparcos: a Gaia, CSV or FITS catalog is
+    used at its own epoch), its position searched first; a solve that fails with the hinted
+    FOV is tried again without it. ``position_hint_deg``: the boresight's (RA, Dec), roughly
+    (wins over the header's). ``prior``: the previous frame's ``R_cam_from_icrs``, with its
+    fitted ``camera``: tracking. The time budget is the solve's (``runtime.budget``)."""
     options = SolveOptions.make(options, **option_fields)
     camera = options.camera
     search_range(
