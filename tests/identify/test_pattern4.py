@@ -134,6 +134,7 @@ def test_table_is_cached_in_memory_and_on_disk(database, table, monkeypatch):
     assert again.from_cache and again is not table
     for name in ("keys", "codes", "fields", "largest_edge_steps"):
         assert np.array_equal(getattr(again, name), getattr(table, name))
+        assert not getattr(again, name).flags.owndata  # memory-mapped, not read whole
     assert again.edge_step_rad == table.edge_step_rad
 
 

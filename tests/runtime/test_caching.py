@@ -3,6 +3,7 @@ written only within its limit."""
 
 from __future__ import annotations
 
+import mmap
 import re
 
 import numpy as np
@@ -81,3 +82,56 @@ def test_a_table_is_written_only_within_the_cache_limit(monkeypatch, tmp_path):
     assert save_cached(tmp_path / "cache" / "c.npz", x=np.zeros(1)) is None
     monkeypatch.delenv(caching.CACHE_LIMIT_ENV)
     assert save_cached(tmp_path / "cache" / "b.npz", x=np.zeros(80_000)) is not None
+
+
+def _memory_mapped(array: np.ndarray) -> bool:
+    base = array
+    while isinstance(base, np.ndarray):
+        base = base.base
+    return isinstance(base, mmap.mmap)
+
+
+def test_a_table_is_read_back_memory_mapped_as_written(tmp_path):
+    """Each array comes back equal, aligned, writable (copy-on-write: the file keeps what was
+    written) and memory-mapped; np.load reads the file as well."""
+    rng = np.random.default_rng(1)
+    arrays = {
+        "keys": np.sort(rng.integers(0, 2**40, 5001)),
+        "codes": rng.integers(0, 2**32, 5001).astype(np.uint32),
+        "fields": rng.integers(0, 60000, (333, 7)).astype(np.uint16),
+        "fortran": np.asfortranarray(rng.normal(size=(9, 5))),
+        "none": np.empty(0, dtype=np.int32),
+        "edge_step_rad": 1.5e-6,
+        "bins": 50,
+    }
+    path = caching.save_cached(tmp_path / "t.npz", **arrays)
+    read = caching.load_cached(path)
+    assert read.keys() == arrays.keys()
+    for name, value in arrays.items():
+        array = read[name]
+        assert np.array_equal(array, value) and array.dtype == np.asarray(value).dtype
+        assert _memory_mapped(array) and array.flags.aligned and array.flags.writeable
+    assert read["fortran"].flags.f_contiguous
+    read["codes"][:] = 0
+    assert np.array_equal(caching.load_cached(path)["codes"], arrays["codes"])
+    with np.load(path) as data:
+        assert all(np.array_equal(data[name], value) for name, value in arrays.items())
+
+
+def test_old_savez_tables_are_read_and_damaged_ones_refused(tmp_path):
+    """A file np.savez wrote (the format before) is read, and written again aligned; a cut,
+    overwritten, emptied or compressed one is None (its table is then rebuilt)."""
+    x = np.arange(100_000, dtype=np.int64)
+    np.savez(tmp_path / "old.npz", x=x, bins=50)
+    old = caching.load_cached(tmp_path / "old.npz")
+    assert np.array_equal(old["x"], x) and old["bins"] == 50 and old["x"].flags.aligned
+    again = caching.load_cached(tmp_path / "old.npz")  # written again aligned: mapped now
+    assert np.array_equal(again["x"], x) and _memory_mapped(again["x"])
+    whole = caching.save_cached(tmp_path / "t.npz", x=x).read_bytes()
+    bad = tmp_path / "bad.npz"
+    for damaged in (whole[: len(whole) // 2], whole[:-30], b"not a numpy file", b""):
+        bad.write_bytes(damaged)
+        assert caching.load_cached(bad) is None
+    np.savez_compressed(bad, x=x)
+    assert caching.load_cached(bad) is None
+    assert caching.load_cached(tmp_path / "missing.npz") is None

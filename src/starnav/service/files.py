@@ -15,8 +15,9 @@
 (or a local Dask cluster) start: they inherit it. The tables and the machine code already
 built in the cache starnav uses outside the service (``$STARNAV_CACHE_DIR`` or
 ``~/.cache/starnav``, ``$NUMBA_CACHE_DIR``) are linked into ``cache/`` and only read: a
-table built anew is written in ``cache/`` (replacing the link, never its target), and only
-while the tables there take less than the cache limit (``STARNAV_CACHE_LIMIT_MB``,
+table built anew (or one of the format before, written again aligned: ``load_cached``) is
+written in ``cache/`` (replacing the link, never its target), and only while the tables there
+take less than the cache limit (``STARNAV_CACHE_LIMIT_MB``,
 ``starnav.runtime.caching.save_cached``); past it a worker keeps a new table in its memory.
 """
 
