@@ -12,7 +12,7 @@ import contextlib
 import gc
 import os
 import sys
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator, Sequence
 from typing import NoReturn
 
 EXIT_OK, EXIT_NOT_SOLVED, EXIT_BAD_INPUT = 0, 1, 2
@@ -63,3 +63,15 @@ def exit_now(code: int) -> NoReturn:
         except (OSError, ValueError):  # a closed pipe: nothing more can be said
             pass
     os._exit(code)
+
+
+def run_console(run: Callable[[Sequence[str] | None], int], argv: Sequence[str] | None) -> int:
+    """A drop-in's ``main``: ``run(argv)`` without the cyclic garbage collector
+    (``collector_paused``); its exit code, or for the console script (``argv`` None) the end
+    of its process at once (``exit_now``)."""
+    freeze_at_exit()
+    with collector_paused():
+        code = run(argv)
+    if argv is None:
+        exit_now(code)
+    return code

@@ -33,13 +33,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from starnav.cli.parser import (
-    EXIT_BAD_INPUT,
-    Parser,
-    collector_paused,
-    exit_now,
-    freeze_at_exit,
-)
+from starnav.cli.parser import EXIT_BAD_INPUT, Parser, run_console
 from starnav.errors import CatalogError, ImageError, StarnavError
 
 if TYPE_CHECKING:  # numpy, astropy and the solver are imported when a file is solved: -h needs none
@@ -159,15 +153,9 @@ def build_parser() -> Parser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run ASTAP's command line without the cyclic garbage collector
-    (``starnav.cli.parser.collector_paused``); ASTAP's exit code (the console script's
-    process ends at once: ``exit_now``)."""
-    freeze_at_exit()
-    with collector_paused():
-        code = _main(argv)
-    if argv is None:  # the console script: its process ends here (``exit_now``)
-        exit_now(code)
-    return code
+    """Run ASTAP's command line (``starnav.cli.parser.run_console``: no
+    garbage collections; the console script's process ends at once); its exit code."""
+    return run_console(_main, argv)
 
 
 def _main(argv: Sequence[str] | None) -> int:

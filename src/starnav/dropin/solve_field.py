@@ -32,13 +32,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from starnav.cli.parser import (
-    EXIT_BAD_INPUT,
-    Parser,
-    collector_paused,
-    exit_now,
-    freeze_at_exit,
-)
+from starnav.cli.parser import EXIT_BAD_INPUT, Parser, run_console
 from starnav.errors import StarnavError
 
 if TYPE_CHECKING:  # numpy and the solver are imported when a file is solved: --help needs neither
@@ -268,15 +262,9 @@ class _Ignored(argparse.Action):
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run solve-field's command line without the cyclic garbage collector
-    (``starnav.cli.parser.collector_paused``); the exit status (the console script's
-    process ends at once: ``exit_now``)."""
-    freeze_at_exit()
-    with collector_paused():
-        code = _main(argv)
-    if argv is None:  # the console script: its process ends here (``exit_now``)
-        exit_now(code)
-    return code
+    """Run solve-field's command line (``starnav.cli.parser.run_console``: no
+    garbage collections; the console script's process ends at once); its exit code."""
+    return run_console(_main, argv)
 
 
 def _main(argv: Sequence[str] | None) -> int:

@@ -495,7 +495,7 @@ def solve_unknown_field(
         return _scan(stars, starts, options, settings, budget_s)
     near = hint_cone(position_hint_deg, options.position_radius_deg)
     known = options.fov_deg is not None or camera is not None
-    ranges = [(lo, hi)] if known else _ranges(options, (lo, hi), shape)
+    ranges = [(lo, hi)] if known else searched_ranges(options, (lo, hi), shape)
     results, left_s = [], budget_s
     for k, (a, b) in enumerate(ranges):
         # the budget counts once the range's tables are loaded (built on first use); the
@@ -532,7 +532,9 @@ def solve_unknown_field(
     return result
 
 
-def _ranges(options: SolveOptions, first: tuple[float, float], shape) -> list[tuple[float, float]]:
+def searched_ranges(
+    options: SolveOptions, first: tuple[float, float], shape
+) -> list[tuple[float, float]]:
     """The horizontal FOV ranges (degrees) searched in turn for a field not given: ``first``,
     then the lens model's extended ones, the narrowest reaching the image's own limit
     (``fov_limits_deg`` of its ``shape``: a portrait image's is lower)."""
@@ -881,6 +883,54 @@ def _with_fitted_centre(solution, catalog: Catalog) -> CameraModel:
     return model(fit.x) if fit.success else camera
 
 
+def fit_searched(
+    xy: np.ndarray,
+    stars: StarList,
+    order: np.ndarray,
+    bands: list[Band],
+    base: Camera,
+    settings: SolveSettings,
+    fov_range: tuple[float, float],
+    deadline: Deadline | None,
+    near,
+    t0: float,
+    **search,
+) -> SolveResult:
+    """One FOV search (``search_fov``) of ``bands`` over a horizontal ``fov_range`` (degrees)
+    for the points ``xy`` (px, the pinhole's: the ``stars`` in ``order``), each identification
+    fitted (``fit_first``) until one is accepted or the ``deadline`` passes; ``near``: a
+    position hint's cone or None; ``search``: ``search_fov``'s other keywords."""
+    lo, hi = fov_range
+    return fit_first(
+        search_candidates(
+            search_fov(
+                xy,
+                bands,
+                width=base.width,
+                height=base.height,
+                cx=base.cx,
+                cy=base.cy,
+                sigma_px=settings.sigma_px,
+                focal_range_px=(
+                    focal_px_from_fov(hi, base.width),
+                    focal_px_from_fov(lo, base.width),
+                ),
+                parity=settings.parity,
+                max_false_match_probability=settings.max_false_match_probability,
+                deadline=deadline,
+                near=near,
+                **search,
+            ),
+            order,
+            base,
+        ),
+        stars,
+        settings,
+        bands[0].database.catalog,
+        t0=t0,
+    )
+
+
 def _search_and_fit(
     stars, base: Camera, bands, settings: SolveSettings, fov_range, pattern_stars, deadline, near
 ):
@@ -896,7 +946,6 @@ def _search_and_fit(
     if base.distorted:  # take the known distortion out: the search assumes a pinhole
         pinhole = Camera(base.width, base.height, base.focal_px, base.cx, base.cy)
         xy_sorted = pinhole.bearings_to_pixels(base.pixels_to_bearings(xy_sorted))
-    lo, hi = fov_range
     for where in [near, None] if near is not None else [None]:
         # the search near a position hint takes at most a share of the budget (of the
         # default one when there is none)
@@ -904,35 +953,10 @@ def _search_and_fit(
         if where is not None:
             whole = deadline or Deadline.after(SEARCH_BUDGET_S)
             share = replace(whole, budget_s=HINT_BUDGET_SHARE * whole.budget_s)
-        result = fit_first(
-            search_candidates(
-                search_fov(
-                    xy_sorted[: MatchSettings.max_screen_stars],
-                    bands,
-                    width=base.width,
-                    height=base.height,
-                    cx=base.cx,
-                    cy=base.cy,
-                    sigma_px=settings.sigma_px,
-                    focal_range_px=(
-                        focal_px_from_fov(hi, base.width),
-                        focal_px_from_fov(lo, base.width),
-                    ),
-                    parity=settings.parity,
-                    max_false_match_probability=settings.max_false_match_probability,
-                    pattern_stars=pattern_stars,
-                    deadline=share,
-                    point_mag=point_mag,
-                    near=where,
-                ),
-                order,
-                base,
-            ),
-            stars,
-            settings,
-            bands[0].database.catalog,
-            t0=t0,
-        )
+        result = fit_searched(
+            xy_sorted[: MatchSettings.max_screen_stars], stars, order, bands, base, settings,
+            fov_range, share, where, t0, pattern_stars=pattern_stars, point_mag=point_mag,
+        )  # fmt: skip
         if result.solution is not None or expired(deadline):
             break
     return result

@@ -31,15 +31,16 @@ from starnav.identify.pattern4 import build_pattern_table
 from starnav.pipeline.fov import (
     HINT_BUDGET_SHARE,
     band_source,
+    fit_searched,
     hint_cone,
     range_grid,
-    search_candidates,
     search_catalog,
     search_range,
+    searched_ranges,
 )
-from starnav.pipeline.fov_search import Band, search_fov
+from starnav.pipeline.fov_search import Band
 from starnav.pipeline.options import SolveOptions
-from starnav.pipeline.solver import SolveSettings, first_use, fit_first
+from starnav.pipeline.solver import SolveSettings, first_use
 from starnav.results import SolveResult
 from starnav.runtime.budget import Deadline, check_budget, default_budget_s, expired
 from starnav.runtime.caches import process_cache
@@ -171,9 +172,8 @@ def solve_unordered(
     )
     stars = check_star_list(xy, width=width, height=height)
     settings = SolveSettings.from_options(options, fit_focal=True)
-    ranges = [(lo, hi)]
-    if options.fov_deg is None and options.camera is None:
-        ranges += [r for r in options.searched_ranges_deg[1:] if r != (lo, hi)]
+    known = options.fov_deg is not None or options.camera is not None
+    ranges = [(lo, hi)] if known else searched_ranges(options, (lo, hi), (width, height))
     near = hint_cone(position_hint_deg, options.position_radius_deg)
     t0 = time.perf_counter()
     order = uniform_order(stars.xy, width, height)  # the first points verified: spread
@@ -189,37 +189,11 @@ def solve_unordered(
             if where is not None and deadline is not None:
                 share = replace(deadline, budget_s=HINT_BUDGET_SHARE * deadline.budget_s)
             with first_use("solve"):
-                result = fit_first(
-                    search_candidates(
-                        search_fov(
-                            xy_spread,
-                            bands,
-                            width=width,
-                            height=height,
-                            cx=base.cx,
-                            cy=base.cy,
-                            sigma_px=settings.sigma_px,
-                            focal_range_px=(
-                                focal_px_from_fov(b, width),
-                                focal_px_from_fov(a, width),
-                            ),
-                            parity=settings.parity,
-                            max_false_match_probability=settings.max_false_match_probability,
-                            max_hypotheses=MAX_HYPOTHESES,
-                            deadline=share,
-                            near=where,
-                            patterns=patterns,
-                            lookup_sigma_px=settings.sigma_px or LOOKUP_SIGMA_PX,
-                            screen=SCREEN_POINTS,
-                        ),
-                        order,
-                        base,
-                    ),
-                    stars,
-                    settings,
-                    bands[0].database.catalog,
-                    t0=t0,
-                )
+                result = fit_searched(
+                    xy_spread, stars, order, bands, base, settings, (a, b), share, where, t0,
+                    max_hypotheses=MAX_HYPOTHESES, patterns=patterns, screen=SCREEN_POINTS,
+                    lookup_sigma_px=settings.sigma_px or LOOKUP_SIGMA_PX,
+                )  # fmt: skip
             if result.solution is not None or expired(deadline):
                 return result
     return result
