@@ -105,8 +105,8 @@ if collector_on:  # the collector on, the process ended by the interpreter
     starnav.cli.parser.freeze_at_exit()
     report(dropin._main(sys.argv[1:]))
 else:  # as the console script runs it: main() reads sys.argv and ends the process
-    exit_now = dropin.exit_now
-    dropin.exit_now = lambda code: (report(code), exit_now(code))
+    exit_now = starnav.cli.parser.exit_now  # run_console's
+    starnav.cli.parser.exit_now = lambda code: (report(code), exit_now(code))
     sys.argv = ["starnav-solve-field", *sys.argv[1:]]
     dropin.main()
 """
