@@ -896,39 +896,49 @@ def fit_searched(
     t0: float,
     **search,
 ) -> SolveResult:
-    """One FOV search (``search_fov``) of ``bands`` over a horizontal ``fov_range`` (degrees)
+    """The FOV search (``search_fov``) of ``bands`` over a horizontal ``fov_range`` (degrees)
     for the points ``xy`` (px, the pinhole's: the ``stars`` in ``order``), each identification
-    fitted (``fit_first``) until one is accepted or the ``deadline`` passes; ``near``: a
-    position hint's cone or None; ``search``: ``search_fov``'s other keywords."""
+    fitted (``fit_first``) until one is accepted or the ``deadline`` passes; with a position
+    hint (``near``: its cone) the catalog near it is searched first, in at most
+    ``HINT_BUDGET_SHARE`` of the budget (of the default one when there is none), then the
+    whole sky. ``search``: ``search_fov``'s other keywords."""
     lo, hi = fov_range
-    return fit_first(
-        search_candidates(
-            search_fov(
-                xy,
-                bands,
-                width=base.width,
-                height=base.height,
-                cx=base.cx,
-                cy=base.cy,
-                sigma_px=settings.sigma_px,
-                focal_range_px=(
-                    focal_px_from_fov(hi, base.width),
-                    focal_px_from_fov(lo, base.width),
+    for where in [near, None] if near is not None else [None]:
+        share = deadline
+        if where is not None:
+            whole = deadline or Deadline.after(SEARCH_BUDGET_S)
+            share = replace(whole, budget_s=HINT_BUDGET_SHARE * whole.budget_s)
+        result = fit_first(
+            _candidates(
+                search_fov(
+                    xy,
+                    bands,
+                    width=base.width,
+                    height=base.height,
+                    cx=base.cx,
+                    cy=base.cy,
+                    sigma_px=settings.sigma_px,
+                    focal_range_px=(
+                        focal_px_from_fov(hi, base.width),
+                        focal_px_from_fov(lo, base.width),
+                    ),
+                    parity=settings.parity,
+                    max_false_match_probability=settings.max_false_match_probability,
+                    deadline=share,
+                    near=where,
+                    **search,
                 ),
-                parity=settings.parity,
-                max_false_match_probability=settings.max_false_match_probability,
-                deadline=deadline,
-                near=near,
-                **search,
+                order,
+                base,
             ),
-            order,
-            base,
-        ),
-        stars,
-        settings,
-        bands[0].database.catalog,
-        t0=t0,
-    )
+            stars,
+            settings,
+            bands[0].database.catalog,
+            t0=t0,
+        )
+        if result.solution is not None or expired(deadline):
+            break
+    return result
 
 
 def _search_and_fit(
@@ -946,23 +956,13 @@ def _search_and_fit(
     if base.distorted:  # take the known distortion out: the search assumes a pinhole
         pinhole = Camera(base.width, base.height, base.focal_px, base.cx, base.cy)
         xy_sorted = pinhole.bearings_to_pixels(base.pixels_to_bearings(xy_sorted))
-    for where in [near, None] if near is not None else [None]:
-        # the search near a position hint takes at most a share of the budget (of the
-        # default one when there is none)
-        share = deadline
-        if where is not None:
-            whole = deadline or Deadline.after(SEARCH_BUDGET_S)
-            share = replace(whole, budget_s=HINT_BUDGET_SHARE * whole.budget_s)
-        result = fit_searched(
-            xy_sorted[: MatchSettings.max_screen_stars], stars, order, bands, base, settings,
-            fov_range, share, where, t0, pattern_stars=pattern_stars, point_mag=point_mag,
-        )  # fmt: skip
-        if result.solution is not None or expired(deadline):
-            break
-    return result
+    return fit_searched(
+        xy_sorted[: MatchSettings.max_screen_stars], stars, order, bands, base, settings,
+        fov_range, deadline, near, t0, pattern_stars=pattern_stars, point_mag=point_mag,
+    )  # fmt: skip
 
 
-def search_candidates(
+def _candidates(
     found_matches: Iterator[FovMatch], order: np.ndarray, base: Camera
 ) -> Iterator[Candidate]:
     """The FOV search's matches as the fit's candidates (their stars' rows back in the

@@ -106,7 +106,7 @@ def fov_range_from_scale(
     if ends[0] <= DEFAULT_FOV_RANGE_DEG[0] and ends[1] >= DEFAULT_FOV_RANGE_DEG[1]:
         return DEFAULT_FOV_RANGE_DEG
     shape = None if height_px is None else (width_px, height_px)
-    lo, hi = fov_limits_deg("pinhole", shape) if shape else FOV_LIMITS_DEG
+    lo, hi = fov_limits_deg("pinhole", shape)
     clipped = (max(ends[0], lo), min(ends[1], hi))
     if clipped[0] <= clipped[1]:
         if clipped[0] == clipped[1]:  # one value: search around it, within the limits

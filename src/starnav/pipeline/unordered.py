@@ -19,7 +19,6 @@ from __future__ import annotations
 import itertools
 import math
 import time
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -29,7 +28,6 @@ from starnav.catalog import GAIA, Catalog, is_embedded, load_catalog
 from starnav.identify.database import catalog_only
 from starnav.identify.pattern4 import build_pattern_table
 from starnav.pipeline.fov import (
-    HINT_BUDGET_SHARE,
     band_source,
     fit_searched,
     hint_cone,
@@ -184,16 +182,12 @@ def solve_unordered(
         bands = local_bands(a, b, width, height, len(stars.xy), options.catalog,
                             options.epoch_year)  # fmt: skip
         deadline = deadline or Deadline.after(budget_s)  # once the first tables are loaded
-        for where in [near, None] if near is not None else [None]:
-            share = deadline  # near a position hint: a share of the budget (as ``fov``'s)
-            if where is not None and deadline is not None:
-                share = replace(deadline, budget_s=HINT_BUDGET_SHARE * deadline.budget_s)
-            with first_use("solve"):
-                result = fit_searched(
-                    xy_spread, stars, order, bands, base, settings, (a, b), share, where, t0,
-                    max_hypotheses=MAX_HYPOTHESES, patterns=patterns, screen=SCREEN_POINTS,
-                    lookup_sigma_px=settings.sigma_px or LOOKUP_SIGMA_PX,
-                )  # fmt: skip
-            if result.solution is not None or expired(deadline):
-                return result
+        with first_use("solve"):
+            result = fit_searched(
+                xy_spread, stars, order, bands, base, settings, (a, b), deadline, near, t0,
+                max_hypotheses=MAX_HYPOTHESES, patterns=patterns, screen=SCREEN_POINTS,
+                lookup_sigma_px=settings.sigma_px or LOOKUP_SIGMA_PX,
+            )  # fmt: skip
+        if result.solution is not None or expired(deadline):
+            return result
     return result
