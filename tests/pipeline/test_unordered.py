@@ -8,16 +8,20 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 
 from starnav.catalog import hipparcos_mags, load_catalog
+from starnav.errors import StarnavError
 from starnav.identify.database import catalog_only
 from starnav.identify.pattern4 import build_pattern_table
+from starnav.pipeline.options import SolveOptions
 from starnav.pipeline.unordered import (
     CATALOG_SHARE,
     MAG_STEP,
     density_mag_limit,
     image_sr,
     neighbour_patterns,
+    solve_unordered,
 )
 
 
@@ -57,3 +61,15 @@ def test_neighbour_patterns():
     far = np.linalg.norm(xy[rows[:, 1:]] - xy[rows[:, :1]], axis=2).max()
     assert far < 250.0  # neighbours, not points across the field
     assert len(neighbour_patterns(xy[:3], np.arange(3), 5)) == 0
+
+
+def test_a_portrait_list_takes_the_narrowest_field_of_its_shape():
+    """A 1080 x 1920 px list (a Seestar S50's frame, 0.71° across) is searched at its width,
+    as its image is (1° along the longer side); the same width on a landscape list is refused
+    in one line."""
+    xy = np.random.default_rng(3).uniform((0, 0), (1080, 1920), (40, 2))
+    options = SolveOptions(fov_deg=0.71, fov_exact=False, time_budget_s=1.0)
+    res = solve_unordered(xy, options, width=1080, height=1920)
+    assert res.solution is None and "fov_deg must be within" not in res.reason
+    with pytest.raises(StarnavError, match="1° along the image's longer side"):
+        solve_unordered(xy[:, ::-1], options, width=1920, height=1080)

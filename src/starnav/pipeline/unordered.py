@@ -162,7 +162,10 @@ def solve_unordered(
     if options.camera is not None:
         width, height = options.camera.width, options.camera.height
     height = width if height is None else height
-    lo, hi = search_range(options.fov_deg, options.search_range_deg, options.camera)
+    shape = (width, height)  # a portrait list's narrowest field is its height's, as an image's
+    lo, hi = search_range(
+        options.fov_deg, options.search_range_deg, options.camera, options.lens_model, shape
+    )
     base = Camera.from_fov(0.5 * (lo + hi), width, height)
     budget_s = check_budget(
         options.time_budget_s,
@@ -171,7 +174,7 @@ def solve_unordered(
     stars = check_star_list(xy, width=width, height=height)
     settings = SolveSettings.from_options(options, fit_focal=True)
     known = options.fov_deg is not None or options.camera is not None
-    ranges = [(lo, hi)] if known else searched_ranges(options, (lo, hi), (width, height))
+    ranges = [(lo, hi)] if known else searched_ranges(options, (lo, hi), shape)
     near = hint_cone(position_hint_deg, options.position_radius_deg)
     t0 = time.perf_counter()
     order = uniform_order(stars.xy, width, height)  # the first points verified: spread
