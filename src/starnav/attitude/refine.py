@@ -96,7 +96,7 @@ def refine_attitude(
 def refinement(f, camera: CameraModel) -> Refinement:
     """The ``Refinement`` of a kernel ``Fit`` of ``camera`` (``camera`` itself when the fit
     kept its parameters)."""
-    kept = np.array_equal(f.params, camera.params)
+    kept = bool((f.params == camera.params).all())  # the kernel's params have p0's length
     return Refinement(
         R_cam_from_icrs=f.R,
         camera=camera if kept else type(camera).from_params(camera.width, camera.height, f.params),

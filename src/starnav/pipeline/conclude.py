@@ -51,12 +51,16 @@ def conclude(
     fit_focal: bool,
     min_matched_fraction: float,
     fit_distortion: bool = False,
+    algorithm: str = "",
+    t0: float | None = None,
 ) -> tuple[Solution | None, str]:
     """The fitted solution of an identification, or None and the reason it is refused.
     ``database``: what it was identified on (its catalog's rows); ``camera``: the model the
     identification used; ``settings``: its tolerances; ``sigma_px``: the centroid sigma the
     outlier and rematch rules use; ``known_sigma_px``: the one told (None: not known), the
-    least the reported 1-sigmas are at (``attitude.kernels.at_least_sigma``)."""
+    least the reported 1-sigmas are at (``attitude.kernels.at_least_sigma``); ``algorithm``:
+    the identifier's name, and ``t0`` when the solve began (``time.perf_counter()``; None:
+    ``time_ms`` 0), for the solution's own fields."""
     k = kernels()
     xy = np.ascontiguousarray(stars.xy, dtype=np.float64)
     rank = stars.rank
@@ -99,21 +103,36 @@ def conclude(
         return None, too_few(len(done.obs), done.expected, min_matched_fraction)
     fit = refinement(done.fit, camera)
     solution = solution_of(
-        stars, done.obs, done.cat, database.catalog, fit, done.false_match_probability
+        stars,
+        done.obs,
+        done.cat,
+        database.catalog,
+        fit,
+        done.false_match_probability,
+        algorithm=algorithm,
+        t0=t0,
     )
     return solution, ""
 
 
 def solution_of(
-    stars: StarList, obs: np.ndarray, cat_rows: np.ndarray, cat: Catalog, fit, p_false: float
+    stars: StarList,
+    obs: np.ndarray,
+    cat_rows: np.ndarray,
+    cat: Catalog,
+    fit,
+    p_false: float,
+    *,
+    algorithm: str = "",
+    t0: float | None = None,
 ) -> Solution:
     """The ``Solution`` of matched ``obs`` rows of ``stars`` and ``cat_rows`` of ``cat`` with
-    the ``Refinement`` ``fit`` (its camera, attitude and residuals); ``time_ms`` is set by the
-    caller."""
+    the ``Refinement`` ``fit`` (its camera, attitude and residuals), found by ``algorithm``;
+    ``time_ms`` from ``t0`` (``time.perf_counter()``) to now, 0 when None."""
     catalog_id = np.full(len(stars.xy), -1, dtype=np.int64)
     residual_px = np.full(len(stars.xy), np.nan)
     catalog_id[obs] = cat.ids[cat_rows]
-    residual_px[obs] = np.sqrt(np.sum(fit.residuals_px**2, axis=1))
+    residual_px[obs] = np.hypot(fit.residuals_px[:, 0], fit.residuals_px[:, 1])
     table = StarTable(stars.labels, stars.xy, catalog_id, residual_px)
     R = fit.R_cam_from_icrs
     ra, dec, roll, par = radec_roll_from_attitude(R)
@@ -130,11 +149,11 @@ def solution_of(
         sigma_roll_arcsec=fit.sigma_roll_arcsec,
         sigma_focal_px=fit.sigma_focal_px,
         false_match_probability=float(p_false),
-        time_ms=0.0,
+        time_ms=0.0 if t0 is None else elapsed_ms(t0),
         R_cam_from_icrs=R,
         star_table=table,
         n_matched=len(obs),
-        algorithm="",
+        algorithm=algorithm,
         catalog=cat.name,
         camera_model=camera.model,
         camera=camera,

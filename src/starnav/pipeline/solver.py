@@ -259,10 +259,7 @@ class Solver:
             bearings = self.camera.pixels_to_bearings(stars.xy)
             order = stars.order
             t1 = time.perf_counter()
-            given = {"point_mag": stars.magnitudes}
-            if deadline is not None:
-                given["deadline"] = deadline
-            settings = replace(self.match_settings, **given)
+            settings = self.match_settings.replaced(point_mag=stars.magnitudes, deadline=deadline)
             outcome, algorithm = self._identify(bearings, order, prior, prior_sigma_deg, settings)
             t2 = time.perf_counter()
             stages = {"bearings": (t1 - t0) * 1e3, "identify": (t2 - t1) * 1e3}
@@ -404,6 +401,8 @@ def fit_identification(
         fit_focal=settings.fit_focal,
         fit_distortion=settings.fit_distortion,
         min_matched_fraction=settings.min_matched_fraction,
+        algorithm=algorithm,
+        t0=t0,
     )
     stages = {**stages, "fit": elapsed_ms(t_fit)}
     if solution is not None and settings.deep_catalog is not None:
@@ -412,7 +411,6 @@ def fit_identification(
             solution, stars, settings.deep_catalog, sigma_px=settings.search_sigma_px
         )
         stages["deep"] = elapsed_ms(t_deep)
-    ms = elapsed_ms(t0)
-    if solution is not None:
-        solution = replace(solution, time_ms=ms, algorithm=algorithm)
+        solution = replace(solution, time_ms=elapsed_ms(t0))
+    ms = elapsed_ms(t0) if solution is None else solution.time_ms
     return SolveResult(solution, reason, ms, found.hypotheses, database.catalog, stages)
