@@ -55,6 +55,7 @@ def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``starnav`` command."""
     freeze_at_exit()
     args = build_parser().parse_args(argv)
+    args.own_process = argv is None  # the console script: the process is this command's alone
     try:
         return args.run(args)
     except StarnavError as exc:

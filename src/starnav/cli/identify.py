@@ -33,6 +33,7 @@ from starnav.cli.common import (
 )
 from starnav.cli.field import add_fov_search, check_fov
 from starnav.cli.output import print_json, print_solution
+from starnav.cli.plain import plain_python, solve_plain
 from starnav.errors import StarnavError
 from starnav.geometry import attitude_from_radec_roll
 from starnav.identify import DEFAULT_ALGORITHM
@@ -160,7 +161,10 @@ def run(args: argparse.Namespace) -> int:
     if args.fov_deg is None and args.camera is None:
         _check_fov_search(args, prior)
     options = replace(solve_options(args), prior_sigma_deg=args.prior_sigma_deg)
-    result = solve_stars(stars, options, width=args.width, height=args.height, prior=prior)
+    if plain_python(args):
+        result = solve_plain(stars, options, width=args.width, height=args.height, prior=prior)
+    else:
+        result = solve_stars(stars, options, width=args.width, height=args.height, prior=prior)
     _plot(args, result)
     s = result.solution
     if args.json:

@@ -25,11 +25,12 @@ from dataclasses import dataclass
 
 from starnav.camera import Camera
 from starnav.detect.stars import Detections
+from starnav.runtime.budget import SPENT
 
 FEW_STARS = "too few stars"
 TRAILED = "stars trailed"
 DISTORTED = "lens too distorted for the model"
-BUDGET = "time budget spent"
+BUDGET = SPENT
 OUTSIDE = "field outside the range"
 FAILURES = (FEW_STARS, TRAILED, DISTORTED, BUDGET, OUTSIDE)
 
@@ -37,7 +38,7 @@ FEW_STARS_LIMIT = 8  # fewer detected stars than this rarely identify a field an
 TRAILED_ELONGATION = 2.0  # median long / short axis of the stars
 # the solve's own words for an attitude that fits some of the stars only
 _PART_FITS = "stars agree with the best attitude"
-_BUDGET = "time budget spent"
+_BUDGET = SPENT
 _NOT_CONVINCING = "best hypothesis not convincing"
 
 

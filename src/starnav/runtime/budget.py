@@ -42,6 +42,7 @@ DEFAULTS = (
     f"{SCAN_BUDGET_S:g} s for a fisheye's focal scan"
 )
 
+SPENT = "time budget spent"  # how the reason of a solve stopped by its deadline begins
 UNIT_SHARE = 0.05  # a search's unit of work lasts about this part of its budget
 CHUNK_GROWTH = 2  # a chunk of work is at most this many times the last one
 
@@ -57,6 +58,10 @@ def _install_compile_clock() -> None:
     if _CLOCK:
         return
     _CLOCK.append(True)
+    from starnav.runtime.caching import python_kernels
+
+    if python_kernels():  # nothing compiles, and numba is not to be imported
+        return
     try:
         from numba.core import event
     except ImportError:  # no numba event API: compilations are counted in budgets
@@ -149,7 +154,7 @@ class Deadline:
 
     def reason(self, tried: str) -> str:
         """The reason of a solve stopped by this deadline, with what was ``tried``."""
-        return f"time budget spent ({self.budget_s:g} s): {tried}"
+        return f"{SPENT} ({self.budget_s:g} s): {tried}"
 
 
 def next_chunk(deadline: Deadline, elapsed_s: float, size: int, most: int) -> int:

@@ -15,6 +15,7 @@ callee would otherwise run the old callee's code. numba checks its own version a
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import hashlib
 import mmap
@@ -27,8 +28,11 @@ from pathlib import Path
 
 import numpy as np
 
+from starnav.errors import StarnavError
+
 PACKAGE = Path(__file__).resolve().parents[1]
 CACHE_LIMIT_ENV = "STARNAV_CACHE_LIMIT_MB"
+KERNELS_ENV = "STARNAV_KERNELS"
 # every module with numba kernels (tests/runtime/test_caching.py checks the list against the
 # sources)
 KERNEL_SOURCES = (
@@ -180,10 +184,46 @@ def kernel_cache_dir(numba_cache_dir: str = "") -> Path:
     return base / f"kernels-{kernel_sources_hash()}"
 
 
+@functools.cache
+def python_kernels() -> bool:
+    """Whether this process runs the kernels as plain Python (``$STARNAV_KERNELS`` =
+    ``python``; default ``numba``): numba is then never imported. Loading numba and the
+    kernels' cached machine code costs a process ~0.6 s and ~150 MB, more than a star list
+    of a known field takes to solve in plain Python (~50 ms; the kernels run 10-100x
+    slower), so ``starnav identify`` on one list starts that way (``starnav.cli.identify``).
+    The answers are the same either way. Read once, when the first kernel module is
+    imported: a process does not mix the two."""
+    mode = os.environ.get(KERNELS_ENV, "numba")
+    if mode not in ("numba", "python"):
+        raise StarnavError(f"${KERNELS_ENV} must be numba or python, got {mode!r}")
+    return mode == "python"
+
+
+class _PlainObjmode:
+    """``numba.objmode`` of a kernel run as plain Python: its block is Python anyway."""
+
+    def __call__(self, **_types: str) -> contextlib.nullcontext:
+        return contextlib.nullcontext()
+
+
+def kernel_objmode():
+    """What a kernel module binds ``objmode`` to: numba's (a block of a compiled kernel run
+    by the interpreter; numba recognises its own object among the kernel's globals), or a
+    stand-in when the kernels are plain Python (``python_kernels``)."""
+    if python_kernels():
+        return _PlainObjmode()
+    from numba import objmode
+
+    return objmode
+
+
 def njit(**options) -> Callable:
     """``numba.njit(**options)`` whose cache (``cache=True``) is ``kernel_cache_dir()``: numba
     picks a function's cache folder when it is decorated, so ``numba.config.CACHE_DIR`` is set
-    for the decoration only (numba code of other packages keeps its own)."""
+    for the decoration only (numba code of other packages keeps its own). With
+    ``python_kernels()`` the function itself, undecorated."""
+    if python_kernels():
+        return lambda func: func
     import numba
 
     def decorate(func: Callable) -> Callable:

@@ -12,7 +12,6 @@ import time
 from collections import namedtuple
 
 import numpy as np
-from numba import objmode
 
 from starnav.attitude.rotation import det3, wahba
 from starnav.identify.kernels.evidence import (
@@ -29,11 +28,13 @@ from starnav.identify.kernels.hypothesis import (
 )
 from starnav.identify.kernels.sky import angle, chord, cone, field_radius, near_cell
 from starnav.identify.kernels.triangles import catalog_triangles
-from starnav.runtime.caching import njit
+from starnav.runtime.caching import kernel_objmode, njit
 
 FLAT_FACTOR = 3.0  # a triangle is too flat to give its orientation below 3 tol x its longest side
 WIDE_SCREEN_RAD = math.radians(35.0)  # wider fields: the screen does not count the field cone
 CLOCK_EVERY = 32  # with a time budget, the clock is read every this many hypotheses
+
+objmode = kernel_objmode()  # numba's, or a stand-in when the kernels run as plain Python
 
 Search = namedtuple("Search", "status obs cat R parity p log_sides hypotheses proposed best_p")
 
