@@ -7,9 +7,11 @@ and min reported):
    ``starnav`` line.
 2. ``starnav identify STARS.csv --fov-deg 12 --width 512 --json`` (the console script, as a
    user runs it) on a list of 20 stars of a simulated 12° / 512 px frame: wall time and peak
-   resident memory.
+   resident memory; as it chooses (the kernels as plain Python, ``starnav.cli.plain``) and
+   with ``STARNAV_KERNELS=numba`` (the machine code loaded).
 3. A Python process that imports starnav and solves that list with ``starnav.solve`` and the
-   field given: its import and solve times, wall time and peak resident memory.
+   field given: its import and solve times, wall time and peak resident memory; with the
+   machine code (the library's default) and with ``STARNAV_KERNELS=python``.
 4. For scale, the floors under them: Python alone, ``import numpy``, ``import numba``, and a
    numba process calling one trivial kernel loaded from numba's cache, with and without the
    interpreter's garbage collections at exit (which walk numba's objects; ``starnav`` skips
@@ -42,6 +44,7 @@ from benchmarks.harness import DOCS, machine, replace_block, table_head, table_r
 from starnav.api import prepare_solver
 from starnav.camera import Camera
 from starnav.catalog import load_catalog
+from starnav.runtime.caching import KERNELS_ENV
 from starnav.simulate import simulate_frame
 
 DOC = DOCS / "performance.md"
@@ -71,6 +74,7 @@ wall = time.perf_counter() - t0
 with open(sys.argv[1], "w") as fh:
     fh.write(f"{wall} {usage.ru_maxrss} {os.waitstatus_to_exitcode(status)}")
 """
+RUNS = ("import", "identify", "identify, machine code", "solve", "solve, plain")
 FROZEN_AT_EXIT = "import atexit, gc; atexit.register(gc.freeze); "
 TRIVIAL_KERNEL = """
 import numba
@@ -144,15 +148,20 @@ def measure(args: argparse.Namespace, folder: Path) -> tuple[dict[str, list], fl
             env,
         ),
     }
-    warm_s = run(identify)[0]  # compiles the machine code if it is not cached yet
+    plain = {k: v for k, v in os.environ.items() if k != KERNELS_ENV}  # identify chooses
+    machine_code = {**plain, KERNELS_ENV: "numba"}
+    python_kernels = {**plain, KERNELS_ENV: "python"}
+    # compiles the machine code if it is not cached yet
+    warm_s = run(identify, machine_code)[0]
     run(floors["numba, one trivial cached kernel called"][0], env)
-    samples: dict[str, list] = {"import": [], "identify": [], "solve": []}
-    samples.update({name: [] for name in floors})
+    samples: dict[str, list] = {name: [] for name in (*RUNS, *floors)}
     for _ in range(args.repeats):
         samples["import"].append(import_seconds())
-        samples["identify"].append(run(identify)[:2])
-        wall, rss, out = run(solve)
-        samples["solve"].append((wall, rss, *(float(v) for v in out.split())))
+        samples["identify"].append(run(identify, plain)[:2])
+        samples["identify, machine code"].append(run(identify, machine_code)[:2])
+        for name, kernels in (("solve", machine_code), ("solve, plain", python_kernels)):
+            wall, rss, out = run(solve, kernels)
+            samples[name].append((wall, rss, *(float(v) for v in out.split())))
         for name, (cmd, cmd_env) in floors.items():
             samples[name].append(run(cmd, cmd_env)[:2])
     return samples, warm_s
@@ -177,7 +186,9 @@ def spread(values, digits: int = 2) -> str:
 def report(samples: dict[str, list], warm_s: float, args, load: float, seconds: float) -> str:
     import_s = samples["import"]
     id_wall, id_rss = zip(*samples["identify"], strict=True)
+    idm_wall, idm_rss = zip(*samples["identify, machine code"], strict=True)
     py_wall, py_rss, py_import, py_solve = zip(*samples["solve"], strict=True)
+    pp_wall, pp_rss, pp_import, pp_solve = zip(*samples["solve, plain"], strict=True)
 
     def status(value: float, target: float, unit: str) -> str:
         met = "met" if np.median(value) < target else "**not met**"
@@ -200,7 +211,13 @@ def report(samples: dict[str, list], warm_s: float, args, load: float, seconds: 
             f"`starnav identify STARS.csv --fov-deg {FOV_DEG:g} --width {WIDTH} --json`",
             spread(id_wall),
             spread(id_rss, 0),
-            "",
+            "the kernels as plain Python (the command's choice for one list of a known field)",
+        ),
+        table_row(
+            f"the same with `{KERNELS_ENV}=numba`",
+            spread(idm_wall),
+            spread(idm_rss, 0),
+            "numba and the kernels' machine code loaded",
         ),
         table_row(
             f"Python: `import starnav`, `starnav.solve(xy, fov_deg={FOV_DEG:g}, ...)`",
@@ -209,16 +226,24 @@ def report(samples: dict[str, list], warm_s: float, args, load: float, seconds: 
             f"import {spread(py_import)} s, first solve {spread(py_solve)} s (numba and the "
             "machine code loaded in it)",
         ),
+        table_row(
+            f"the same with `{KERNELS_ENV}=python`",
+            spread(pp_wall),
+            spread(pp_rss, 0),
+            f"import {spread(pp_import)} s, first solve {spread(pp_solve)} s (plain Python)",
+        ),
     ]
     for name in samples:
-        if name not in ("import", "identify", "solve"):
+        if name not in RUNS:
             wall, rss = zip(*samples[name], strict=True)
             lines.append(table_row(name, spread(wall), spread(rss, 0), "floor"))
     lines += [
         "",
         f"Targets: `import starnav` {status(import_s, TARGET_IMPORT_S, 's')}; "
         f"`starnav identify` {status(id_wall, TARGET_IDENTIFY_S, 's')}; peak RSS of the "
-        f"star-list solve {status(py_rss, TARGET_RSS_MB, 'MB')}. In memory besides the code: "
+        f"star-list solve (`starnav identify`) {status(id_rss, TARGET_RSS_MB, 'MB')}; a Python "
+        f"process that keeps the machine code loaded (many solves, 0.2-0.5 ms each) holds "
+        f"{np.median(py_rss):.0f} MB. In memory besides the code: "
         f"{tables()}.",
         "",
         f"{machine(load, load_at_end=True)}; `python benchmarks/speed/startup.py --repeats "
