@@ -362,7 +362,8 @@ def conclude(obs, cat, R, xy, sky, allowed, model, p0, width, height, fit_focal,
         # a wrong focal length biases the attitude beyond its error bars: test the scale, on
         # the stars matched and on those a free focal length finds besides
         wrong, f_scale = scale_off(f.R, vectors[a.cat], xy[a.obs], model, p0, sigma_px)
-        if not wrong:
+        # with every point matched, no focal length can match more (pairs are one to one)
+        if not wrong and len(a.obs) < len(xy):
             free = converge(a.obs, a.cat, f.R, xy, sky, allowed, model, p0, width, height, True,
                             fit_distortion, radius, sigma_px, work)  # fmt: skip
             if len(free.obs) > len(a.obs):
