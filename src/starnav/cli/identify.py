@@ -161,7 +161,7 @@ def run(args: argparse.Namespace) -> int:
     if args.fov_deg is None and args.camera is None:
         _check_fov_search(args, prior)
     options = replace(solve_options(args), prior_sigma_deg=args.prior_sigma_deg)
-    if plain_python(args):
+    if plain_python(args, len(stars.xy)):
         result = solve_plain(stars, options, width=args.width, height=args.height, prior=prior)
     else:
         result = solve_stars(stars, options, width=args.width, height=args.height, prior=prior)

@@ -1,8 +1,8 @@
 """One star list of a known field in a process of its own (``starnav identify LIST``): the
 kernels run as plain Python (``starnav.runtime.caching.python_kernels``). Loading numba and
 the kernels' machine code costs such a process ~0.6 s and ~150 MB; the plain solve of a
-list takes ~50 ms. A solve that needs longer than ``PLAIN_BUDGET_S`` is redone, the whole
-command again, with the machine code (benchmarks/speed/startup.py measures both)."""
+short list takes ~50-200 ms. A solve that needs longer than ``PLAIN_BUDGET_S`` is redone, the
+whole command again, with the machine code (benchmarks/speed/startup.py measures both)."""
 
 from __future__ import annotations
 
@@ -19,15 +19,20 @@ from starnav.runtime.budget import SPENT
 from starnav.runtime.caching import KERNELS_ENV, python_kernels
 from starnav.starlist import StarList
 
-PLAIN_BUDGET_S = 0.5  # s: a plain solve that needs longer is redone with the machine code
+PLAIN_BUDGET_S = 0.3  # s: a plain solve that needs longer is redone with the machine code
+# longer lists are solved with the machine code at once: a plain solve's screen costs points
+# x hypotheses (a 6° tracker's 105 points and its deep stage: ~0.5 s)
+PLAIN_MAX_POINTS = 50
 
 
-def plain_python(args: argparse.Namespace) -> bool:
-    """Whether this command's one list of a known field is solved with the kernels as plain
-    Python: the console script (the process is the command's alone), ``$STARNAV_KERNELS``
-    not set, and no kernel loaded with numba yet (then it sets the variable)."""
+def plain_python(args: argparse.Namespace, n_points: int) -> bool:
+    """Whether this command's one list of ``n_points`` of a known field is solved with the
+    kernels as plain Python: the console script (the process is the command's alone), at
+    most ``PLAIN_MAX_POINTS``, ``$STARNAV_KERNELS`` not set, and no kernel loaded with numba
+    yet (then it sets the variable)."""
     known = args.fov_deg is not None or args.camera is not None
-    if not (getattr(args, "own_process", False) and known and KERNELS_ENV not in os.environ):
+    own = getattr(args, "own_process", False)
+    if not (own and known and n_points <= PLAIN_MAX_POINTS and KERNELS_ENV not in os.environ):
         return False
     os.environ[KERNELS_ENV] = "python"
     return python_kernels()
