@@ -6,11 +6,15 @@ from __future__ import annotations
 
 import os
 
+import numpy as np
 import pytest
 
 from shared_data import CONTEST, SHARED, USER_CACHE_DIR, reference_frames, shared_file
+from starnav.api import solve
+from starnav.camera import Camera
 from starnav.catalog import HIPPARCOS_EPOCH_YEAR, load_catalog
 from starnav.runtime.caching import cache_dir
+from starnav.simulate import simulate_frame
 
 # The kernels' machine code stays where every solve keeps it (the user's cache, which
 # `starnav demo` fills): _private_cache below moves STARNAV_CACHE_DIR before the first kernel
@@ -41,6 +45,24 @@ def hip_1991():
 @pytest.fixture(scope="session")
 def contest_catalog():
     return load_catalog(shared_file(CONTEST / "catalog.csv"))
+
+
+@pytest.fixture(scope="session")
+def star_list(tmp_path_factory):
+    """A 12° / 512 px star list (x, y, mag) of 20 stars, solved once here: the subprocesses
+    that solve it find the pair table in the cache (building it uses scipy.spatial), as every
+    solve but an installation's first does."""
+    cat = load_catalog(None, mag_limit=6.0)
+    camera = Camera.from_fov(12.0, 512)
+    frame = next(
+        f for seed in range(100) if len((f := simulate_frame(cat, camera, seed=seed)).xy) >= 20
+    )
+    keep = np.sort(np.argsort(frame.mag)[:20])
+    path = tmp_path_factory.mktemp("stars") / "stars.csv"
+    np.savetxt(path, np.column_stack([frame.xy[keep], frame.mag[keep]]), delimiter=",",
+               header="x,y,mag", comments="", fmt="%.4f")  # fmt: skip
+    assert solve(frame.xy[keep], fov_deg=12.0, width=512) is not None
+    return path
 
 
 @pytest.fixture(scope="module")

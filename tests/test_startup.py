@@ -11,7 +11,6 @@ import json
 import subprocess
 import sys
 
-import numpy as np
 import pytest
 
 import starnav
@@ -48,26 +47,6 @@ def _loaded(code: str, prefixes: tuple[str, ...]) -> set[str]:
     ).stdout
     names = set(json.loads(out.splitlines()[-1]))
     return {p for p in prefixes if p in names or any(n.startswith(p + ".") for n in names)}
-
-
-@pytest.fixture(scope="module")
-def star_list(tmp_path_factory):
-    """A 12° / 512 px star list (x, y, mag) of 20 stars, solved once here: the subprocesses
-    find the pair table in the cache (building it uses scipy.spatial), as every solve but an
-    installation's first does."""
-    cat = starnav.load_catalog(None, mag_limit=6.0)
-    camera = starnav.Camera.from_fov(12.0, 512)
-    frame = next(
-        f
-        for seed in range(100)
-        if len((f := starnav.simulate_frame(cat, camera, seed=seed)).xy) >= 20
-    )
-    keep = np.sort(np.argsort(frame.mag)[:20])
-    path = tmp_path_factory.mktemp("startup") / "stars.csv"
-    np.savetxt(path, np.column_stack([frame.xy[keep], frame.mag[keep]]), delimiter=",",
-               header="x,y,mag", comments="", fmt="%.4f")  # fmt: skip
-    assert starnav.solve(frame.xy[keep], fov_deg=12.0, width=512) is not None
-    return path
 
 
 def test_import_starnav_and_the_cli_parser_load_no_heavy_dependency():

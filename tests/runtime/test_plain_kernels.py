@@ -13,7 +13,6 @@ import sys
 import numpy as np
 import pytest
 
-import starnav
 from starnav.runtime.caching import KERNELS_ENV
 
 # frames of both parities, noisy ones with false stars and missing stars, a few-star one
@@ -71,24 +70,6 @@ def test_plain_python_kernels_answer_as_the_machine_code_without_loading_numba()
             assert a["ids"] == b["ids"]
             np.testing.assert_allclose(a["R"], b["R"], atol=1e-12)
             assert a["p"] == pytest.approx(b["p"], rel=1e-9)
-
-
-@pytest.fixture(scope="module")
-def star_list(tmp_path_factory):
-    """A 12° / 512 px list of 20 stars (x, y, mag), solved once here (the pair table cached)."""
-    cat = starnav.load_catalog(None, mag_limit=6.0)
-    camera = starnav.Camera.from_fov(12.0, 512)
-    frame = next(
-        f
-        for seed in range(100)
-        if len((f := starnav.simulate_frame(cat, camera, seed=seed)).xy) >= 20
-    )
-    keep = np.sort(np.argsort(frame.mag)[:20])
-    path = tmp_path_factory.mktemp("plain") / "stars.csv"
-    np.savetxt(path, np.column_stack([frame.xy[keep], frame.mag[keep]]), delimiter=",",
-               header="x,y,mag", comments="", fmt="%.4f")  # fmt: skip
-    assert starnav.solve(frame.xy[keep], fov_deg=12.0, width=512) is not None
-    return path
 
 
 def _identify(star_list, kernels: str | None, *extra: str) -> tuple[dict, str, int]:
