@@ -35,7 +35,10 @@ def plain_python(args: argparse.Namespace, n_points: int) -> bool:
     if not (own and known and n_points <= PLAIN_MAX_POINTS and KERNELS_ENV not in os.environ):
         return False
     os.environ[KERNELS_ENV] = "python"
-    return python_kernels()
+    if python_kernels():
+        return True
+    del os.environ[KERNELS_ENV]  # decided before: the machine code, for this process's children too
+    return False
 
 
 def solve_plain(
