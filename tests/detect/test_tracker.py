@@ -8,6 +8,7 @@ import dataclasses
 
 import numpy as np
 import pytest
+import sep
 from scipy.spatial import cKDTree
 
 from starnav.catalog import load_catalog
@@ -105,3 +106,37 @@ def test_the_fast_path_keeps_the_options(frame):
     assert found.n_hot >= 1
     assert not np.any(np.hypot(*(found.xy - [200.5, 100.5]).T) < 1.0)
     assert np.all(np.diff(found.snr[~found.saturated]) <= 0)
+
+
+def test_the_kernels_give_seps_and_numpys_numbers(frame):
+    """The windowed centroids are ``sep.winpos``'s (subpix=1) to the last bit, from the
+    isophotal barycentres and from 0.7 px off them, for the window of either path and a
+    wide one; the hot-pixel candidates listed while the background is subtracted are the
+    pixels ``np.flatnonzero`` finds over the level."""
+    from starnav.detect import kernels
+
+    data = np.asarray(frame.image, dtype=np.float32)
+    found = tracker_sources(data, float(data.min()), 5.0, 3, None, True)
+    x0, y0 = found.objects["x"], found.objects["y"]
+    for sigma in (np.hypot(found.psf_sigma_px, 1.0), 1.0, 3.0):
+        window = np.full(len(x0), sigma)
+        for dx in (0.0, 0.7):
+            x, y = kernels.windowed_centroids(found.data, x0 + dx, y0 - dx, window)
+            xs, ys, _ = sep.winpos(found.data, x0 + dx, y0 - dx, window, subpix=1)
+            assert np.array_equal(x, xs) and np.array_equal(y, ys)
+    level = np.float32(5.0 * found.rms)
+    residual, above = kernels.background_subtracted(data, np.zeros((16, 16)) + 100.0, 64, level)
+    assert np.array_equal(residual, data - np.float32(100.0))
+    assert np.array_equal(above, np.flatnonzero(residual > level))
+
+
+def test_the_callers_image_is_left_unchanged(frame):
+    """A float32 array is detected in place, not copied, on either path: its pixels are left
+    as they were."""
+    for image in (frame.image, _with_tree_line(frame.image, 1)):
+        pixels = np.asarray(image, dtype=np.float32)
+        pixels[100, 200] = 60000.0  # a hot pixel, which detection replaces in its own copy
+        before = pixels.copy()
+        found = detect_stars(pixels)
+        assert found.n_hot >= 1
+        assert np.array_equal(pixels, before)

@@ -21,6 +21,12 @@ _MAD_BINS = 256  # of the histogram a tile's median absolute deviation is read f
 # sep's deblending, as ``starnav.detect.stars`` calls it: 16 levels, contrast 0.005
 DEBLEND_LEVELS = 16
 DEBLEND_CONTRAST = 0.005
+# SExtractor's windowed centroid (``windowed_centroids``)
+WINDOW_SIGMAS = 4.0
+_WINDOW_STEPS = 16
+_WINDOW_OFFSET_MIN_PX = 1e-4
+_WINDOW_GAIN = 2.0
+_CHUNK_PX = 64  # a row's stretch checked at once for pixels over a threshold
 # status of ``find_sources``
 FOUND, TOO_MANY_PIXELS, PLATEAU = 0, 1, 2
 
@@ -254,18 +260,43 @@ def _map_row(rows, down, r, out):
 
 
 @njit(cache=True)
-def background_subtracted(data, level, tile_px):
-    """``data`` less its background, float32: the tile ``level``s interpolated bilinearly
-    between tile centres (constant beyond the outer ones)."""
+def background_subtracted(data, level, tile_px, above):
+    """(``data`` less its background, float32: the tile ``level``s interpolated bilinearly
+    between tile centres (constant beyond the outer ones); the flat indices, in raster
+    order, of its pixels over ``above``: the candidates ``starnav.detect.hot`` judges)."""
     height, width = data.shape
     rows, down = _across(level, tile_px, height, width)
     out = np.empty((height, width), dtype=np.float32)
     back = np.empty(width)
+    over = np.empty(height * width, dtype=np.int64)  # only the pages written are touched
+    n = 0
+    limit = np.empty(width, dtype=np.float32)
+    limit[:] = above
     for r in range(height):
         _map_row(rows, down, r, back)
+        row = out[r]
         for c in range(width):
-            out[r, c] = data[r, c] - back[c]
-    return out
+            row[c] = data[r, c] - back[c]
+        for start in range(0, width, _CHUNK_PX):
+            stop = min(width, start + _CHUNK_PX)
+            if _count_over(row[start:stop], limit[start:stop]) == 0:
+                continue
+            for c in range(start, stop):
+                if row[c] > above:
+                    over[n] = r * width + c
+                    n += 1
+    return out, over[:n].copy()
+
+
+@njit(cache=True, inline="always")
+def _count_over(values, limits):
+    """How many ``values`` exceed their ``limits``: a loop without branches, which the
+    compiler vectorizes, so that the pixels over a threshold (few) are looked for only in
+    the stretches of a row that hold some."""
+    count = 0
+    for c in range(len(values)):
+        count += values[c] > limits[c]
+    return count
 
 
 @njit(cache=True, inline="always")
@@ -311,6 +342,8 @@ def _pixels_above(data, threshold, tile_px, capacity):
     filtered = np.empty(width, dtype=np.float32)
     level = np.empty(width)
     maps, down = _across(threshold, tile_px, height, width)
+    constant = threshold.min() == threshold.max()  # its interpolation: that value everywhere
+    level[:] = threshold[0, 0]
     _row_sums(data, -1, above)
     _row_sums(data, 0, here)
     n = 0
@@ -319,24 +352,29 @@ def _pixels_above(data, threshold, tile_px, capacity):
         two, sixteenth = np.float32(2.0), np.float32(1.0 / 16.0)
         for c in range(width):
             filtered[c] = (above[c] + two * here[c] + below[c]) * sixteenth
-        _map_row(maps, down, r, level)
+        if not constant:
+            _map_row(maps, down, r, level)
         now, before = r % 2, (r + 1) % 2
-        for c in range(width):
-            f = filtered[c]
-            if not f > level[c]:
+        for start in range(0, width, _CHUNK_PX):
+            stop = min(width, start + _CHUNK_PX)
+            if _count_over(filtered[start:stop], level[start:stop]) == 0:
                 continue
-            if n == capacity:
-                return rows, cols, values, parent, -1
-            rows[n], cols[n], values[n], parent[n] = r, c, f, n
-            # 8-connected neighbours seen before: left, and the three above
-            if c > 0 and stamp[now, c - 1] == r:
-                _join(parent, n, index[now, c - 1])
-            for dc in (-1, 0, 1):
-                cc = c + dc
-                if 0 <= cc < width and stamp[before, cc] == r - 1:
-                    _join(parent, n, index[before, cc])
-            index[now, c], stamp[now, c] = n, r
-            n += 1
+            for c in range(start, stop):
+                f = filtered[c]
+                if not f > level[c]:
+                    continue
+                if n == capacity:
+                    return rows, cols, values, parent, -1
+                rows[n], cols[n], values[n], parent[n] = r, c, f, n
+                # 8-connected neighbours seen before: left, and the three above
+                if c > 0 and stamp[now, c - 1] == r:
+                    _join(parent, n, index[now, c - 1])
+                for dc in (-1, 0, 1):
+                    cc = c + dc
+                    if 0 <= cc < width and stamp[before, cc] == r - 1:
+                        _join(parent, n, index[before, cc])
+                index[now, c], stamp[now, c] = n, r
+                n += 1
         above, here, below = here, below, above
     for i in range(n):
         parent[i] = _find(parent, i)
@@ -502,6 +540,49 @@ def find_sources(data, threshold, tile_px, min_area, capacity, plateau_px):
         moments[t, 4] = acc[t, base + 5] / norm - x * y
     count = acc[:n_obj, 6].astype(np.int64)
     return FOUND, count, acc[:n_obj, 0].copy(), moments, peaks[:n_obj].copy()
+
+
+@njit(cache=True)
+def windowed_centroids(data, x, y, sigma):
+    """SExtractor's windowed centroids (``XWIN_IMAGE``, ``YWIN_IMAGE``; ``sep.winpos`` with
+    ``subpix=1`` gives the same numbers) of the sources starting at (``x``, ``y``) in
+    background-subtracted ``data``, each with a Gaussian window of ``sigma`` px: the pixels
+    whose centres lie within ``WINDOW_SIGMAS`` sigmas of the current position, weighted by
+    the window, move it by ``_WINDOW_GAIN`` times their weighted mean offset (exact for a
+    Gaussian star), up to ``_WINDOW_STEPS`` times, until that mean offset is under
+    ``_WINDOW_OFFSET_MIN_PX`` or the weighted sum is not positive (the position reached is
+    kept)."""
+    height, width = data.shape
+    x_out, y_out = x.copy(), y.copy()
+    min_offset2 = _WINDOW_OFFSET_MIN_PX * _WINDOW_OFFSET_MIN_PX
+    for s in range(len(x)):
+        xc, yc = x[s], y[s]
+        radius = WINDOW_SIGMAS * sigma[s]
+        radius2 = radius * radius
+        inv_two_sigma2 = 1.0 / (2.0 * sigma[s] * sigma[s])
+        for _ in range(_WINDOW_STEPS):
+            total, sum_x, sum_y = 0.0, 0.0, 0.0
+            top, bottom = max(0, math.ceil(yc - radius)), min(height, math.floor(yc + radius) + 1)
+            left, right = max(0, math.ceil(xc - radius)), min(width, math.floor(xc + radius) + 1)
+            for r in range(top, bottom):
+                dy = r - yc
+                for c in range(left, right):
+                    dx = c - xc
+                    d2 = dx * dx + dy * dy
+                    if d2 < radius2:
+                        w = float(data[r, c]) * math.exp(-d2 * inv_two_sigma2)
+                        total += w
+                        sum_x += w * dx
+                        sum_y += w * dy
+            if not total > 0.0:
+                break
+            mean_x, mean_y = sum_x / total, sum_y / total
+            xc += mean_x * _WINDOW_GAIN
+            yc += mean_y * _WINDOW_GAIN
+            if mean_x * mean_x + mean_y * mean_y < min_offset2:
+                break
+        x_out[s], y_out[s] = xc, yc
+    return x_out, y_out
 
 
 @njit(cache=True)

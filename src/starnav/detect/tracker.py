@@ -111,16 +111,21 @@ def tracker_sources(
         return None
     level, rms, white, at_low = kernels.tile_statistics(data, TILE_PX, ROW_STRIDE, np.float32(low))
     samples = data.size / (2 * ROW_STRIDE)
-    if not _smooth_white_sky(level, rms, white) or at_low >= _CLIPPED_FRACTION * samples:
+    if at_low >= _CLIPPED_FRACTION * samples:
         return None
     # both median-filtered over 3 x 3 tiles, as the real-sky mesh
-    level, rms = median_3x3(level), median_3x3(rms)
+    smooth_level = median_3x3(level)
+    if not _smooth_white_sky(level, smooth_level, rms, white):
+        return None
+    level, rms = smooth_level, median_3x3(rms)
     sky, noise = float(np.median(level)), float(np.median(rms))
-    residual = kernels.background_subtracted(data, level, TILE_PX)
+    # in float32, as numpy compares the float32 pixels with it
+    hot_level = np.float32(threshold_sigma * noise if reject_hot_pixels else np.inf)
+    residual, above = kernels.background_subtracted(data, level, TILE_PX, hot_level)
     # one threshold on a noise within 25 % of uniform, as the real-sky path; else a map
     uniform = rms.max() <= _UNIFORM_NOISE * rms.min()
     threshold = threshold_sigma * FILTER_NOISE * (np.full_like(rms, noise) if uniform else rms)
-    n_hot = clean_hot_pixels(residual, threshold_sigma * noise) if reject_hot_pixels else 0
+    n_hot = clean_hot_pixels(residual, hot_level, above) if reject_hot_pixels else 0
     capacity = max(10_000, int(_CAPACITY_FRACTION * data.size))
     status, npix, flux, moments, peaks = kernels.find_sources(
         residual, threshold, TILE_PX, min_area_px, capacity, _PLATEAU_PX
@@ -147,8 +152,11 @@ def tracker_sources(
     return TrackerSources(objects, saturated, residual, sky, noise, sigma, n_hot)
 
 
-def _smooth_white_sky(level: np.ndarray, rms: np.ndarray, white: np.ndarray) -> bool:
-    """Tests 2 and 3 of the module on the tiles' levels and rms."""
+def _smooth_white_sky(
+    level: np.ndarray, around: np.ndarray, rms: np.ndarray, white: np.ndarray
+) -> bool:
+    """Tests 2 and 3 of the module on the tiles' levels, their medians over 3 x 3 tiles
+    (``around``) and rms."""
     measured = np.isfinite(white)
     if not (np.all(rms > 0) and np.all(white[measured] > 0)):
         return False  # a flat or quantised-away sky: the real-sky path has its floors
@@ -157,7 +165,6 @@ def _smooth_white_sky(level: np.ndarray, rms: np.ndarray, white: np.ndarray) -> 
     typical = np.median(rms)
     if rms.max() > _RMS_ABOVE * typical or rms.min() < typical / _RMS_BELOW:
         return False
-    around = median_3x3(level)
     return bool(np.all(np.abs(level - around) <= _STEP_RMS * rms))
 
 
