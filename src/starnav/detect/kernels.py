@@ -91,20 +91,9 @@ def _level_rms(values, dx, dy, n, scratch):
         rms = values[:n].std()
     gx, gy = 0.0, 0.0
     for _ in range(3):
-        count, sx, sy, sxx, syy = 0.0, 0.0, 0.0, 0.0, 0.0
-        total, tx, ty, squares = 0.0, 0.0, 0.0, 0.0
-        for i in range(n):
-            d = values[i] - level - gx * dx[i] - gy * dy[i]
-            kept = 1.0 if abs(d) <= 3.0 * rms else 0.0
-            count += kept
-            sx += kept * dx[i]
-            sy += kept * dy[i]
-            sxx += kept * dx[i] * dx[i]
-            syy += kept * dy[i] * dy[i]
-            total += kept * d
-            tx += kept * d * dx[i]
-            ty += kept * d * dy[i]
-            squares += kept * d * d
+        count, sx, sy, sxx, syy, total, tx, ty, squares = _clipped_sums(
+            values[:n], dx[:n], dy[:n], level, gx, gy, 3.0 * rms
+        )
         if count < 4:
             break
         # the plane's correction, as if the kept samples were symmetric about their mean
@@ -124,6 +113,29 @@ def _level_rms(values, dx, dy, n, scratch):
     if mad > 0:
         rms = _MAD_TO_SIGMA * mad
     return level, rms
+
+
+@njit(cache=True, fastmath={"reassoc", "nsz"})
+def _clipped_sums(values, dx, dy, level, gx, gy, limit):
+    """Over the ``values`` within ``limit`` of the plane level + gx dx + gy dy, their residual
+    d from it: the sums of 1, dx, dy, dx², dy², d, d dx, d dy, d², added in whatever order
+    the compiler vectorizes them in (``_level_rms``'s clipping; the order changes the sums
+    in their last bits only)."""
+    count, sx, sy, sxx, syy = 0.0, 0.0, 0.0, 0.0, 0.0
+    total, tx, ty, squares = 0.0, 0.0, 0.0, 0.0
+    for i in range(len(values)):
+        d = values[i] - level - gx * dx[i] - gy * dy[i]
+        kept = 1.0 if abs(d) <= limit else 0.0
+        count += kept
+        sx += kept * dx[i]
+        sy += kept * dy[i]
+        sxx += kept * dx[i] * dx[i]
+        syy += kept * dy[i] * dy[i]
+        total += kept * d
+        tx += kept * d * dx[i]
+        ty += kept * d * dy[i]
+        squares += kept * d * d
+    return count, sx, sy, sxx, syy, total, tx, ty, squares
 
 
 @njit(cache=True)
@@ -196,6 +208,24 @@ def tile_statistics(data, tile_px, stride, low):
             if m > 1 and i % 2 == 0 and j % 2 == 0:
                 white[i, j] = _level_rms(steps, flat, flat, m, scratch)[1] / math.sqrt(2.0)
     return level, rms, white, at_low
+
+
+@njit(cache=True)
+def median_3x3(mesh):
+    """The median of each cell's 3 x 3 neighbourhood, the edge cells repeated beyond the
+    mesh (``starnav.detect.background.median_3x3``'s numbers, without its numpy calls)."""
+    ny, nx = mesh.shape
+    out = np.empty((ny, nx))
+    window = np.empty(9)
+    for i in range(ny):
+        for j in range(nx):
+            k = 0
+            for di in (-1, 0, 1):
+                for dj in (-1, 0, 1):
+                    window[k] = mesh[min(max(i + di, 0), ny - 1), min(max(j + dj, 0), nx - 1)]
+                    k += 1
+            out[i, j] = _select(window, 9, 4)
+    return out
 
 
 @njit(cache=True)
@@ -545,7 +575,9 @@ def find_sources(data, threshold, tile_px, min_area, capacity, plateau_px):
 @njit(cache=True)
 def windowed_centroids(data, x, y, sigma):
     """SExtractor's windowed centroids (``XWIN_IMAGE``, ``YWIN_IMAGE``; ``sep.winpos`` with
-    ``subpix=1`` gives the same numbers) of the sources starting at (``x``, ``y``) in
+    ``subpix=1`` gives the same numbers but for their last bits: the window's Gaussian is
+    taken as the product of its factors along the row and the column, a tenth of the
+    exponentials) of the sources starting at (``x``, ``y``) in
     background-subtracted ``data``, each with a Gaussian window of ``sigma`` px: the pixels
     whose centres lie within ``WINDOW_SIGMAS`` sigmas of the current position, weighted by
     the window, move it by ``_WINDOW_GAIN`` times their weighted mean offset (exact for a
@@ -554,6 +586,7 @@ def windowed_centroids(data, x, y, sigma):
     kept)."""
     height, width = data.shape
     x_out, y_out = x.copy(), y.copy()
+    across = np.empty(2 * math.ceil(WINDOW_SIGMAS * sigma.max()) + 2 if len(x) else 0)
     min_offset2 = _WINDOW_OFFSET_MIN_PX * _WINDOW_OFFSET_MIN_PX
     for s in range(len(x)):
         xc, yc = x[s], y[s]
@@ -564,13 +597,15 @@ def windowed_centroids(data, x, y, sigma):
             total, sum_x, sum_y = 0.0, 0.0, 0.0
             top, bottom = max(0, math.ceil(yc - radius)), min(height, math.floor(yc + radius) + 1)
             left, right = max(0, math.ceil(xc - radius)), min(width, math.floor(xc + radius) + 1)
+            for c in range(left, right):
+                across[c - left] = math.exp(-((c - xc) ** 2) * inv_two_sigma2)
             for r in range(top, bottom):
                 dy = r - yc
+                down = math.exp(-dy * dy * inv_two_sigma2)
                 for c in range(left, right):
                     dx = c - xc
-                    d2 = dx * dx + dy * dy
-                    if d2 < radius2:
-                        w = float(data[r, c]) * math.exp(-d2 * inv_two_sigma2)
+                    if dx * dx + dy * dy < radius2:
+                        w = float(data[r, c]) * (down * across[c - left])
                         total += w
                         sum_x += w * dx
                         sum_y += w * dy
@@ -661,9 +696,11 @@ def annulus_photometry(data, x, y, r_ap, r_in, r_out):
                 keep[i] = abs(rest[i] - centre) <= 3.0 * spread
             c0, cx, cy, offset, mad = _plane_and_mad(ring, dx, dy, keep, rest, scratch, m)
             noise[s] = _MAD_TO_SIGMA * mad
-        total = 0.0
-        for r in range(max(0, yc - half), min(height, yc + half + 1)):
-            for c in range(max(0, xc - half), min(width, xc + half + 1)):
+        total = 0.0  # over the aperture's own box (the pixels of the annulus's, in order)
+        top, bottom = max(0, math.ceil(y[s] - r_ap)), min(height, math.floor(y[s] + r_ap) + 1)
+        left, right = max(0, math.ceil(x[s] - r_ap)), min(width, math.floor(x[s] + r_ap) + 1)
+        for r in range(top, bottom):
+            for c in range(left, right):
                 ox, oy = c - x[s], r - y[s]
                 if ox * ox + oy * oy < r_ap * r_ap:
                     total += data[r, c] - c0 - cx * ox - cy * oy - offset

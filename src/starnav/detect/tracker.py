@@ -37,7 +37,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from starnav.detect.background import median_3x3
 from starnav.detect.hot import clean_hot_pixels
 from starnav.detect.photometry import misshapen, zones
 from starnav.detect.psf import DEFAULT_SIGMA_PX, psf_samples, psf_sigma_from
@@ -114,10 +113,10 @@ def tracker_sources(
     if at_low >= _CLIPPED_FRACTION * samples:
         return None
     # both median-filtered over 3 x 3 tiles, as the real-sky mesh
-    smooth_level = median_3x3(level)
+    smooth_level = kernels.median_3x3(level)
     if not _smooth_white_sky(level, smooth_level, rms, white):
         return None
-    level, rms = smooth_level, median_3x3(rms)
+    level, rms = smooth_level, kernels.median_3x3(rms)
     sky, noise = float(np.median(level)), float(np.median(rms))
     # in float32, as numpy compares the float32 pixels with it
     hot_level = np.float32(threshold_sigma * noise if reject_hot_pixels else np.inf)
