@@ -113,7 +113,7 @@ def test_the_kernels_give_seps_and_numpys_numbers(frame):
     px), from the isophotal barycentres and from 0.7 px off them, for the window of either
     path and a wide one; the hot-pixel candidates listed while the background is subtracted
     are the pixels ``np.flatnonzero`` finds over the level; the tiles' 3 x 3 medians are
-    ``detect.background``'s."""
+    ``detect.background``'s; the half-light radii are ``sep.flux_radius``'s."""
     from starnav.detect import kernels
     from starnav.detect.background import median_3x3
 
@@ -132,6 +132,13 @@ def test_the_kernels_give_seps_and_numpys_numbers(frame):
     assert np.array_equal(above, np.flatnonzero(residual > level))
     mesh = np.random.default_rng(1).normal(size=(11, 7))
     assert np.array_equal(kernels.median_3x3(mesh), median_3x3(mesh))
+    # half-light radii: sep.flux_radius's (subpix 5) to the last bit, out to the PSF's
+    # sizes and beyond 45 px (where pixels away from the annuli's edges are not split)
+    x, y = np.ascontiguousarray(x0), np.ascontiguousarray(y0)
+    size = np.sqrt(found.objects["x2"] + found.objects["y2"])
+    for rmax in (np.clip(3.0 * size, 3.0, 50.0), np.full(len(x), 47.3)):
+        radii, _ = sep.flux_radius(found.data, x, y, rmax, 0.5, subpix=5)
+        assert np.array_equal(kernels.half_light_radii(found.data, x, y, rmax, 5), radii)
 
 
 def test_the_callers_image_is_left_unchanged(frame):

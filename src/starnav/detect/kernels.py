@@ -1,7 +1,11 @@
 """The kernels of a clean star-tracker frame's detection (numba): its background on tiles,
 its sources (sep's 3 x 3 matched filter, a threshold, 8-connected pixels split at their
 saddles) and each source's photometry against its own annulus. ``starnav.detect.tracker``
-is their Python face; they are imported on first use (numba takes ~0.2 s to load).
+is their Python face; they are imported on first use (numba takes ~0.2 s to load). Two of
+them give sep's own numbers without its cost per call, for either path's unmasked images:
+the windowed centroid (``windowed_centroids``, ``sep.winpos``) and the half-light radius
+(``half_light_radii``, ``sep.flux_radius``), which ``starnav.detect.stars`` and
+``starnav.detect.psf`` call.
 
 Pixel coordinates here are sep's: pixel centres at integers.
 """
@@ -27,6 +31,10 @@ _WINDOW_STEPS = 16
 _WINDOW_OFFSET_MIN_PX = 1e-4
 _WINDOW_GAIN = 2.0
 _CHUNK_PX = 64  # a row's stretch checked at once for pixels over a threshold
+# sep.flux_radius's annuli (``half_light_radii``): how many, and how close (px) to an edge a
+# pixel's centre must come to be split into samples
+_RADIUS_BINS = 64
+_BIN_MARGIN_PX = 0.7072
 # status of ``find_sources``
 FOUND, TOO_MANY_PIXELS, PLATEAU = 0, 1, 2
 
@@ -618,6 +626,80 @@ def windowed_centroids(data, x, y, sigma):
                 break
         x_out[s], y_out[s] = xc, yc
     return x_out, y_out
+
+
+@njit(cache=True)
+def half_light_radii(data, x, y, rmax, subpix):
+    """Per source at (``x``, ``y``) of background-subtracted ``data``: the radius (px)
+    within which half the light inside ``rmax`` lies, as ``sep.flux_radius(data, x, y, rmax,
+    0.5, subpix=subpix)`` finds it (the same numbers): the pixels whose centres lie within
+    ``rmax`` + 1.5 px, each split into ``subpix`` x ``subpix`` samples (all but those whose
+    centre's distance lies farther than ``_BIN_MARGIN_PX`` from every edge of the
+    ``_RADIUS_BINS`` annuli of equal width out to ``rmax``), summed per annulus; the sums
+    accumulated outwards and the radius where they reach half of the last interpolated
+    linearly within its annulus."""
+    height, width = data.shape
+    radii = np.empty(len(x))
+    sums = np.empty(_RADIUS_BINS)
+    scale = 1.0 / subpix
+    scale2 = scale * scale
+    offset = 0.5 * (scale - 1.0)
+    for s in range(len(x)):
+        xs, ys = x[s], y[s]
+        r_out = rmax[s] + 1.5
+        r_out2 = r_out * r_out
+        step = rmax[s] / _RADIUS_BINS
+        per_px = 1.0 / step
+        sums[:] = 0.0
+        top, bottom = max(0, math.ceil(ys - r_out)), min(height, math.floor(ys + r_out) + 1)
+        left, right = max(0, math.ceil(xs - r_out)), min(width, math.floor(xs + r_out) + 1)
+        for r in range(top, bottom):
+            for c in range(left, right):
+                dx, dy = c - xs, r - ys
+                d2 = dx * dx + dy * dy
+                if not d2 < r_out2:
+                    continue
+                pix = float(data[r, c])
+                distance = math.sqrt(d2)
+                into = np.fmod(distance, step)
+                if into < _BIN_MARGIN_PX or into > step - _BIN_MARGIN_PX:
+                    sy = dy + offset
+                    for _ in range(subpix):
+                        sx = dx + offset
+                        sy2 = sy * sy
+                        for _ in range(subpix):
+                            j = int(math.sqrt(sx * sx + sy2) * per_px)
+                            if j < _RADIUS_BINS:
+                                sums[j] += scale2 * pix
+                            sx += scale
+                        sy += scale
+                else:
+                    j = int(distance * per_px)
+                    if j < _RADIUS_BINS:
+                        sums[j] += pix
+        for j in range(1, _RADIUS_BINS):
+            sums[j] += sums[j - 1]
+        radii[s] = _radius_at(sums, rmax[s], 0.5 * sums[_RADIUS_BINS - 1])
+    return radii
+
+
+@njit(cache=True)
+def _radius_at(cumulative, rmax, target):
+    """The radius at which the ``cumulative`` sums of ``half_light_radii``'s annuli out to
+    ``rmax`` reach ``target``, linear within an annulus (0 when the first is not positive
+    and the target is not either; ``rmax`` when none reaches it)."""
+    n = len(cumulative)
+    step = rmax / n
+    i = 0
+    while i < n and cumulative[i] < target:
+        i += 1
+    if i == 0:
+        if target <= 0.0 or cumulative[0] == 0.0:
+            return 0.0
+        return step * target / cumulative[0]
+    if i == n:
+        return rmax
+    return step * (i + (target - cumulative[i - 1]) / (cumulative[i] - cumulative[i - 1]))
 
 
 @njit(cache=True)

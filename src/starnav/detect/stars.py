@@ -65,6 +65,11 @@ first place. ``keep_saturated=False`` drops them (a blooming CCD smears them alo
 
 Coordinates: sep puts pixel centres at integer coordinates; ours (docs/conventions.md) put the
 top-left pixel's centre at (0.5, 0.5), so 0.5 is added to both.
+
+sep's windowed centroid and half-light radius are computed by kernels with its numbers
+(``starnav.detect.kernels``) when no pixel is masked; with a mask, by sep. A float32 image
+is not copied until a step writes to it (the real-sky path's); the caller's pixels are left
+as they were.
 """
 
 from __future__ import annotations
