@@ -152,19 +152,20 @@ def _abs_median(values, dx, dy, n, level, gx, gy, limit):
     dx + gy dy: from a histogram of ``_MAD_BINS`` bins up to ``limit``, linear within the
     median's bin (to ~1/1000 of ``limit``: a selection's unpredictable branches cost more);
     0 for none."""
-    counts = np.zeros(_MAD_BINS + 1)
+    counts = np.zeros(_MAD_BINS + 1, dtype=np.int64)  # whole numbers: a shorter latency
     scale = _MAD_BINS / limit if limit > 0 else 0.0
     for i in range(n):
         bin_ = min(int(abs(values[i] - level - gx * dx[i] - gy * dy[i]) * scale), _MAD_BINS)
-        counts[bin_] += 1.0
-    kept = counts[:_MAD_BINS].sum()
+        counts[bin_] += 1
+    kept = float(counts[:_MAD_BINS].sum())
     if kept == 0.0 or scale == 0.0:
         return 0.0
     below = 0.0
     for b in range(_MAD_BINS):
-        if below + counts[b] >= 0.5 * kept:
-            return (b + (0.5 * kept - below) / counts[b]) / scale
-        below += counts[b]
+        count = float(counts[b])
+        if below + count >= 0.5 * kept:
+            return (b + (0.5 * kept - below) / count) / scale
+        below += count
     return limit
 
 
@@ -306,7 +307,7 @@ def background_subtracted(data, level, tile_px, above):
     rows, down = _across(level, tile_px, height, width)
     out = np.empty((height, width), dtype=np.float32)
     back = np.empty(width)
-    over = np.empty(height * width, dtype=np.int64)  # only the pages written are touched
+    over = np.empty(max(1024, height * width // 256), dtype=np.int64)  # grown when full
     n = 0
     limit = np.empty(width, dtype=np.float32)
     limit[:] = above
@@ -321,6 +322,8 @@ def background_subtracted(data, level, tile_px, above):
                 continue
             for c in range(start, stop):
                 if row[c] > above:
+                    if n == len(over):
+                        over = np.concatenate((over, np.empty_like(over)))
                     over[n] = r * width + c
                     n += 1
     return out, over[:n].copy()
