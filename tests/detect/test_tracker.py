@@ -145,7 +145,7 @@ def test_the_kernels_give_seps_and_numpys_numbers(frame):
 
 def test_the_callers_image_is_left_unchanged(frame):
     """A float32 array is detected in place, not copied, on either path: its pixels are left
-    as they were."""
+    as they were, and a read-only one gives the same stars."""
     for image in (frame.image, _with_tree_line(frame.image, 1)):
         pixels = np.asarray(image, dtype=np.float32)
         pixels[100, 200] = 60000.0  # a hot pixel, which detection replaces in its own copy
@@ -153,3 +153,5 @@ def test_the_callers_image_is_left_unchanged(frame):
         found = detect_stars(pixels)
         assert found.n_hot >= 1
         assert np.array_equal(pixels, before)
+        pixels.setflags(write=False)  # and a read-only one (a memory-mapped file's) is taken
+        assert np.array_equal(detect_stars(pixels).xy, found.xy)
