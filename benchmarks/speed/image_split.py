@@ -46,7 +46,7 @@ from starnav.detect.read import read_image
 from starnav.pipeline import image
 
 STAGES = (  # (label, module, attribute): wrapped where the callers look them up
-    ("detection (`detect_stars`)", stars, "detect_stars"),
+    ("detection (`detect_stars`)", image, "detect_stars"),
     ("- tile statistics (kernel)", kernels, "tile_statistics"),
     ("- background subtracted, hot-pixel candidates (kernel)", kernels, "background_subtracted"),
     ("- sources: filter, threshold, deblending (kernel)", kernels, "find_sources"),
