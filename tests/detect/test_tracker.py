@@ -128,7 +128,8 @@ def test_the_kernels_give_seps_and_numpys_numbers(frame):
             assert np.max(np.abs(np.concatenate([x - xs, y - ys]))) < 1e-9
     level = np.float32(5.0 * found.rms)
     for sky in (100.0, 0.0):  # few pixels over the level; most (the list grown many times)
-        residual, above = kernels.background_subtracted(data, np.full((16, 16), sky), 64, level)
+        residual = np.empty_like(data)
+        above = kernels.background_subtracted(data, np.full((16, 16), sky), 64, level, residual)
         assert np.array_equal(residual, data - np.float32(sky))
         assert np.array_equal(above, np.flatnonzero(residual > level))
     assert len(above) > data.size // 2
@@ -155,3 +156,14 @@ def test_the_callers_image_is_left_unchanged(frame):
         assert np.array_equal(pixels, before)
         pixels.setflags(write=False)  # and a read-only one (a memory-mapped file's) is taken
         assert np.array_equal(detect_stars(pixels).xy, found.xy)
+
+
+def test_the_arrays_kept_from_frame_to_frame_leave_no_trace(frame):
+    """Detection in the arrays a thread keeps (the pixels as float32, the residual) gives
+    the stars of a fresh detection, whatever was detected before in them: another frame, one
+    of another size, the real-sky path's."""
+    images = [frame.image, _with_tree_line(frame.image, 2), frame.image[:700, :900]]
+    first = [detect_stars(image) for image in images]
+    for image, found in zip(images[::-1], first[::-1], strict=True):
+        again = detect_stars(image)
+        assert np.array_equal(again.xy, found.xy) and np.array_equal(again.flux, found.flux)

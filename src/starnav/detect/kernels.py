@@ -299,13 +299,13 @@ def _map_row(rows, down, r, out):
 
 
 @njit(cache=True)
-def background_subtracted(data, level, tile_px, above):
-    """(``data`` less its background, float32: the tile ``level``s interpolated bilinearly
-    between tile centres (constant beyond the outer ones); the flat indices, in raster
-    order, of its pixels over ``above``: the candidates ``starnav.detect.hot`` judges)."""
+def background_subtracted(data, level, tile_px, above, out):
+    """``data`` less its background, into ``out`` (float32, its shape): the tile ``level``s
+    interpolated bilinearly between tile centres (constant beyond the outer ones); returns
+    the flat indices, in raster order, of its pixels over ``above``: the candidates
+    ``starnav.detect.hot`` judges."""
     height, width = data.shape
     rows, down = _across(level, tile_px, height, width)
-    out = np.empty((height, width), dtype=np.float32)
     back = np.empty(width)
     over = np.empty(max(1024, height * width // 256), dtype=np.int64)  # grown when full
     n = 0
@@ -326,7 +326,7 @@ def background_subtracted(data, level, tile_px, above):
                         over = np.concatenate((over, np.empty_like(over)))
                     over[n] = r * width + c
                     n += 1
-    return out, over[:n].copy()
+    return over[:n].copy()
 
 
 @njit(cache=True, inline="always")

@@ -98,11 +98,14 @@ def tracker_sources(
     min_area_px: int,
     saturation: float | None,
     reject_hot_pixels: bool,
+    residual: np.ndarray | None = None,
 ) -> TrackerSources | None:
     """The sources of ``data`` (float32, every pixel finite, ``low`` its minimum; left
     unchanged) when the frame is clean (the module's tests), else None: ``threshold_sigma``
     in the noise of sep's 3 x 3 filtered image, ``min_area_px`` filtered pixels,
-    ``saturation`` the sensor's saturation level (None: none)."""
+    ``saturation`` the sensor's saturation level (None: none). ``residual``: the array
+    (float32, the shape of ``data``) the image less its background is written to, which
+    becomes ``TrackerSources.data`` (None: a new one)."""
     from starnav.detect import kernels
 
     height, width = data.shape
@@ -120,7 +123,9 @@ def tracker_sources(
     sky, noise = float(np.median(level)), float(np.median(rms))
     # in float32, as numpy compares the float32 pixels with it
     hot_level = np.float32(threshold_sigma * noise if reject_hot_pixels else np.inf)
-    residual, above = kernels.background_subtracted(data, level, TILE_PX, hot_level)
+    if residual is None:
+        residual = np.empty(data.shape, dtype=np.float32)
+    above = kernels.background_subtracted(data, level, TILE_PX, hot_level, residual)
     # one threshold on a noise within 25 % of uniform, as the real-sky path; else a map
     uniform = rms.max() <= _UNIFORM_NOISE * rms.min()
     threshold = threshold_sigma * FILTER_NOISE * (np.full_like(rms, noise) if uniform else rms)
