@@ -50,7 +50,7 @@ STAGES = (  # (label, module, attribute): wrapped where the callers look them up
     ("- tile statistics (kernel)", kernels, "tile_statistics"),
     ("- background subtracted, hot-pixel candidates (kernel)", kernels, "background_subtracted"),
     ("- sources: filter, threshold, deblending (kernel)", kernels, "find_sources"),
-    ("- PSF: half-light radii (kernel)", tracker, "psf_sigma_from"),
+    ("- PSF: half-light radii (kernel) and their mode", tracker, "psf_sigma_from"),
     ("- centroids and photometry of the likely stars", stars, "_tracker_detections"),
     ("identification and fit (`solve_stars`)", image, "solve_stars"),
 )
