@@ -8,6 +8,7 @@ import dataclasses
 
 import numpy as np
 import pytest
+import sep
 from scipy.spatial import cKDTree
 
 from starnav.catalog import load_catalog
@@ -105,3 +106,64 @@ def test_the_fast_path_keeps_the_options(frame):
     assert found.n_hot >= 1
     assert not np.any(np.hypot(*(found.xy - [200.5, 100.5]).T) < 1.0)
     assert np.all(np.diff(found.snr[~found.saturated]) <= 0)
+
+
+def test_the_kernels_give_seps_and_numpys_numbers(frame):
+    """The windowed centroids are ``sep.winpos``'s (subpix=1) but for their last bits (1e-9
+    px), from the isophotal barycentres and from 0.7 px off them, for the window of either
+    path and a wide one; the hot-pixel candidates listed while the background is subtracted
+    are the pixels ``np.flatnonzero`` finds over the level; the tiles' 3 x 3 medians are
+    ``detect.background``'s; the half-light radii are ``sep.flux_radius``'s."""
+    from starnav.detect import kernels
+    from starnav.detect.background import median_3x3
+
+    data = np.asarray(frame.image, dtype=np.float32)
+    found = tracker_sources(data, float(data.min()), 5.0, 3, None, True)
+    x0, y0 = found.objects["x"], found.objects["y"]
+    for sigma in (np.hypot(found.psf_sigma_px, 1.0), 1.0, 3.0):
+        window = np.full(len(x0), sigma)
+        for dx in (0.0, 0.7):
+            x, y = kernels.windowed_centroids(found.data, x0 + dx, y0 - dx, window)
+            xs, ys, _ = sep.winpos(found.data, x0 + dx, y0 - dx, window, subpix=1)
+            assert np.max(np.abs(np.concatenate([x - xs, y - ys]))) < 1e-9
+    level = np.float32(5.0 * found.rms)
+    for sky in (100.0, 0.0):  # few pixels over the level; most (the list grown many times)
+        residual = np.empty_like(data)
+        above = kernels.background_subtracted(data, np.full((16, 16), sky), 64, level, residual)
+        assert np.array_equal(residual, data - np.float32(sky))
+        assert np.array_equal(above, np.flatnonzero(residual > level))
+    assert len(above) > data.size // 2
+    mesh = np.random.default_rng(1).normal(size=(11, 7))
+    assert np.array_equal(kernels.median_3x3(mesh), median_3x3(mesh))
+    # half-light radii: sep.flux_radius's (subpix 5) to the last bit, out to the PSF's
+    # sizes and beyond 45 px (where pixels away from the annuli's edges are not split)
+    x, y = np.ascontiguousarray(x0), np.ascontiguousarray(y0)
+    size = np.sqrt(found.objects["x2"] + found.objects["y2"])
+    for rmax in (np.clip(3.0 * size, 3.0, 50.0), np.full(len(x), 47.3)):
+        radii, _ = sep.flux_radius(found.data, x, y, rmax, 0.5, subpix=5)
+        assert np.array_equal(kernels.half_light_radii(found.data, x, y, rmax, 5), radii)
+
+
+def test_the_callers_image_is_left_unchanged(frame):
+    """A float32 array is detected in place, not copied, on either path: its pixels are left
+    as they were, and a read-only one gives the same stars."""
+    for image in (frame.image, _with_tree_line(frame.image, 1)):
+        pixels = np.asarray(image, dtype=np.float32)
+        pixels[100, 200] = 60000.0  # a hot pixel, which detection replaces in its own copy
+        before = pixels.copy()
+        found = detect_stars(pixels)
+        assert found.n_hot >= 1
+        assert np.array_equal(pixels, before)
+        pixels.setflags(write=False)  # and a read-only one (a memory-mapped file's) is taken
+        assert np.array_equal(detect_stars(pixels).xy, found.xy)
+
+
+def test_the_arrays_kept_from_frame_to_frame_leave_no_trace(frame):
+    """Detection in the arrays a thread keeps (the pixels as float32, the residual) gives
+    the stars of a fresh detection, whatever was detected before in them: another frame, one
+    of another size, the real-sky path's."""
+    images = [frame.image, _with_tree_line(frame.image, 2), frame.image[:700, :900]]
+    first = [detect_stars(image) for image in images]
+    for image, found in zip(images[::-1], first[::-1], strict=True):
+        again = detect_stars(image)
+        assert np.array_equal(again.xy, found.xy) and np.array_equal(again.flux, found.flux)

@@ -19,12 +19,14 @@ import numpy as np
 NEIGHBOUR_FRACTION = 0.1
 
 
-def clean_hot_pixels(data: np.ndarray, level: float) -> int:
+def clean_hot_pixels(data: np.ndarray, level: float, above: np.ndarray | None = None) -> int:
     """Replace, in place, the isolated single pixels of background-subtracted ``data`` above
-    ``level`` (image units) by the mean of their four neighbours; how many were replaced."""
+    ``level`` (image units) by the mean of their four neighbours; how many were replaced.
+    ``above``: the flat indices of the pixels above ``level``, in raster order, when the
+    caller has them (``starnav.detect.kernels.background_subtracted`` lists them)."""
     height, width = data.shape
     flat = data.reshape(-1)
-    cand = np.flatnonzero(flat > level)
+    cand = np.flatnonzero(flat > level) if above is None else above
     if len(cand) == 0:
         return 0
     row, col = np.divmod(cand, width)

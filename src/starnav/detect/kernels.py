@@ -1,7 +1,11 @@
 """The kernels of a clean star-tracker frame's detection (numba): its background on tiles,
 its sources (sep's 3 x 3 matched filter, a threshold, 8-connected pixels split at their
 saddles) and each source's photometry against its own annulus. ``starnav.detect.tracker``
-is their Python face; they are imported on first use (numba takes ~0.2 s to load).
+is their Python face; they are imported on first use (numba takes ~0.2 s to load). Two of
+them give sep's own numbers without its cost per call, for either path's unmasked images:
+the windowed centroid (``windowed_centroids``, ``sep.winpos``) and the half-light radius
+(``half_light_radii``, ``sep.flux_radius``), which ``starnav.detect.stars`` and
+``starnav.detect.psf`` call.
 
 Pixel coordinates here are sep's: pixel centres at integers.
 """
@@ -21,6 +25,16 @@ _MAD_BINS = 256  # of the histogram a tile's median absolute deviation is read f
 # sep's deblending, as ``starnav.detect.stars`` calls it: 16 levels, contrast 0.005
 DEBLEND_LEVELS = 16
 DEBLEND_CONTRAST = 0.005
+# SExtractor's windowed centroid (``windowed_centroids``)
+WINDOW_SIGMAS = 4.0
+_WINDOW_STEPS = 16
+_WINDOW_OFFSET_MIN_PX = 1e-4
+_WINDOW_GAIN = 2.0
+_CHUNK_PX = 64  # a row's stretch checked at once for pixels over a threshold
+# sep.flux_radius's annuli (``half_light_radii``): how many, and how close (px) to an edge a
+# pixel's centre must come to be split into samples
+_RADIUS_BINS = 64
+_BIN_MARGIN_PX = 0.7072
 # status of ``find_sources``
 FOUND, TOO_MANY_PIXELS, PLATEAU = 0, 1, 2
 
@@ -85,20 +99,9 @@ def _level_rms(values, dx, dy, n, scratch):
         rms = values[:n].std()
     gx, gy = 0.0, 0.0
     for _ in range(3):
-        count, sx, sy, sxx, syy = 0.0, 0.0, 0.0, 0.0, 0.0
-        total, tx, ty, squares = 0.0, 0.0, 0.0, 0.0
-        for i in range(n):
-            d = values[i] - level - gx * dx[i] - gy * dy[i]
-            kept = 1.0 if abs(d) <= 3.0 * rms else 0.0
-            count += kept
-            sx += kept * dx[i]
-            sy += kept * dy[i]
-            sxx += kept * dx[i] * dx[i]
-            syy += kept * dy[i] * dy[i]
-            total += kept * d
-            tx += kept * d * dx[i]
-            ty += kept * d * dy[i]
-            squares += kept * d * d
+        count, sx, sy, sxx, syy, total, tx, ty, squares = _clipped_sums(
+            values[:n], dx[:n], dy[:n], level, gx, gy, 3.0 * rms
+        )
         if count < 4:
             break
         # the plane's correction, as if the kept samples were symmetric about their mean
@@ -120,25 +123,49 @@ def _level_rms(values, dx, dy, n, scratch):
     return level, rms
 
 
+@njit(cache=True, fastmath={"reassoc", "nsz"})
+def _clipped_sums(values, dx, dy, level, gx, gy, limit):
+    """Over the ``values`` within ``limit`` of the plane level + gx dx + gy dy, their residual
+    d from it: the sums of 1, dx, dy, dx², dy², d, d dx, d dy, d², added in whatever order
+    the compiler vectorizes them in (``_level_rms``'s clipping; the order changes the sums
+    in their last bits only)."""
+    count, sx, sy, sxx, syy = 0.0, 0.0, 0.0, 0.0, 0.0
+    total, tx, ty, squares = 0.0, 0.0, 0.0, 0.0
+    for i in range(len(values)):
+        d = values[i] - level - gx * dx[i] - gy * dy[i]
+        kept = 1.0 if abs(d) <= limit else 0.0
+        count += kept
+        sx += kept * dx[i]
+        sy += kept * dy[i]
+        sxx += kept * dx[i] * dx[i]
+        syy += kept * dy[i] * dy[i]
+        total += kept * d
+        tx += kept * d * dx[i]
+        ty += kept * d * dy[i]
+        squares += kept * d * d
+    return count, sx, sy, sxx, syy, total, tx, ty, squares
+
+
 @njit(cache=True)
 def _abs_median(values, dx, dy, n, level, gx, gy, limit):
     """The median of |v - plane| over the values within ``limit`` of the plane level + gx
     dx + gy dy: from a histogram of ``_MAD_BINS`` bins up to ``limit``, linear within the
     median's bin (to ~1/1000 of ``limit``: a selection's unpredictable branches cost more);
     0 for none."""
-    counts = np.zeros(_MAD_BINS + 1)
+    counts = np.zeros(_MAD_BINS + 1, dtype=np.int64)  # whole numbers: a shorter latency
     scale = _MAD_BINS / limit if limit > 0 else 0.0
     for i in range(n):
         bin_ = min(int(abs(values[i] - level - gx * dx[i] - gy * dy[i]) * scale), _MAD_BINS)
-        counts[bin_] += 1.0
-    kept = counts[:_MAD_BINS].sum()
+        counts[bin_] += 1
+    kept = float(counts[:_MAD_BINS].sum())
     if kept == 0.0 or scale == 0.0:
         return 0.0
     below = 0.0
     for b in range(_MAD_BINS):
-        if below + counts[b] >= 0.5 * kept:
-            return (b + (0.5 * kept - below) / counts[b]) / scale
-        below += counts[b]
+        count = float(counts[b])
+        if below + count >= 0.5 * kept:
+            return (b + (0.5 * kept - below) / count) / scale
+        below += count
     return limit
 
 
@@ -190,6 +217,24 @@ def tile_statistics(data, tile_px, stride, low):
             if m > 1 and i % 2 == 0 and j % 2 == 0:
                 white[i, j] = _level_rms(steps, flat, flat, m, scratch)[1] / math.sqrt(2.0)
     return level, rms, white, at_low
+
+
+@njit(cache=True)
+def median_3x3(mesh):
+    """The median of each cell's 3 x 3 neighbourhood, the edge cells repeated beyond the
+    mesh (``starnav.detect.background.median_3x3``'s numbers, without its numpy calls)."""
+    ny, nx = mesh.shape
+    out = np.empty((ny, nx))
+    window = np.empty(9)
+    for i in range(ny):
+        for j in range(nx):
+            k = 0
+            for di in (-1, 0, 1):
+                for dj in (-1, 0, 1):
+                    window[k] = mesh[min(max(i + di, 0), ny - 1), min(max(j + dj, 0), nx - 1)]
+                    k += 1
+            out[i, j] = _select(window, 9, 4)
+    return out
 
 
 @njit(cache=True)
@@ -254,18 +299,45 @@ def _map_row(rows, down, r, out):
 
 
 @njit(cache=True)
-def background_subtracted(data, level, tile_px):
-    """``data`` less its background, float32: the tile ``level``s interpolated bilinearly
-    between tile centres (constant beyond the outer ones)."""
+def background_subtracted(data, level, tile_px, above, out):
+    """``data`` less its background, into ``out`` (float32, its shape): the tile ``level``s
+    interpolated bilinearly between tile centres (constant beyond the outer ones); returns
+    the flat indices, in raster order, of its pixels over ``above``: the candidates
+    ``starnav.detect.hot`` judges."""
     height, width = data.shape
     rows, down = _across(level, tile_px, height, width)
-    out = np.empty((height, width), dtype=np.float32)
     back = np.empty(width)
+    over = np.empty(max(1024, height * width // 256), dtype=np.int64)  # grown when full
+    n = 0
+    limit = np.empty(width, dtype=np.float32)
+    limit[:] = above
     for r in range(height):
         _map_row(rows, down, r, back)
+        row = out[r]
         for c in range(width):
-            out[r, c] = data[r, c] - back[c]
-    return out
+            row[c] = data[r, c] - back[c]
+        for start in range(0, width, _CHUNK_PX):
+            stop = min(width, start + _CHUNK_PX)
+            if _count_over(row[start:stop], limit[start:stop]) == 0:
+                continue
+            for c in range(start, stop):
+                if row[c] > above:
+                    if n == len(over):
+                        over = np.concatenate((over, np.empty_like(over)))
+                    over[n] = r * width + c
+                    n += 1
+    return over[:n].copy()
+
+
+@njit(cache=True, inline="always")
+def _count_over(values, limits):
+    """How many ``values`` exceed their ``limits``: a loop without branches, which the
+    compiler vectorizes, so that the pixels over a threshold (few) are looked for only in
+    the stretches of a row that hold some."""
+    count = 0
+    for c in range(len(values)):
+        count += values[c] > limits[c]
+    return count
 
 
 @njit(cache=True, inline="always")
@@ -311,6 +383,8 @@ def _pixels_above(data, threshold, tile_px, capacity):
     filtered = np.empty(width, dtype=np.float32)
     level = np.empty(width)
     maps, down = _across(threshold, tile_px, height, width)
+    constant = threshold.min() == threshold.max()  # its interpolation: that value everywhere
+    level[:] = threshold[0, 0]
     _row_sums(data, -1, above)
     _row_sums(data, 0, here)
     n = 0
@@ -319,24 +393,29 @@ def _pixels_above(data, threshold, tile_px, capacity):
         two, sixteenth = np.float32(2.0), np.float32(1.0 / 16.0)
         for c in range(width):
             filtered[c] = (above[c] + two * here[c] + below[c]) * sixteenth
-        _map_row(maps, down, r, level)
+        if not constant:
+            _map_row(maps, down, r, level)
         now, before = r % 2, (r + 1) % 2
-        for c in range(width):
-            f = filtered[c]
-            if not f > level[c]:
+        for start in range(0, width, _CHUNK_PX):
+            stop = min(width, start + _CHUNK_PX)
+            if _count_over(filtered[start:stop], level[start:stop]) == 0:
                 continue
-            if n == capacity:
-                return rows, cols, values, parent, -1
-            rows[n], cols[n], values[n], parent[n] = r, c, f, n
-            # 8-connected neighbours seen before: left, and the three above
-            if c > 0 and stamp[now, c - 1] == r:
-                _join(parent, n, index[now, c - 1])
-            for dc in (-1, 0, 1):
-                cc = c + dc
-                if 0 <= cc < width and stamp[before, cc] == r - 1:
-                    _join(parent, n, index[before, cc])
-            index[now, c], stamp[now, c] = n, r
-            n += 1
+            for c in range(start, stop):
+                f = filtered[c]
+                if not f > level[c]:
+                    continue
+                if n == capacity:
+                    return rows, cols, values, parent, -1
+                rows[n], cols[n], values[n], parent[n] = r, c, f, n
+                # 8-connected neighbours seen before: left, and the three above
+                if c > 0 and stamp[now, c - 1] == r:
+                    _join(parent, n, index[now, c - 1])
+                for dc in (-1, 0, 1):
+                    cc = c + dc
+                    if 0 <= cc < width and stamp[before, cc] == r - 1:
+                        _join(parent, n, index[before, cc])
+                index[now, c], stamp[now, c] = n, r
+                n += 1
         above, here, below = here, below, above
     for i in range(n):
         parent[i] = _find(parent, i)
@@ -505,6 +584,128 @@ def find_sources(data, threshold, tile_px, min_area, capacity, plateau_px):
 
 
 @njit(cache=True)
+def windowed_centroids(data, x, y, sigma):
+    """SExtractor's windowed centroids (``XWIN_IMAGE``, ``YWIN_IMAGE``; ``sep.winpos`` with
+    ``subpix=1`` gives the same numbers but for their last bits: the window's Gaussian is
+    taken as the product of its factors along the row and the column, a tenth of the
+    exponentials) of the sources starting at (``x``, ``y``) in
+    background-subtracted ``data``, each with a Gaussian window of ``sigma`` px: the pixels
+    whose centres lie within ``WINDOW_SIGMAS`` sigmas of the current position, weighted by
+    the window, move it by ``_WINDOW_GAIN`` times their weighted mean offset (exact for a
+    Gaussian star), up to ``_WINDOW_STEPS`` times, until that mean offset is under
+    ``_WINDOW_OFFSET_MIN_PX`` or the weighted sum is not positive (the position reached is
+    kept)."""
+    height, width = data.shape
+    x_out, y_out = x.copy(), y.copy()
+    across = np.empty(2 * math.ceil(WINDOW_SIGMAS * sigma.max()) + 2 if len(x) else 0)
+    min_offset2 = _WINDOW_OFFSET_MIN_PX * _WINDOW_OFFSET_MIN_PX
+    for s in range(len(x)):
+        xc, yc = x[s], y[s]
+        radius = WINDOW_SIGMAS * sigma[s]
+        radius2 = radius * radius
+        inv_two_sigma2 = 1.0 / (2.0 * sigma[s] * sigma[s])
+        for _ in range(_WINDOW_STEPS):
+            total, sum_x, sum_y = 0.0, 0.0, 0.0
+            top, bottom = max(0, math.ceil(yc - radius)), min(height, math.floor(yc + radius) + 1)
+            left, right = max(0, math.ceil(xc - radius)), min(width, math.floor(xc + radius) + 1)
+            for c in range(left, right):
+                across[c - left] = math.exp(-((c - xc) ** 2) * inv_two_sigma2)
+            for r in range(top, bottom):
+                dy = r - yc
+                down = math.exp(-dy * dy * inv_two_sigma2)
+                for c in range(left, right):
+                    dx = c - xc
+                    if dx * dx + dy * dy < radius2:
+                        w = float(data[r, c]) * (down * across[c - left])
+                        total += w
+                        sum_x += w * dx
+                        sum_y += w * dy
+            if not total > 0.0:
+                break
+            mean_x, mean_y = sum_x / total, sum_y / total
+            xc += mean_x * _WINDOW_GAIN
+            yc += mean_y * _WINDOW_GAIN
+            if mean_x * mean_x + mean_y * mean_y < min_offset2:
+                break
+        x_out[s], y_out[s] = xc, yc
+    return x_out, y_out
+
+
+@njit(cache=True)
+def half_light_radii(data, x, y, rmax, subpix):
+    """Per source at (``x``, ``y``) of background-subtracted ``data``: the radius (px)
+    within which half the light inside ``rmax`` lies, as ``sep.flux_radius(data, x, y, rmax,
+    0.5, subpix=subpix)`` finds it (the same numbers): the pixels whose centres lie within
+    ``rmax`` + 1.5 px, each split into ``subpix`` x ``subpix`` samples (all but those whose
+    centre's distance lies farther than ``_BIN_MARGIN_PX`` from every edge of the
+    ``_RADIUS_BINS`` annuli of equal width out to ``rmax``), summed per annulus; the sums
+    accumulated outwards and the radius where they reach half of the last interpolated
+    linearly within its annulus."""
+    height, width = data.shape
+    radii = np.empty(len(x))
+    sums = np.empty(_RADIUS_BINS)
+    scale = 1.0 / subpix
+    scale2 = scale * scale
+    offset = 0.5 * (scale - 1.0)
+    for s in range(len(x)):
+        xs, ys = x[s], y[s]
+        r_out = rmax[s] + 1.5
+        r_out2 = r_out * r_out
+        step = rmax[s] / _RADIUS_BINS
+        per_px = 1.0 / step
+        sums[:] = 0.0
+        top, bottom = max(0, math.ceil(ys - r_out)), min(height, math.floor(ys + r_out) + 1)
+        left, right = max(0, math.ceil(xs - r_out)), min(width, math.floor(xs + r_out) + 1)
+        for r in range(top, bottom):
+            for c in range(left, right):
+                dx, dy = c - xs, r - ys
+                d2 = dx * dx + dy * dy
+                if not d2 < r_out2:
+                    continue
+                pix = float(data[r, c])
+                distance = math.sqrt(d2)
+                into = np.fmod(distance, step)
+                if into < _BIN_MARGIN_PX or into > step - _BIN_MARGIN_PX:
+                    sy = dy + offset
+                    for _ in range(subpix):
+                        sx = dx + offset
+                        sy2 = sy * sy
+                        for _ in range(subpix):
+                            j = int(math.sqrt(sx * sx + sy2) * per_px)
+                            if j < _RADIUS_BINS:
+                                sums[j] += scale2 * pix
+                            sx += scale
+                        sy += scale
+                else:
+                    j = int(distance * per_px)
+                    if j < _RADIUS_BINS:
+                        sums[j] += pix
+        for j in range(1, _RADIUS_BINS):
+            sums[j] += sums[j - 1]
+        radii[s] = _radius_at(sums, rmax[s], 0.5 * sums[_RADIUS_BINS - 1])
+    return radii
+
+
+@njit(cache=True)
+def _radius_at(cumulative, rmax, target):
+    """The radius at which the ``cumulative`` sums of ``half_light_radii``'s annuli out to
+    ``rmax`` reach ``target``, linear within an annulus (0 when the first is not positive
+    and the target is not either; ``rmax`` when none reaches it)."""
+    n = len(cumulative)
+    step = rmax / n
+    i = 0
+    while i < n and cumulative[i] < target:
+        i += 1
+    if i == 0:
+        if target <= 0.0 or cumulative[0] == 0.0:
+            return 0.0
+        return step * target / cumulative[0]
+    if i == n:
+        return rmax
+    return step * (i + (target - cumulative[i - 1]) / (cumulative[i] - cumulative[i - 1]))
+
+
+@njit(cache=True)
 def _plane(values, dx, dy, keep):
     """(c0, cx, cy): the plane c0 + cx dx + cy dy through the ``keep`` values, fitted as if
     their offsets were symmetric about the source (``starnav.detect.photometry._plane``)."""
@@ -580,9 +781,11 @@ def annulus_photometry(data, x, y, r_ap, r_in, r_out):
                 keep[i] = abs(rest[i] - centre) <= 3.0 * spread
             c0, cx, cy, offset, mad = _plane_and_mad(ring, dx, dy, keep, rest, scratch, m)
             noise[s] = _MAD_TO_SIGMA * mad
-        total = 0.0
-        for r in range(max(0, yc - half), min(height, yc + half + 1)):
-            for c in range(max(0, xc - half), min(width, xc + half + 1)):
+        total = 0.0  # over the aperture's own box (the pixels of the annulus's, in order)
+        top, bottom = max(0, math.ceil(y[s] - r_ap)), min(height, math.floor(y[s] + r_ap) + 1)
+        left, right = max(0, math.ceil(x[s] - r_ap)), min(width, math.floor(x[s] + r_ap) + 1)
+        for r in range(top, bottom):
+            for c in range(left, right):
                 ox, oy = c - x[s], r - y[s]
                 if ox * ox + oy * oy < r_ap * r_ap:
                     total += data[r, c] - c0 - cx * ox - cy * oy - offset

@@ -28,6 +28,7 @@ _BIN_DEX = 0.05
 _WINDOW_DEX = 0.1
 _ROUND = 2.0  # a / b above this: a trail, a blend or an edge, not a PSF sample
 _PEAK_RATIO = 2.0 / 3.0
+_SUBPIX = 5  # samples per pixel side of sep's flux_radius (its default)
 
 
 def measure_psf_sigma(
@@ -68,7 +69,12 @@ def psf_sigma_from(data: np.ndarray, objects: np.ndarray, mask: np.ndarray | Non
     size = np.sqrt(objects["x2"] + objects["y2"])
     rmax = np.clip(3.0 * size, 3.0, 50.0)
     x, y = np.ascontiguousarray(objects["x"]), np.ascontiguousarray(objects["y"])
-    r_half, _ = sep.flux_radius(data, x, y, rmax, 0.5, mask=mask)
+    if mask is None:  # sep.flux_radius's numbers (subpix 5), without its cost per sample
+        from starnav.detect import kernels
+
+        r_half = kernels.half_light_radii(data, x, y, rmax, _SUBPIX)
+    else:
+        r_half, _ = sep.flux_radius(data, x, y, rmax, 0.5, mask=mask, subpix=_SUBPIX)
     r_half = r_half[np.isfinite(r_half) & (r_half > 0)]
     if len(r_half) < 3:
         return DEFAULT_SIGMA_PX

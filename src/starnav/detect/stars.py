@@ -65,11 +65,18 @@ first place. ``keep_saturated=False`` drops them (a blooming CCD smears them alo
 
 Coordinates: sep puts pixel centres at integer coordinates; ours (docs/conventions.md) put the
 top-left pixel's centre at (0.5, 0.5), so 0.5 is added to both.
+
+sep's windowed centroid and half-light radius are computed by kernels with its numbers
+(``starnav.detect.kernels``) when no pixel is masked; with a mask, by sep. A float32 image
+is not copied until a step writes to it (the real-sky path's); the caller's pixels are left
+as they were. The float32 pixels of an image of another type and the fast path's residual
+go to arrays the thread keeps from one image to the next (``_frame_buffer``).
 """
 
 from __future__ import annotations
 
 import math
+import threading
 from dataclasses import dataclass
 
 import numpy as np
@@ -189,21 +196,28 @@ def detect_stars(
     gives no stars.
     """
     _check_options(threshold_sigma, max_stars, min_area_px, saturation, psf_sigma_px)
-    data, mask, dtype = _float_image(image)
+    data, mask, dtype, (low, high) = _float_image(image)
     height, width = data.shape
     if mask is not None and mask.all():
         return _empty(width, height, psf_sigma_px)
-    low, high = _finite_range(data, mask)
     if not high > low:
         return _empty(width, height, psf_sigma_px, float(low))
     if saturation is None:
         saturation = _infer_saturation(data, dtype, high)
     if mask is None and psf_sigma_px is None:  # a clean star-tracker frame: the fast path
         found = tracker_sources(
-            data, low, threshold_sigma, min_area_px, saturation, reject_hot_pixels
+            data,
+            low,
+            threshold_sigma,
+            min_area_px,
+            saturation,
+            reject_hot_pixels,
+            residual=_frame_buffer("residual", data.shape),
         )
         if found is not None:
             return _tracker_detections(found, threshold_sigma, max_stars, keep_saturated)
+    if np.may_share_memory(data, image):  # the caller's pixels: the steps below write
+        data = data.copy()
 
     clipped = _clipped(data, mask, low)
     background = estimate_background(data, mask)
@@ -534,10 +548,15 @@ def _rms_at_peaks(background: Background, objects: np.ndarray) -> np.ndarray:
     return background.rms_at(objects["xpeak"].astype(np.intp), objects["ypeak"].astype(np.intp))
 
 
-def _float_image(image: np.ndarray) -> tuple[np.ndarray, np.ndarray | None, np.dtype]:
-    """The image as a C-ordered float32 copy in native byte order (for sep), with its
-    non-finite pixels set to 0 and masked (mask None when every pixel is finite), and the
-    dtype it came in; ``ImageError`` for what is not a 2-D image of at least 3 x 3 numbers."""
+def _float_image(
+    image: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray | None, np.dtype, tuple[float, float]]:
+    """The image as a C-ordered float32 array in native byte order (for sep: the caller's own
+    when it is one and every pixel is finite, which the caller must not write to; else this
+    thread's ``_frame_buffer``, or a new array when a pixel is not finite) with its
+    non-finite pixels set to 0 and masked (mask None when every pixel is finite), the dtype
+    it came in and the range of its finite pixels (``_finite_range``; 0, 0 for none);
+    ``ImageError`` for what is not a 2-D image of at least 3 x 3 numbers."""
     raw = np.asarray(image)
     if raw.ndim != 2 or raw.size == 0:
         raise ImageError(f"an image must be a 2-D array, not empty; got shape {raw.shape}")
@@ -546,14 +565,35 @@ def _float_image(image: np.ndarray) -> tuple[np.ndarray, np.ndarray | None, np.d
     height, width = raw.shape
     if height < 3 or width < 3:
         raise ImageError(f"image of {width} x {height} px is too small to detect stars in")
-    data = np.array(raw, dtype=np.float32, order="C")  # a copy, native byte order, for sep
-    mask = None
-    if raw.dtype.kind == "f":
-        finite = np.isfinite(data)
-        if not finite.all():
-            mask = ~finite
-            data[mask] = 0.0
-    return data, mask, raw.dtype
+    data = raw
+    if not (raw.dtype == np.float32 and raw.dtype.isnative and raw.flags.c_contiguous):
+        data = _frame_buffer("pixels", raw.shape)
+        np.copyto(data, raw, casting="unsafe")  # np.asarray(raw, dtype=np.float32)'s values
+    low, high = data.min(), data.max()  # NaN or infinite when a pixel is
+    if np.isfinite(low) and np.isfinite(high):
+        return data, None, raw.dtype, (float(low), float(high))
+    finite = np.isfinite(data)
+    mask = ~finite
+    data = np.where(finite, data, np.float32(0.0))
+    return data, mask, raw.dtype, _finite_range(data, mask) if finite.any() else (0.0, 0.0)
+
+
+_FRAME_BUFFERS = threading.local()
+
+
+def _frame_buffer(name: str, shape: tuple[int, int]) -> np.ndarray:
+    """This thread's float32 array ``name`` of ``shape``, kept from one image to the next:
+    an image's pixels as float32 (``_float_image``) and its residual on the fast path
+    (``tracker_sources``). A new 4-16 MB array every frame is memory the allocator gives back
+    to the system between frames and the system zeroes again page by page when it is asked
+    for it (500-1000 page faults, about 1.5 ms of a 1024 px frame). Their contents live only
+    within one ``detect_stars`` call (detection does not call itself, and no result holds
+    them); the memory stays with the thread, for the last image size it detected."""
+    buffers = _FRAME_BUFFERS.__dict__
+    buffer = buffers.get(name)
+    if buffer is None or buffer.shape != shape:
+        buffer = buffers[name] = np.empty(shape, dtype=np.float32)
+    return buffer
 
 
 def _extract(
@@ -655,8 +695,13 @@ def _centroids(
     """Windowed centroids (sep's pixel convention) of the sources, Gaussian window of sigma
     sqrt(``sigma``² + 1 px²)."""
     window = np.full(len(objects), math.sqrt(sigma**2 + 1.0))
-    # subpix=1: the window is a Gaussian, so finer sampling of its edge changes nothing
-    x, y, _ = sep.winpos(data, objects["x"], objects["y"], window, mask=mask, subpix=1)
+    x0, y0 = objects["x"].astype(float), objects["y"].astype(float)
+    if mask is None:  # sep.winpos's numbers (subpix=1), without its cost per call
+        from starnav.detect import kernels
+
+        x, y = kernels.windowed_centroids(data, x0, y0, window)
+    else:  # subpix=1: the window is a Gaussian, so finer sampling of its edge changes nothing
+        x, y, _ = sep.winpos(data, x0, y0, window, mask=mask, subpix=1)
     # a faint star deblended from a bright neighbour drags its window towards it: keep
     # sep's isophotal barycentre (of its own pixels) when the window wanders off (< 1 %)
     wandered = ~(np.hypot(x - objects["x"], y - objects["y"]) <= window)

@@ -37,7 +37,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from starnav.detect.background import median_3x3
 from starnav.detect.hot import clean_hot_pixels
 from starnav.detect.photometry import misshapen, zones
 from starnav.detect.psf import DEFAULT_SIGMA_PX, psf_samples, psf_sigma_from
@@ -99,11 +98,14 @@ def tracker_sources(
     min_area_px: int,
     saturation: float | None,
     reject_hot_pixels: bool,
+    residual: np.ndarray | None = None,
 ) -> TrackerSources | None:
     """The sources of ``data`` (float32, every pixel finite, ``low`` its minimum; left
     unchanged) when the frame is clean (the module's tests), else None: ``threshold_sigma``
     in the noise of sep's 3 x 3 filtered image, ``min_area_px`` filtered pixels,
-    ``saturation`` the sensor's saturation level (None: none)."""
+    ``saturation`` the sensor's saturation level (None: none). ``residual``: the array
+    (float32, the shape of ``data``) the image less its background is written to, which
+    becomes ``TrackerSources.data`` (None: a new one)."""
     from starnav.detect import kernels
 
     height, width = data.shape
@@ -111,16 +113,23 @@ def tracker_sources(
         return None
     level, rms, white, at_low = kernels.tile_statistics(data, TILE_PX, ROW_STRIDE, np.float32(low))
     samples = data.size / (2 * ROW_STRIDE)
-    if not _smooth_white_sky(level, rms, white) or at_low >= _CLIPPED_FRACTION * samples:
+    if at_low >= _CLIPPED_FRACTION * samples:
         return None
     # both median-filtered over 3 x 3 tiles, as the real-sky mesh
-    level, rms = median_3x3(level), median_3x3(rms)
+    smooth_level = kernels.median_3x3(level)
+    if not _smooth_white_sky(level, smooth_level, rms, white):
+        return None
+    level, rms = smooth_level, kernels.median_3x3(rms)
     sky, noise = float(np.median(level)), float(np.median(rms))
-    residual = kernels.background_subtracted(data, level, TILE_PX)
+    # in float32, as numpy compares the float32 pixels with it
+    hot_level = np.float32(threshold_sigma * noise if reject_hot_pixels else np.inf)
+    if residual is None:
+        residual = np.empty(data.shape, dtype=np.float32)
+    above = kernels.background_subtracted(data, level, TILE_PX, hot_level, residual)
     # one threshold on a noise within 25 % of uniform, as the real-sky path; else a map
     uniform = rms.max() <= _UNIFORM_NOISE * rms.min()
     threshold = threshold_sigma * FILTER_NOISE * (np.full_like(rms, noise) if uniform else rms)
-    n_hot = clean_hot_pixels(residual, threshold_sigma * noise) if reject_hot_pixels else 0
+    n_hot = clean_hot_pixels(residual, hot_level, above) if reject_hot_pixels else 0
     capacity = max(10_000, int(_CAPACITY_FRACTION * data.size))
     status, npix, flux, moments, peaks = kernels.find_sources(
         residual, threshold, TILE_PX, min_area_px, capacity, _PLATEAU_PX
@@ -147,8 +156,11 @@ def tracker_sources(
     return TrackerSources(objects, saturated, residual, sky, noise, sigma, n_hot)
 
 
-def _smooth_white_sky(level: np.ndarray, rms: np.ndarray, white: np.ndarray) -> bool:
-    """Tests 2 and 3 of the module on the tiles' levels and rms."""
+def _smooth_white_sky(
+    level: np.ndarray, around: np.ndarray, rms: np.ndarray, white: np.ndarray
+) -> bool:
+    """Tests 2 and 3 of the module on the tiles' levels, their medians over 3 x 3 tiles
+    (``around``) and rms."""
     measured = np.isfinite(white)
     if not (np.all(rms > 0) and np.all(white[measured] > 0)):
         return False  # a flat or quantised-away sky: the real-sky path has its floors
@@ -157,7 +169,6 @@ def _smooth_white_sky(level: np.ndarray, rms: np.ndarray, white: np.ndarray) -> 
     typical = np.median(rms)
     if rms.max() > _RMS_ABOVE * typical or rms.min() < typical / _RMS_BELOW:
         return False
-    around = median_3x3(level)
     return bool(np.all(np.abs(level - around) <= _STEP_RMS * rms))
 
 
