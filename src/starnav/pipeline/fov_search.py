@@ -51,6 +51,7 @@ _MAX_CELL_HALF_WIDTH = 0.2  # relative focal-length half-width of a cell at most
 MIN_PATTERN_TOLS = 10.0  # a pattern's longest edge spans at least this many pair tolerances
 _FIRST_LOOKUP = 16  # observed patterns of a band's first look-up when there is a deadline
 _FOCAL_STEPS = 3  # Gauss-Newton steps of a pattern's focal length
+_FOCAL_STEP_REL = 1e-4  # relative step of their central differences
 _FIT_SLICE = 50_000  # pairings whose focal lengths are fitted at once
 _LOCAL_BATCH = 128  # observed patterns given (``search_fov``'s ``patterns``) looked up at once
 
@@ -123,20 +124,20 @@ def fit_pattern_focal(
     xy: np.ndarray, cat_edges: np.ndarray, cx: float, cy: float, focal0: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
     """The focal length (px) at which the observed patterns ``xy`` (h, 4, 2) have the
-    catalog's edge angles ``cat_edges`` (h, 6) (least squares on log f from ``focal0``), and
-    the largest edge error left (radians)."""
-    log_f = np.log(focal0)
-    h = 1e-4
-    for _ in range(_FOCAL_STEPS):
-        f = np.exp(log_f)[:, None]
-        r = pattern_edges(pinhole_bearings(xy, cx, cy, f)) - cat_edges
-        up = pattern_edges(pinhole_bearings(xy, cx, cy, f * (1.0 + h)))
-        down = pattern_edges(pinhole_bearings(xy, cx, cy, f * (1.0 - h)))
-        d = (up - down) / (2.0 * h)
-        log_f = log_f - np.sum(r * d, axis=1) / np.maximum(np.sum(d * d, axis=1), 1e-300)
-    f = np.exp(log_f)
-    err = np.abs(pattern_edges(pinhole_bearings(xy, cx, cy, f[:, None])) - cat_edges).max(axis=1)
-    return f, err
+    catalog's edge angles ``cat_edges`` (h, 6) (least squares on log f from ``focal0``,
+    ``_FOCAL_STEPS`` Gauss-Newton steps), and the largest edge error left (radians); through
+    a distortion-free pinhole of principal point (cx, cy) (``pipeline.kernels``)."""
+    from starnav.pipeline import kernels  # numba: loaded on first use
+
+    return kernels.pattern_focals(
+        Camera.model_code,
+        np.array([1.0, cx, cy, 0.0, 0.0]),  # [focal_px, cx, cy, k1, k2]
+        np.ascontiguousarray(xy, dtype=np.float64),
+        np.ascontiguousarray(cat_edges, dtype=np.float64),
+        np.ascontiguousarray(focal0, dtype=np.float64),
+        _FOCAL_STEPS,
+        _FOCAL_STEP_REL,
+    )
 
 
 def _cells(

@@ -29,10 +29,11 @@ from starnav.camera.kernels import (
     pixels_to_bearings,
     project,
     sees,
+    unproject,
 )
 from starnav.identify.kernels.evidence import brightness_log_ratio, field_false_match
 from starnav.identify.kernels.pairing import pair_catalog
-from starnav.identify.kernels.sky import chord, cone
+from starnav.identify.kernels.sky import angle, chord, cone
 from starnav.runtime.caching import njit
 
 MAX_REMATCH = 5  # fit / rematch rounds
@@ -67,6 +68,9 @@ MISFIT_ALPHA_Z = 3.719  # the normal quantile of MISFIT_ALPHA = 1e-4 (one-sided)
 # stars, so such stars should be among the points
 UNSEEN_MARGIN_MAG = 0.5
 MIN_UNSEEN = 3
+
+# the six edges of a 4-star pattern, as identify.pattern4's _PAIRS
+PATTERN_PAIRS = ((0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3))
 
 Converged = namedtuple("Converged", "obs cat fit n_cone field_area")
 Concluded = namedtuple(
@@ -390,3 +394,52 @@ def conclude(obs, cat, R, xy, sky, allowed, model, p0, width, height, fit_focal,
     if known_sigma_px > 0:
         f = at_least_sigma(f, known_sigma_px)
     return Concluded(refusal, a.obs, a.cat, f, p_false, f_scale, expected)
+
+
+@njit(cache=True)
+def _pattern_misfit(model, q, xy, cat_edges, focal, v, out):
+    """The edge angles (rad) of the pattern of pixels ``xy`` (4, 2) through the camera ``q``
+    with focal length ``focal`` (px), less the catalog's ``cat_edges`` (6,), written to
+    ``out``; ``v`` (4, 3): work space."""
+    q[0] = focal
+    for j in range(4):
+        unproject(model, q, xy[j, 0], xy[j, 1], v[j])
+    for e in range(6):
+        a, b = PATTERN_PAIRS[e]
+        out[e] = angle(v[a], v[b]) - cat_edges[e]
+
+
+@njit(cache=True)
+def pattern_focals(model, p, xy, cat_edges, focal0, steps, step_rel):
+    """Per observed pattern of pixels ``xy`` (h, 4, 2), the focal length (px) at which its six
+    edges have the catalog's angles ``cat_edges`` (h, 6): ``steps`` Gauss-Newton steps on log f
+    from ``focal0`` (h,), the derivative by central differences of ``step_rel``; and the
+    largest edge error (rad) left. ``p``: the camera's other parameters."""
+    n = len(xy)
+    f_fit = np.empty(n)
+    err = np.empty(n)
+    q = p.copy()
+    v = np.empty((4, 3))
+    r = np.empty(6)
+    up = np.empty(6)
+    down = np.empty(6)
+    for i in range(n):
+        log_f = math.log(focal0[i])
+        for _ in range(steps):
+            f = math.exp(log_f)
+            _pattern_misfit(model, q, xy[i], cat_edges[i], f, v, r)
+            _pattern_misfit(model, q, xy[i], cat_edges[i], f * (1.0 + step_rel), v, up)
+            _pattern_misfit(model, q, xy[i], cat_edges[i], f * (1.0 - step_rel), v, down)
+            num, den = 0.0, 0.0
+            for e in range(6):
+                d = (up[e] - down[e]) / (2.0 * step_rel)
+                num += r[e] * d
+                den += d * d
+            log_f -= num / max(den, 1e-300)
+        f_fit[i] = math.exp(log_f)
+        _pattern_misfit(model, q, xy[i], cat_edges[i], f_fit[i], v, r)
+        worst = 0.0
+        for e in range(6):
+            worst = max(worst, abs(r[e]))
+        err[i] = worst
+    return f_fit, err
