@@ -631,26 +631,23 @@ def _star_orders(
     canon_edges = pattern_edges(np.take_along_axis(obs, canon[:, :, None], axis=1))
     # a distance from the centroid is off by at most two star errors (the star's and the
     # centroid's), each below tol / sqrt(2): a difference of two by 2 sqrt(2) tol
-    tie_rad = 3.0 * tol_rad + 2.0 * rel_tol * largest[:, None]
-    d_perm = dist_sorted[:, _PERMS]  # (p, 24, 4)
-    consistent = np.ones((len(obs), len(_PERMS)), dtype=bool)
-    for i, j in _PAIRS:
-        consistent &= d_perm[:, :, i] <= d_perm[:, :, j] + tie_rad
-    hyp_cand, hyp_perm, hyp_err = [], [], []
-    for k in np.flatnonzero(consistent[cand_pat].any(axis=0)):
-        c = np.flatnonzero(consistent[cand_pat, k])
-        err = (
-            np.abs(canon_edges[cand_pat[c]][:, _PERM_EDGES[k]] * scale[c, None] - cat_edges[c])
-            - rel_tol * cat_edges[c]
-        ).max(axis=1) / scale[c]
-        good = err <= tol_rad
-        hyp_cand.append(c[good])
-        hyp_perm.append(np.full(int(good.sum()), k))
-        hyp_err.append(err[good])
-    if not hyp_cand:
-        empty = np.empty(0, dtype=np.intp)
-        return canon, empty, empty, np.empty(0)
-    return canon, np.concatenate(hyp_cand), np.concatenate(hyp_perm), np.concatenate(hyp_err)
+    tie_rad = 3.0 * tol_rad + 2.0 * rel_tol * largest
+    from starnav.identify.kernels import patterns  # numba: loaded on first use
+
+    c, k, err = patterns.agreeing_orders(
+        np.ascontiguousarray(dist_sorted),
+        np.ascontiguousarray(tie_rad, dtype=np.float64),
+        np.ascontiguousarray(canon_edges),
+        np.ascontiguousarray(cand_pat, dtype=np.int64),
+        np.ascontiguousarray(cat_edges, dtype=np.float64),
+        np.ascontiguousarray(scale, dtype=np.float64),
+        float(tol_rad),
+        float(rel_tol),
+        _PERMS,
+        _PERM_EDGES,
+        _PAIRS,
+    )
+    return canon, c.astype(np.intp), k.astype(np.intp), err
 
 
 def _with_parity(

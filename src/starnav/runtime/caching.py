@@ -43,6 +43,7 @@ KERNEL_SOURCES = (
     "identify/kernels/evidence.py",
     "identify/kernels/hypothesis.py",
     "identify/kernels/pairing.py",
+    "identify/kernels/patterns.py",
     "identify/kernels/search.py",
     "identify/kernels/sky.py",
     "identify/kernels/triangles.py",

@@ -10,6 +10,8 @@ one module per idea:
 - ``hypothesis``: the test of one hypothesis (attitude, agreement, mirror check) and the
   outcomes of a test and of a search;
 - ``triangles``: the catalog triangle join on the pair table;
+- ``patterns``: which pairings of a 4-star pattern's stars agree edge by edge with a
+  catalog pattern's (the FOV search's look-up, ``pattern4``);
 - ``search``: Mortari's triangle loop over an array of star triples (screen, then verify
   the best), shared by Pyramid, Triangle and tracking.
 
