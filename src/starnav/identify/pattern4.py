@@ -33,7 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from starnav.errors import CatalogError, StarnavError, shown
-from starnav.geometry import angle_between, chord_from_angle, triple_product
+from starnav.geometry import angle_between, chord_from_angle
 from starnav.identify.base import IdentifyOutcome, MatchSettings, screen_stars_only
 from starnav.identify.database import PairDatabase, load_cached, save_cached
 from starnav.identify.verify import HypothesisTester
@@ -81,11 +81,6 @@ def centroid_distances(v: np.ndarray) -> np.ndarray:
     c = v.sum(axis=-2)
     c /= np.linalg.norm(c, axis=-1, keepdims=True)
     return angle_between(v, c[..., None, :])
-
-
-def _triple_products(v: np.ndarray) -> np.ndarray:
-    """det of the four star triangles of patterns ``v`` (..., 4, 3), triangles as ``_TRIPLES``."""
-    return triple_product(*(v[..., _TRIPLES[:, k], :] for k in range(3)))
 
 
 def fibonacci_lattice(n: int) -> np.ndarray:
@@ -664,13 +659,16 @@ def _with_parity(
     """The matches with their parity, from the orientation of each pattern's best-spread
     triangle (both parities where it is too flat to tell), those of another ``parity`` left
     out, grouped by observed pattern with the closest edge agreement first."""
-    n = len(pat_h)
-    det_obs = _triple_products(obs[pat_h[:, None], obs_local])
-    det_cat = _triple_products(cat_vec)
-    best = np.argmax(np.abs(det_obs), axis=1)
-    d_obs = det_obs[np.arange(n), best]
-    par = np.where(np.sign(d_obs) == np.sign(det_cat[np.arange(n), best]), 1, -1)
-    flat = np.abs(d_obs) < 3.0 * tol_rad * largest[pat_h]
+    from starnav.identify.kernels import patterns  # numba: loaded on first use
+
+    par, spread = patterns.pairing_parities(
+        np.ascontiguousarray(obs, dtype=np.float64),
+        np.ascontiguousarray(pat_h, dtype=np.int64),
+        np.ascontiguousarray(obs_local, dtype=np.int64),
+        np.ascontiguousarray(cat_vec, dtype=np.float64),
+        _TRIPLES,
+    )
+    flat = spread < 3.0 * tol_rad * largest[pat_h]
     if flat.any():  # too flat to tell the orientation: both
         f = np.flatnonzero(flat)
         pat_h = np.concatenate([pat_h, pat_h[f]])

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from starnav.attitude.rotation import det3
 from starnav.runtime.caching import njit
 
 
@@ -63,3 +64,27 @@ def agreeing_orders(dist_sorted, tie_rad, canon_edges, cand_pat, cat_edges, scal
                 c_out[n], k_out[n], err_out[n] = c, k, errs[k, c]
                 n += 1
     return c_out, k_out, err_out
+
+
+@njit(cache=True)
+def pairing_parities(obs, pat_h, obs_local, cat_vec, triples):
+    """The parity (+1: the sky as seen, -1: mirrored) of each pairing of observed pattern
+    ``pat_h`` (its stars ``obs[pat_h]`` in the order ``obs_local``) with catalog stars
+    ``cat_vec`` (n, 4, 3), from the observed pattern's best-spread triangle of ``triples``
+    (the largest |triple product|), and that triangle's |triple product| (how flat it is)."""
+    n = len(pat_h)
+    parity = np.empty(n, dtype=np.int64)
+    spread = np.empty(n)
+    for h in range(n):
+        v = obs[pat_h[h]]
+        best, d_obs, d_cat = -1.0, 0.0, 0.0
+        for t in range(len(triples)):
+            i, j, k = triples[t, 0], triples[t, 1], triples[t, 2]
+            d = det3(v[obs_local[h, i]], v[obs_local[h, j]], v[obs_local[h, k]])
+            if abs(d) > best:
+                best = abs(d)
+                d_obs = d
+                d_cat = det3(cat_vec[h, i], cat_vec[h, j], cat_vec[h, k])
+        parity[h] = 1 if np.sign(d_obs) == np.sign(d_cat) else -1
+        spread[h] = abs(d_obs)
+    return parity, spread
