@@ -167,3 +167,42 @@ def test_the_arrays_kept_from_frame_to_frame_leave_no_trace(frame):
     for image, found in zip(images[::-1], first[::-1], strict=True):
         again = detect_stars(image)
         assert np.array_equal(again.xy, found.xy) and np.array_equal(again.flux, found.flux)
+
+
+def test_the_selection_and_the_saturation_test_give_numpys_answers():
+    """The kernels' k-th smallest and median are numpy's on noise, on whole numbers with many
+    ties (a quantised sky), on sorted, reversed and constant values; the saturation test
+    finds the pixels at the maximum and whether two of them touch in a row or a column as
+    the numpy rule it replaced, at the edges too."""
+    from starnav.detect import kernels
+    from starnav.detect.stars import _infer_saturation
+
+    rng = np.random.default_rng(7)
+    for trial in range(3000):
+        n = int(rng.integers(1, 200))
+        kind = trial % 5
+        values = [
+            rng.normal(size=n),
+            rng.integers(0, 4, size=n).astype(float),
+            np.sort(rng.normal(size=n)),
+            np.sort(rng.normal(size=n))[::-1].copy(),
+            np.full(n, 2.5),
+        ][kind]
+        for k in {0, n // 2, n - 1, int(rng.integers(0, n))}:
+            assert kernels._select(values.copy(), n, k) == np.sort(values)[k]
+        assert kernels._median(values.copy(), n) == np.median(values)
+
+    def numpy_rule(data, high):
+        at_max = np.flatnonzero(data == np.float32(high))
+        if len(at_max) < 2 or len(at_max) > data.size // 2:
+            return None
+        width = data.shape[1]
+        same_row = np.isin(at_max + 1, at_max) & ((at_max % width) != width - 1)
+        below = np.isin(at_max + width, at_max)
+        return high if bool(same_row.any() or below.any()) else None
+
+    for _ in range(400):
+        data = rng.integers(0, 3, size=(int(rng.integers(3, 9)), int(rng.integers(3, 9))))
+        data = data.astype(np.float32) + (rng.random(data.shape) < 0.7) * np.float32(0.5)
+        high = float(data.max())
+        assert _infer_saturation(data, np.dtype(np.float32), high) == numpy_rule(data, high)
