@@ -329,12 +329,12 @@ def background_subtracted(data, level, tile_px, above, out):
             stop = min(width, start + _CHUNK_PX)
             if _count_over(row[start:stop], limit[start:stop]) == 0:
                 continue
+            if n + stop - start > len(over):
+                over = np.concatenate((over, np.empty_like(over)))
+            # every index written, the count moved by the test: no branch to mispredict
             for c in range(start, stop):
-                if row[c] > above:
-                    if n == len(over):
-                        over = np.concatenate((over, np.empty_like(over)))
-                    over[n] = r * width + c
-                    n += 1
+                over[n] = r * width + c
+                n += row[c] > above
     return over[:n].copy()
 
 
