@@ -136,10 +136,12 @@ def test_the_kernels_give_seps_and_numpys_numbers(frame):
     mesh = np.random.default_rng(1).normal(size=(11, 7))
     assert np.array_equal(kernels.median_3x3(mesh), median_3x3(mesh))
     # half-light radii: sep.flux_radius's (subpix 5) to the last bit, out to the PSF's
-    # sizes and beyond 45 px (where pixels away from the annuli's edges are not split)
+    # sizes, beyond 45 px (where pixels away from the annuli's edges are not split) and at
+    # random sizes (the pixels left out beyond rmax add nothing to sep's sums either)
     x, y = np.ascontiguousarray(x0), np.ascontiguousarray(y0)
     size = np.sqrt(found.objects["x2"] + found.objects["y2"])
-    for rmax in (np.clip(3.0 * size, 3.0, 50.0), np.full(len(x), 47.3)):
+    random_rmax = np.random.default_rng(2).uniform(0.5, 50.0, len(x))
+    for rmax in (np.clip(3.0 * size, 3.0, 50.0), np.full(len(x), 47.3), random_rmax):
         radii, _ = sep.flux_radius(found.data, x, y, rmax, 0.5, subpix=5)
         assert np.array_equal(kernels.half_light_radii(found.data, x, y, rmax, 5), radii)
 

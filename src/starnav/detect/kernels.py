@@ -35,6 +35,7 @@ _CHUNK_PX = 64  # a row's stretch checked at once for pixels over a threshold
 # pixel's centre must come to be split into samples
 _RADIUS_BINS = 64
 _BIN_MARGIN_PX = 0.7072
+_REACH_MARGIN_PX = 0.01
 # status of ``find_sources``
 FOUND, TOO_MANY_PIXELS, PLATEAU = 0, 1, 2
 
@@ -645,9 +646,10 @@ def half_light_radii(data, x, y, rmax, subpix):
     """Per source at (``x``, ``y``) of background-subtracted ``data``: the radius (px)
     within which half the light inside ``rmax`` lies, as ``sep.flux_radius(data, x, y, rmax,
     0.5, subpix=subpix)`` finds it (the same numbers): the pixels whose centres lie within
-    ``rmax`` + 1.5 px, each split into ``subpix`` x ``subpix`` samples (all but those whose
-    centre's distance lies farther than ``_BIN_MARGIN_PX`` from every edge of the
-    ``_RADIUS_BINS`` annuli of equal width out to ``rmax``), summed per annulus; the sums
+    ``rmax`` + 1.5 px (those of them whose samples can fall within ``rmax``), each split
+    into ``subpix`` x ``subpix`` samples (all but those whose centre's distance lies farther
+    than ``_BIN_MARGIN_PX`` from every edge of the ``_RADIUS_BINS`` annuli of equal width
+    out to ``rmax``), summed per annulus; the sums
     accumulated outwards and the radius where they reach half of the last interpolated
     linearly within its annulus."""
     height, width = data.shape
@@ -655,11 +657,14 @@ def half_light_radii(data, x, y, rmax, subpix):
     sums = np.empty(_RADIUS_BINS)
     scale = 1.0 / subpix
     scale2 = scale * scale
+    # sep looks at the pixels within rmax + 1.5 px; those whose samples all lie beyond rmax
+    # (their centre farther than rmax + the samples' reach, with a margin) add nothing
+    reach = 0.5 * math.sqrt(2.0) * (1.0 - scale) + _REACH_MARGIN_PX
     squares = np.empty(2 * subpix)
     bins = np.empty(subpix * subpix, dtype=np.int64)
     for s in range(len(x)):
         xs, ys = x[s], y[s]
-        r_out = rmax[s] + 1.5
+        r_out = rmax[s] + reach
         r_out2 = r_out * r_out
         step = rmax[s] / _RADIUS_BINS
         per_px = 1.0 / step
