@@ -660,7 +660,7 @@ def half_light_radii(data, x, y, rmax, subpix):
     # sep looks at the pixels within rmax + 1.5 px; those whose samples all lie beyond rmax
     # (their centre farther than rmax + the samples' reach, with a margin) add nothing
     reach = 0.5 * math.sqrt(2.0) * (1.0 - scale) + _REACH_MARGIN_PX
-    squares = np.empty(2 * subpix)
+    squares = np.empty(2 * subpix * subpix)
     bins = np.empty(subpix * subpix, dtype=np.int64)
     for s in range(len(x)):
         xs, ys = x[s], y[s]
@@ -700,20 +700,23 @@ def _split_pixel(sums, dx, dy, value, subpix, per_px, squares, bins):
     """A pixel at offset (``dx``, ``dy``) from the source split into ``subpix`` x ``subpix``
     samples of ``value`` each, added to the annuli ``sums`` (of 1 / ``per_px`` px) their
     centres fall in, in sep's order (row by row; the offsets stepped by additions as sep
-    steps them): the distances first, in a loop without branches that the compiler
-    vectorizes, then the additions (``squares``, ``bins``: scratch)."""
+    steps them): the samples' squared offsets laid out flat, their annuli in one loop
+    without branches that the compiler vectorizes, then the additions (``squares``: 2
+    ``subpix``² scratch values, ``bins``: ``subpix``²)."""
     scale = 1.0 / subpix
     offset = 0.5 * (scale - 1.0)
+    n = subpix * subpix
     sx, sy = dx + offset, dy + offset
     for k in range(subpix):
-        squares[k] = sx * sx
-        squares[subpix + k] = sy * sy
+        x2, y2 = sx * sx, sy * sy
+        for i in range(subpix):
+            squares[i * subpix + k] = x2  # sample (row i, column k)
+            squares[n + k * subpix + i] = y2  # sample (row k, column i)
         sx += scale
         sy += scale
-    for a in range(subpix):
-        for b in range(subpix):
-            bins[a * subpix + b] = int(math.sqrt(squares[b] + squares[subpix + a]) * per_px)
-    for k in range(subpix * subpix):
+    for k in range(n):
+        bins[k] = int(math.sqrt(squares[k] + squares[n + k]) * per_px)
+    for k in range(n):
         if bins[k] < _RADIUS_BINS:
             sums[bins[k]] += value
 
