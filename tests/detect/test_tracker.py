@@ -193,6 +193,8 @@ def test_the_selection_and_the_saturation_test_give_numpys_answers():
         for k in {0, n // 2, n - 1, int(rng.integers(0, n))}:
             assert kernels._select(values.copy(), n, k) == np.sort(values)[k]
         assert kernels._median(values.copy(), n) == np.median(values)
+    for values in (np.full(9, np.nan), np.array([3.0, np.nan, 1.0, np.nan, 2.0])):
+        kernels._select(values.copy(), len(values), len(values) // 2)  # NaN: it ends
 
     def numpy_rule(data, high):
         at_max = np.flatnonzero(data == np.float32(high))

@@ -47,7 +47,8 @@ def _select(values, n, k):
     middle by a partition without branches (every element swapped, the split point moved by
     the comparison's outcome): the branches of a classic partition go either way at random,
     and their mispredictions cost most of its time (a 140-pixel annulus's median 2x faster).
-    A pivot that is the range's least is split off with its equals."""
+    A pivot that is the range's least is split off with its equals. (NaN values: some value
+    or NaN, and an end.)"""
     lo, hi = 0, n - 1
     while lo < hi:
         a, b, c = values[lo], values[(lo + hi) // 2], values[hi]
@@ -68,7 +69,7 @@ def _select(values, n, k):
                 values[i] = values[store]
                 values[store] = v
                 store += v <= pivot
-            if k < store:
+            if k < store or store == lo:  # none equal: a NaN pivot, which is the answer
                 return pivot
             lo = store
     return values[k]
