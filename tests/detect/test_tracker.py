@@ -136,10 +136,12 @@ def test_the_kernels_give_seps_and_numpys_numbers(frame):
     mesh = np.random.default_rng(1).normal(size=(11, 7))
     assert np.array_equal(kernels.median_3x3(mesh), median_3x3(mesh))
     # half-light radii: sep.flux_radius's (subpix 5) to the last bit, out to the PSF's
-    # sizes and beyond 45 px (where pixels away from the annuli's edges are not split)
+    # sizes, beyond 45 px (where pixels away from the annuli's edges are not split) and at
+    # random sizes (the pixels left out beyond rmax add nothing to sep's sums either)
     x, y = np.ascontiguousarray(x0), np.ascontiguousarray(y0)
     size = np.sqrt(found.objects["x2"] + found.objects["y2"])
-    for rmax in (np.clip(3.0 * size, 3.0, 50.0), np.full(len(x), 47.3)):
+    random_rmax = np.random.default_rng(2).uniform(0.5, 50.0, len(x))
+    for rmax in (np.clip(3.0 * size, 3.0, 50.0), np.full(len(x), 47.3), random_rmax):
         radii, _ = sep.flux_radius(found.data, x, y, rmax, 0.5, subpix=5)
         assert np.array_equal(kernels.half_light_radii(found.data, x, y, rmax, 5), radii)
 
@@ -167,3 +169,44 @@ def test_the_arrays_kept_from_frame_to_frame_leave_no_trace(frame):
     for image, found in zip(images[::-1], first[::-1], strict=True):
         again = detect_stars(image)
         assert np.array_equal(again.xy, found.xy) and np.array_equal(again.flux, found.flux)
+
+
+def test_the_selection_and_the_saturation_test_give_numpys_answers():
+    """The kernels' k-th smallest and median are numpy's on noise, on whole numbers with many
+    ties (a quantised sky), on sorted, reversed and constant values; the saturation test
+    finds the pixels at the maximum and whether two of them touch in a row or a column as
+    the numpy rule it replaced, at the edges too."""
+    from starnav.detect import kernels
+    from starnav.detect.stars import _infer_saturation
+
+    rng = np.random.default_rng(7)
+    for trial in range(3000):
+        n = int(rng.integers(1, 200))
+        kind = trial % 5
+        values = [
+            rng.normal(size=n),
+            rng.integers(0, 4, size=n).astype(float),
+            np.sort(rng.normal(size=n)),
+            np.sort(rng.normal(size=n))[::-1].copy(),
+            np.full(n, 2.5),
+        ][kind]
+        for k in {0, n // 2, n - 1, int(rng.integers(0, n))}:
+            assert kernels._select(values.copy(), n, k) == np.sort(values)[k]
+        assert kernels._median(values.copy(), n) == np.median(values)
+    for values in (np.full(9, np.nan), np.array([3.0, np.nan, 1.0, np.nan, 2.0])):
+        kernels._select(values.copy(), len(values), len(values) // 2)  # NaN: it ends
+
+    def numpy_rule(data, high):
+        at_max = np.flatnonzero(data == np.float32(high))
+        if len(at_max) < 2 or len(at_max) > data.size // 2:
+            return None
+        width = data.shape[1]
+        same_row = np.isin(at_max + 1, at_max) & ((at_max % width) != width - 1)
+        below = np.isin(at_max + width, at_max)
+        return high if bool(same_row.any() or below.any()) else None
+
+    for _ in range(400):
+        data = rng.integers(0, 3, size=(int(rng.integers(3, 9)), int(rng.integers(3, 9))))
+        data = data.astype(np.float32) + (rng.random(data.shape) < 0.7) * np.float32(0.5)
+        high = float(data.max())
+        assert _infer_saturation(data, np.dtype(np.float32), high) == numpy_rule(data, high)

@@ -770,13 +770,12 @@ def _infer_saturation(data: np.ndarray, dtype: np.dtype, high: float) -> float |
     image maximum when at least two adjacent pixels share it (a clipped, flat-topped star)."""
     if dtype.kind in "ui" and high >= np.iinfo(dtype).max:
         return high
-    at_max = np.flatnonzero(data == np.float32(high))
-    if len(at_max) < 2 or len(at_max) > data.size // 2:
+    from starnav.detect import kernels
+
+    count, adjacent = kernels.plateau(data, np.float32(high))
+    if count < 2 or count > data.size // 2:
         return None
-    width = data.shape[1]
-    same_row = np.isin(at_max + 1, at_max) & ((at_max % width) != width - 1)
-    below = np.isin(at_max + width, at_max)
-    return high if bool(same_row.any() or below.any()) else None
+    return high if adjacent else None
 
 
 def _gaussian_kernel(sigma: float) -> np.ndarray:
