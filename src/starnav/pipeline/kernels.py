@@ -364,9 +364,9 @@ def conclude(obs, cat, R, xy, sky, allowed, model, p0, width, height, fit_focal,
     f_scale = 0.0
     if not fit_focal and len(a.obs) >= MIN_STARS_SCALE_CHECK:
         # a wrong focal length biases the attitude beyond its error bars: test the scale, on
-        # the stars matched and on those a free focal length finds besides
+        # the stars matched and on those a free focal length finds besides (none when every
+        # point is matched: pairs are one to one)
         wrong, f_scale = scale_off(f.R, vectors[a.cat], xy[a.obs], model, p0, sigma_px)
-        # with every point matched, no focal length can match more (pairs are one to one)
         if not wrong and len(a.obs) < len(xy):
             free = converge(a.obs, a.cat, f.R, xy, sky, allowed, model, p0, width, height, True,
                             fit_distortion, radius, sigma_px, work)  # fmt: skip
