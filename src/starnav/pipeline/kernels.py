@@ -363,9 +363,8 @@ def conclude(obs, cat, R, xy, sky, allowed, model, p0, width, height, fit_focal,
     refusal = ACCEPTED
     f_scale = 0.0
     if not fit_focal and len(a.obs) >= MIN_STARS_SCALE_CHECK:
-        # a wrong focal length biases the attitude beyond its error bars: test the scale, on
-        # the stars matched and on those a free focal length finds besides (none when every
-        # point is matched: pairs are one to one)
+        # a wrong focal length biases the attitude: test the scale, on the stars matched and
+        # on those a free focal length finds besides (none if every point is: pairs are 1:1)
         wrong, f_scale = scale_off(f.R, vectors[a.cat], xy[a.obs], model, p0, sigma_px)
         if not wrong and len(a.obs) < len(xy):
             free = converge(a.obs, a.cat, f.R, xy, sky, allowed, model, p0, width, height, True,
