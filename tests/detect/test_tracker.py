@@ -134,7 +134,9 @@ def test_the_kernels_give_seps_and_numpys_numbers(frame):
         assert np.array_equal(above, np.flatnonzero(residual > level))
     assert len(above) > data.size // 2
     mesh = np.random.default_rng(1).normal(size=(11, 7))
-    assert np.array_equal(kernels.median_3x3(mesh), median_3x3(mesh))
+    windows = np.lib.stride_tricks.sliding_window_view(np.pad(mesh, 1, mode="edge"), (3, 3))
+    assert np.array_equal(kernels.median_3x3(mesh), np.median(windows.reshape(11, 7, 9), axis=2))
+    assert median_3x3(mesh.astype(np.float32)).dtype == np.float32
     # half-light radii: sep.flux_radius's (subpix 5) to the last bit, out to the PSF's
     # sizes, beyond 45 px (where pixels away from the annuli's edges are not split) and at
     # random sizes (the pixels left out beyond rmax add nothing to sep's sums either)

@@ -232,8 +232,9 @@ def tile_statistics(data, tile_px, stride, low):
 
 @njit(cache=True)
 def median_3x3(mesh):
-    """The median of each cell's 3 x 3 neighbourhood, the edge cells repeated beyond the
-    mesh (``starnav.detect.background.median_3x3``'s numbers, without its numpy calls)."""
+    """The median of each cell's 3 x 3 neighbourhood of a finite ``mesh``, the edge cells
+    repeated beyond it (``scipy.ndimage.median_filter(mesh, size=3, mode="nearest")``'s
+    numbers; both detection paths' tile meshes)."""
     ny, nx = mesh.shape
     out = np.empty((ny, nx))
     window = np.empty(9)
