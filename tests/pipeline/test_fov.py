@@ -266,11 +266,11 @@ def test_a_field_below_the_limit_is_a_one_line_error_saying_why(capsys):
     code = main(["identify", MAP1, "--width", "512", "--fov-range", "0.5", "10"])
     err = capsys.readouterr().err
     assert code == 2 and err.count("\n") == 1, err
-    assert "narrower than 1°" not in err and "1° along the image's longer side" in err
+    assert "narrower than 0.625°" not in err and "0.625° along the image's longer side" in err
     assert "Gaia DR3" in err
     xy = np.zeros((5, 2)) + 10
-    for fov in ({"fov_range_deg": (0.9, 10)}, {"fov_deg": 0.7}):
-        with pytest.raises(StarnavError, match="stars of the embedded Gaia DR3 catalog"):
+    for fov in ({"fov_range_deg": (0.6, 10)}, {"fov_deg": 0.5}):
+        with pytest.raises(StarnavError, match="embedded Gaia DR3 catalog, G <= 10, holds"):
             solve_stars(xy, fov_exact=False, width=100, **fov)
 
 

@@ -121,22 +121,22 @@ def test_starnav_solve_field_solves_a_narrow_fits_frame_with_a_position_hint(
     assert (tmp_path / "narrow.wcs").exists()
 
 
-def test_a_field_under_1_degree_is_refused_in_one_line_naming_the_limit():
-    with pytest.raises(Exception, match="1° along the image's longer side") as info:
-        solve_image(np.zeros((100, 150)), fov_range_deg=(0.4, 0.8))
+def test_a_field_under_the_limit_is_refused_in_one_line_naming_the_limit():
+    with pytest.raises(Exception, match=r"0\.625° along the image's longer side") as info:
+        solve_image(np.zeros((100, 150)), fov_range_deg=(0.3, 0.6))
     assert "\n" not in str(info.value)
     with pytest.raises(Exception, match="outside the fields starnav solves"):
-        fov_range_from_scale("degwidth", 0.6, 0.8, 1920, 1080)  # landscape: 0.6° x 0.34°
+        fov_range_from_scale("degwidth", 0.4, 0.6, 1920, 1080)  # landscape: 0.6° wide at most
 
 
 def test_the_narrowest_field_is_along_the_longer_side_of_a_portrait_image():
-    """1° along the longer side: a landscape image's horizontal field, a portrait image's
-    vertical one (a Seestar S50's 1080 x 1920 px frames are 0.71° x 1.27°)."""
-    assert fov.fov_limits_deg("pinhole", (1920, 1080)) == (1.0, 100.0)
+    """0.625° along the longer side: a landscape image's horizontal field, a portrait
+    image's vertical one (a 1080 x 1920 px frame 0.352° x 0.625°)."""
+    assert fov.fov_limits_deg("pinhole", (1920, 1080)) == (0.625, 100.0)
     lo, _ = fov.fov_limits_deg("pinhole", (1080, 1920))
-    assert lo == pytest.approx(0.5625, rel=1e-4)
+    assert lo == pytest.approx(0.3516, rel=1e-3)
     assert fov.fov_limits_deg("equidistant", (1080, 1920)) == fov.LENS_FOV_LIMITS_DEG
-    assert fov_range_from_scale("degwidth", 0.65, 0.78, 1080, 1920) == (0.65, 0.78)
+    assert fov_range_from_scale("degwidth", 0.4, 0.5, 1080, 1920) == (0.4, 0.5)
 
 
 def test_a_portrait_telescope_frame_under_1_degree_across_is_solved_near_its_hint():

@@ -84,8 +84,8 @@ def test_fov_range_is_clipped_to_what_starnav_searches():
     assert fov_range_from_scale("degwidth", 4.3, 5.3, 1000) == (4.3, 5.3)  # not cut at 5°
     assert fov_range_from_scale("focalmm", 50, 100, 1000)[1] == pytest.approx(39.5977, abs=1e-4)
     with pytest.raises(StarnavError, match="outside the fields starnav solves"):
-        fov_range_from_scale("arcminwidth", 10, 50, 1000)  # 0.17-0.83°
-    assert fov_range_from_scale("arcminwidth", 10, 60, 1000) == (1.0, 1.05)  # 0.17-1°
+        fov_range_from_scale("arcminwidth", 10, 30, 1000)  # 0.17-0.5°
+    assert fov_range_from_scale("arcminwidth", 10, 45, 1000) == (0.625, 0.75)  # 0.17-0.75°
 
 
 def test_parity_words():

@@ -54,9 +54,9 @@ from starnav.starlist import StarList, check_star_list
 if TYPE_CHECKING:  # the detection stack (sep) is not loaded for a star list's solve
     from starnav.detect.circle import ImageCircle
 
-# the narrowest field searched: 1° along the image's longer side, where the embedded Gaia DR3
-# (G <= 10) holds about 8 stars in a 1° x 0.67° image (docs/narrow_fields.md); the whole-sky
-# pattern tables of narrower bands would take 4x more lattice fields per halving
+# the narrowest field searched: 0.625° along the image's longer side, the foot of the grid's
+# 0.884° table (docs/narrow_fields.md); the whole-sky pattern tables of narrower bands would
+# take 2x more lattice fields per grid step
 FOV_LIMITS_DEG = Camera.fov_limits_deg  # (the lens classes hold the limits: these name them)
 # before an image is read, its field is checked as if it were twice as tall as wide (the
 # narrowest a portrait image may be across); the search checks it again on the image's shape
@@ -369,9 +369,10 @@ def _narrower_why(fov_deg: float, lens: str) -> str:
     if model_class(lens).kind != "pinhole" or not fov_deg < lo:
         return ""
     return (
-        f" (the narrowest field searched is {lo:g}° along the image's longer side: it holds "
-        "about 8 stars of the embedded Gaia DR3 catalog, G <= 10, and whole-sky pattern "
-        "tables of narrower fields would take 4x the lattice fields per halving)"
+        f" (the narrowest field searched is {lo:g}° along the image's longer side: the "
+        "embedded Gaia DR3 catalog, G <= 10, holds about 3 stars in such a field away from "
+        "clusters and the Milky Way, and whole-sky pattern tables of narrower fields would "
+        "take 2x the lattice fields per grid step)"
     )
 
 
