@@ -85,8 +85,6 @@ KNOWN_FAILURES = {
     " (solved before, roll 0.117° off): its 6 matched stars in a 6° field claim 0.0059",
     "cedar_roof.jpg": "solved past the roof, boresight 40″ off (tolerance 45″) but roll 0.257°"
     " and FOV 0.3 % short: the stars are all on one side of the frame",
-    "granasat_pleyades_8sec.jpg": "not solved since the detection for real skies: clipped star"
-    " glows are no longer taken as saturated stars; 'no hypothesis agreed with enough stars'",
     "astrometrynet_apod2.jpg": "not solved: a processed 4.5° photograph of the Horsehead; the"
     " 1-5° range searched after 5-40° finds no convincing hypothesis, nor does --fov-range 4 5",
     "astrometrynet_apod3.jpg": "not solved: bright nebulosity (Vela) among the detections;"

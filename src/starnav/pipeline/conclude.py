@@ -82,6 +82,7 @@ def conclude(
         rank,
         kernel_point_mags(stars.magnitudes, len(xy)),
         catalog_mags(database, stars.brightness is not None),
+        database.mags,
         int(found.bright_drop),
         float(sigma_px),
         0.0 if known_sigma_px is None else float(known_sigma_px),

@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from starnav.camera import CameraModel, model_class
+from starnav.camera import Camera, CameraModel, model_class
 from starnav.catalog import Catalog, is_embedded
 from starnav.detect.circle import ImageCircle, dark_corners, find_image_circle
 from starnav.detect.header import ImageHints, fits_hints, is_fits
@@ -38,7 +38,7 @@ from starnav.pipeline.options import (
     SolveOptions,
 )
 from starnav.pipeline.stars import check_searched, exact_field, solve_stars
-from starnav.results import Solution
+from starnav.results import Solution, SolveResult
 from starnav.runtime.budget import Deadline, check_budget, default_budget_s
 
 NO_HINTS = ImageHints()
@@ -49,6 +49,12 @@ AUTO_BIN_PIXELS = 4.2e6  # an image is detected binned to at most this many pixe
 SPENT_ADVICE = "a longer --time-budget, or a smaller image"  # a budget spent before the solve
 FEW_STARS_DEEPER = 15  # a fisheye sky with fewer stars than this is detected again, deeper
 DEEPER_THRESHOLDS_SIGMA = (4.0, 3.0)  # the thresholds of those detections, in turn
+# a searched pinhole image that is not solved is searched again in its middle, this share of
+# its width and height, detected anew there (``_solve_middle``): a wide-angle lens's middle
+# is nearly a pinhole's, and a stretched photograph's brightest points (nebula knots,
+# spiked star glows) often lie elsewhere in it
+MIDDLE_FRACTION = 0.6
+MIN_MIDDLE_PX = 96  # and not when that middle is smaller than this
 
 
 @dataclass(frozen=True, eq=False)
@@ -184,15 +190,11 @@ def solve_image(
         options = replace(options, site=hints.site)
     searched = not options.field_known and not options.scans_focal
     result = _solve_hinted(
-        found.xy,
-        (width, height),
-        options,
-        hints if searched else NO_HINTS,
-        budget_s,
-        position_hint_deg,
-        prior,
-        found.circle,
-    )
+        found.xy, (width, height), options, hints if searched else NO_HINTS, budget_s,
+        position_hint_deg, prior, found.circle,
+    )  # fmt: skip
+    if result.solution is None and searched and prior is None:
+        result = _solve_middle(pixels, found.xy, options, budget_s, result)
     sol = result.solution
     reason, failure = result.reason, None
     if sol is None:
@@ -209,6 +211,71 @@ def solve_image(
         result.catalog,
         hints,
         failure,
+    )
+
+
+def _solve_middle(
+    pixels: np.ndarray, xy: np.ndarray, options: SolveOptions, budget_s: float, failed
+) -> SolveResult:
+    """An unsolved searched pinhole image (``failed``: its result; ``xy``: its detections)
+    solved again from its middle (``MIDDLE_FRACTION`` of each side, the same principal point)
+    on what is left of ``budget_s``: detected anew there and searched (the default ranges, or
+    the middle's part of the range given). From that attitude and focal length (``prior``)
+    the whole frame's detections are fitted with the radial distortion freed (a wide-angle
+    lens bends the rest), or, when that is refused, the middle's detections in the whole
+    frame's pixels: either answer passes the same verification as any, at half the
+    false-match probability asked for (the two searches share it). ``failed`` when nothing
+    is found, its reason telling the middle's."""
+    t0 = time.perf_counter()
+
+    def left_s() -> float:
+        return budget_s - failed.time_ms / 1e3 - (time.perf_counter() - t0)
+
+    height, width = pixels.shape
+    y0, x0 = (round(n * (1.0 - MIDDLE_FRACTION) / 2.0) for n in pixels.shape)
+    size = (width - 2 * x0, height - 2 * y0)
+    if options.lens_model != "pinhole" or left_s() <= 0 or min(size) < MIN_MIDDLE_PX:
+        return failed
+    middle = np.ascontiguousarray(pixels[y0 : height - y0, x0 : width - x0])
+    inner = _detect_binned(middle, options).xy
+    step, why = None, "too few stars detected"
+    searched = options.fov_range_deg
+    if searched is not None:  # the middle's part of each field given, at the same focal length
+        lo = fov_limits_deg("pinhole", size)[0]
+        searched = tuple(
+            max(lo, Camera(*size, Camera.from_fov(v, width, height).focal_px).fov_deg)
+            for v in searched
+        )
+        if searched[0] >= searched[1]:
+            why = "its fields are narrower than the narrowest searched"
+            inner = inner[:0]
+    if len(inner) >= MIN_DETECTIONS and left_s() > 0:
+        # a second search: the false-match probability each may claim is halved, so that
+        # the two together keep the one asked for
+        options = replace(
+            options, max_false_match_probability=options.max_false_match_probability / 2
+        )
+        within = replace(options, fov_range_deg=searched, time_budget_s=left_s())
+        found = solve_stars(inner, within, width=size[0], height=size[1], images=True)
+        why = found.reason or "no time left"
+        camera = None if found.solution is None else Camera(width, height, found.solution.focal_px)
+        for points, bent in ((xy, True), (inner + np.array([x0, y0]), False)):
+            if camera is None or left_s() <= 0:
+                break
+            whole = replace(
+                options, camera=camera, fov_deg=None, fov_range_deg=None, fit_distortion=bent,
+                time_budget_s=left_s(),
+            )  # fmt: skip
+            step = solve_stars(points, whole, prior=found.solution.R_cam_from_icrs, images=True)
+            if step.solution is not None:
+                break
+            why = f"solved, but not in the whole frame's pixels: {step.reason}"
+    ms = failed.time_ms + (time.perf_counter() - t0) * 1e3
+    if step is not None and step.solution is not None:  # named for how it was found
+        named = replace(step.solution, algorithm=f"{found.solution.algorithm} (middle)")
+        return replace(step, solution=named, time_ms=ms)
+    return replace(
+        failed, reason=f"{failed.reason}; the middle of the frame alone: {why}", time_ms=ms
     )
 
 

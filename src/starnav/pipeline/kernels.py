@@ -68,6 +68,11 @@ MISFIT_ALPHA_Z = 3.719  # the normal quantile of MISFIT_ALPHA = 1e-4 (one-sided)
 # stars, so such stars should be among the points
 UNSEEN_MARGIN_MAG = 0.5
 MIN_UNSEEN = 3
+# both counts take the catalog stars in the part of the frame where stars are seen: within
+# SKY_RADIUS_FACTOR sqrt(area / points) of a point, the radius that a point of n spread
+# evenly over the frame misses with chance 1 % (exp(-pi r^2 n / area)): stars behind trees,
+# a roof or a cloud bank are not stars the answer should explain
+SKY_RADIUS_FACTOR = math.sqrt(math.log(100.0) / math.pi)
 
 # the six edges of a 4-star pattern, as identify.pattern4's _PAIRS
 PATTERN_PAIRS = ((0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3))
@@ -269,16 +274,24 @@ def misfits(residuals, n_fitted, sigma_px):
 
 
 @njit(cache=True)
-def expected_stars(R, sky, model, p, width, height, mags, brighter_than, work):
-    """Catalog stars inside the image at attitude ``R`` through the camera ``p`` (the stars
-    the solution says should be measurable), and how many of them have ``mags`` below
-    ``brighter_than`` (0 when ``mags`` is empty)."""
+def expected_stars(R, sky, model, p, width, height, xy, rows, depth_mags, mags, work):
+    """The stars an answer at attitude ``R`` through the camera ``p``, matching the catalog
+    ``rows``, should explain: the catalog stars inside the image, in the sky the points ``xy``
+    show (within ``SKY_RADIUS_FACTOR`` sqrt(area / points) px of one), whose ``depth_mags``
+    are no fainter than the faintest star matched (how deep the image is shown to reach;
+    every one when ``depth_mags`` is empty), but no more than the points; and how many of
+    them have ``mags`` brighter than the brightest matched by ``UNSEEN_MARGIN_MAG`` (0 when
+    ``mags`` is empty)."""
+    some = len(rows) > 0
+    as_deep_as = depth_mags[rows].max() if len(depth_mags) > 0 and some else math.inf
+    brighter_than = mags[rows].min() - UNSEEN_MARGIN_MAG if len(mags) > 0 and some else math.inf
     vectors = sky[0]
     everything = np.ones(len(vectors), dtype=np.bool_)
     limit = field_cos(model, p, width, height)
     n_front = cone(R[2], chord(math.acos(limit)) ** 2, sky, everything, work)
     J_c = np.empty((2, 3))
     J_p = np.empty((2, N_INTRINSIC))
+    near2 = SKY_RADIUS_FACTOR**2 * width * height / max(1, len(xy))
     inside, bright = 0, 0
     for m in range(n_front):
         row = work[m]
@@ -286,27 +299,36 @@ def expected_stars(R, sky, model, p, width, height, mags, brighter_than, work):
         c0 = R[0, 0] * v0 + R[0, 1] * v1 + R[0, 2] * v2
         c1 = R[1, 0] * v0 + R[1, 1] * v1 + R[1, 2] * v2
         c2 = R[2, 0] * v0 + R[2, 1] * v1 + R[2, 2] * v2
-        seen = sees(model, p, width, height, limit, c0, c1, c2, J_c, J_p)
-        inside += seen
-        bright += seen and len(mags) > 0 and mags[row] < brighter_than
-    return inside, bright
+        if not sees(model, p, width, height, limit, c0, c1, c2, J_c, J_p):
+            continue
+        x, y = project(model, p, c0, c1, c2, J_c, J_p)
+        seen_sky = False
+        for i in range(len(xy)):
+            if (xy[i, 0] - x) ** 2 + (xy[i, 1] - y) ** 2 <= near2:
+                seen_sky = True
+                break
+        if not seen_sky:
+            continue
+        inside += len(depth_mags) == 0 or depth_mags[row] <= as_deep_as
+        bright += len(mags) > 0 and mags[row] < brighter_than
+    return min(len(xy), inside), bright
 
 
 @njit(cache=True)
-def conclude(obs, cat, R, xy, sky, allowed, model, p0, width, height, fit_focal,
-             fit_distortion, radius, sigmas, log_sides, rank, point_mag, mags, bright_drop,
-             sigma_px, known_sigma_px, hypotheses, max_p, min_matched_fraction):  # fmt: skip
+def conclude(obs, cat, R, xy, sky, allowed, model, p0, width, height, fit_focal, fit_distortion,
+             radius, sigmas, log_sides, rank, point_mag, mags, depth_mags, bright_drop, sigma_px,
+             known_sigma_px, hypotheses, max_p, min_matched_fraction):  # fmt: skip
     """From an identification (pairs ``obs`` / ``cat``, attitude ``R``) to the fitted
     solution and its refusal code (``ACCEPTED`` or why not). ``radius`` (rad): the pairing
     radius; ``sigmas`` (rad): the centroid sigmas the false-match probability takes the best
     of; ``log_sides``: the identification's triangle-side log ratio; ``rank``: the points'
     places in the brightness order, ``point_mag`` their magnitudes, ``mags`` the catalog's
     (empty: the brightness is not known; ``identify.kernels.evidence.field_false_match`` and
-    ``brightness_log_ratio``), ``bright_drop`` of the pairs' brightness
-    scores left out; ``sigma_px``: the sigma the outlier and rematch rules use;
-    ``known_sigma_px``: the centroid sigma when it is known (0: not), the least the reported
-    covariance is at (``at_least_sigma``) and what the residuals are tested against
-    (``misfits``)."""
+    ``brightness_log_ratio``), ``depth_mags`` the catalog's whatever the points' brightness
+    (``expected_stars``), ``bright_drop`` of the pairs' brightness scores left out;
+    ``sigma_px``: the sigma the outlier and rematch rules use; ``known_sigma_px``: the
+    centroid sigma when it is known (0: not), the least the reported covariance is at
+    (``at_least_sigma``) and what the residuals are tested against (``misfits``)."""
     vectors = sky[0]
     work = np.empty(len(vectors), dtype=np.int64)
     a = converge(obs, cat, R, xy, sky, allowed, model, p0, width, height, fit_focal,
@@ -382,10 +404,8 @@ def conclude(obs, cat, R, xy, sky, allowed, model, p0, width, height, fit_focal,
         refusal = CONTESTED
     if refusal == ACCEPTED and p_false > max_p:
         refusal = UNCONVINCING
-    brightest = mags[a.cat].min() if len(mags) > 0 and len(a.cat) > 0 else math.inf
-    in_image, unseen = expected_stars(f.R, sky, model, f.params, width, height, mags,
-                                      brightest - UNSEEN_MARGIN_MAG, work)  # fmt: skip
-    expected = min(len(xy), in_image)
+    expected, unseen = expected_stars(f.R, sky, model, f.params, width, height, xy, a.cat,
+                                      depth_mags, mags, work)  # fmt: skip
     if refusal == ACCEPTED and len(a.obs) < min_matched_fraction * expected:
         refusal = TOO_FEW
     if refusal == ACCEPTED and unseen >= max(MIN_UNSEEN, len(a.obs)):
