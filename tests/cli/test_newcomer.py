@@ -178,14 +178,14 @@ def test_image_errors_print_plain_numbers():
     pixels = np.zeros((64, 64), np.float32)
     for options in (
         {"fov_deg": np.float64("nan")},
-        {"fov_deg": np.float64(0.5)},
+        {"fov_deg": np.float64(0.3)},
         {"threshold_sigma": np.float64("nan")},
         {"max_stars": np.float64(2.5)},
     ):
         with pytest.raises(StarnavError) as info:
             solve_image(pixels, **options)
         assert "np." not in str(info.value)
-        assert re.search(r"got (nan|2\.5|0\.5)\b", str(info.value)), str(info.value)
+        assert re.search(r"got (nan|2\.5|0\.3)\b", str(info.value)), str(info.value)
 
 
 @pytest.mark.parametrize(
@@ -211,7 +211,7 @@ def test_cli_errors_print_plain_numbers(capsys, blank_png, star_list, argv):
 
 @pytest.mark.parametrize(
     ("lens", "fov"),
-    [("pinhole", "0.5"), ("pinhole", "150"), ("pinhole", "nan"), ("equidistant", "5")],
+    [("pinhole", "0.3"), ("pinhole", "150"), ("pinhole", "nan"), ("equidistant", "5")],
 )
 def test_solve_identify_and_calibrate_refuse_the_same_fields_alike(
     capsys, tmp_path, blank_png, star_list, lens, fov

@@ -295,7 +295,7 @@ def test_a_band_searches_a_quarter_step_into_the_next_wider_one():
 
 
 def test_a_wide_field_outside_the_default_range_is_found_next():
-    """With no range given, 40-70° is searched when 5-40° finds nothing (then 1-5°), in what
+    """With no range given, 40-70° is searched when 5-40° finds nothing (then 0.625-5°), in what
     the budget left; with a range given, only that range is."""
     sky = load_catalog(None, mag_limit=7.0)
     camera = Camera.from_fov(50.0, 1024, 768)
