@@ -69,9 +69,9 @@ MISFIT_ALPHA_Z = 3.719  # the normal quantile of MISFIT_ALPHA = 1e-4 (one-sided)
 UNSEEN_MARGIN_MAG = 0.5
 MIN_UNSEEN = 3
 # both counts take the catalog stars in the part of the frame where stars are seen: within
-# SKY_RADIUS_FACTOR sqrt(area / points) of a point, the radius that a point of n spread
-# evenly over the frame misses with chance 1 % (exp(-pi r^2 n / area)): stars behind trees,
-# a roof or a cloud bank are not stars the answer should explain
+# SKY_RADIUS_FACTOR sqrt(area / points) of a point, the radius within which n points spread
+# at random over the frame leave a place empty with chance 1 % (exp(-pi r^2 n / area)):
+# stars behind trees, a roof or a cloud bank are not stars the answer should explain
 SKY_RADIUS_FACTOR = math.sqrt(math.log(100.0) / math.pi)
 
 # the six edges of a 4-star pattern, as identify.pattern4's _PAIRS
