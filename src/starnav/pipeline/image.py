@@ -224,17 +224,14 @@ def _solve_middle(
     the whole frame's detections are fitted with the radial distortion freed (a wide-angle
     lens bends the rest), or, when that is refused, the middle's detections in the whole
     frame's pixels: either answer passes the same verification as any, at half the
-    false-match probability asked for (the two searches share it). ``failed`` when nothing
-    is found, its reason telling the middle's."""
-    t0 = time.perf_counter()
-
-    def left_s() -> float:
-        return budget_s - failed.time_ms / 1e3 - (time.perf_counter() - t0)
-
+    false-match probability asked for (the two searches share it). The budget counts the
+    searches and fits (``time_ms``), as every solve's does, not the detection or the tables
+    loaded. ``failed`` when nothing is found, its reason telling the middle's."""
+    spent_ms = failed.time_ms
     height, width = pixels.shape
     y0, x0 = (round(n * (1.0 - MIDDLE_FRACTION) / 2.0) for n in pixels.shape)
     size = (width - 2 * x0, height - 2 * y0)
-    if options.lens_model != "pinhole" or left_s() <= 0 or min(size) < MIN_MIDDLE_PX:
+    if options.lens_model != "pinhole" or spent_ms >= budget_s * 1e3 or min(size) < MIN_MIDDLE_PX:
         return failed
     middle = np.ascontiguousarray(pixels[y0 : height - y0, x0 : width - x0])
     inner = _detect_binned(middle, options).xy
@@ -249,33 +246,34 @@ def _solve_middle(
         if searched[0] >= searched[1]:
             why = "its fields are narrower than the narrowest searched"
             inner = inner[:0]
-    if len(inner) >= MIN_DETECTIONS and left_s() > 0:
+    if len(inner) >= MIN_DETECTIONS:
         # a second search: the false-match probability each may claim is halved, so that
         # the two together keep the one asked for
-        options = replace(
-            options, max_false_match_probability=options.max_false_match_probability / 2
-        )
-        within = replace(options, fov_range_deg=searched, time_budget_s=left_s())
+        half = options.max_false_match_probability / 2
+        options = replace(options, max_false_match_probability=half)
+        left_s = budget_s - spent_ms / 1e3
+        within = replace(options, fov_range_deg=searched, time_budget_s=left_s)
         found = solve_stars(inner, within, width=size[0], height=size[1], images=True)
+        spent_ms += found.time_ms
         why = found.reason or "no time left"
         camera = None if found.solution is None else Camera(width, height, found.solution.focal_px)
         for points, bent in ((xy, True), (inner + np.array([x0, y0]), False)):
-            if camera is None or left_s() <= 0:
+            if camera is None or spent_ms >= budget_s * 1e3:
                 break
             whole = replace(
                 options, camera=camera, fov_deg=None, fov_range_deg=None, fit_distortion=bent,
-                time_budget_s=left_s(),
+                time_budget_s=budget_s - spent_ms / 1e3,
             )  # fmt: skip
             step = solve_stars(points, whole, prior=found.solution.R_cam_from_icrs, images=True)
+            spent_ms += step.time_ms
             if step.solution is not None:
                 break
             why = f"solved, but not in the whole frame's pixels: {step.reason}"
-    ms = failed.time_ms + (time.perf_counter() - t0) * 1e3
     if step is not None and step.solution is not None:  # named for how it was found
         named = replace(step.solution, algorithm=f"{found.solution.algorithm} (middle)")
-        return replace(step, solution=named, time_ms=ms)
+        return replace(step, solution=named, time_ms=spent_ms)
     return replace(
-        failed, reason=f"{failed.reason}; the middle of the frame alone: {why}", time_ms=ms
+        failed, reason=f"{failed.reason}; the middle of the frame alone: {why}", time_ms=spent_ms
     )
 
 
