@@ -228,14 +228,19 @@ def _solve_middle(
     searches and fits (``time_ms``), as every solve's does, not the detection or the tables
     loaded. ``failed`` when nothing is found, its reason telling the middle's."""
     spent_ms = failed.time_ms
+
+    def unsolved(why: str) -> SolveResult:
+        return replace(
+            failed,
+            reason=f"{failed.reason}; the middle of the frame alone: {why}",
+            time_ms=spent_ms,
+        )
+
     height, width = pixels.shape
     y0, x0 = (round(n * (1.0 - MIDDLE_FRACTION) / 2.0) for n in pixels.shape)
     size = (width - 2 * x0, height - 2 * y0)
     if options.lens_model != "pinhole" or spent_ms >= budget_s * 1e3 or min(size) < MIN_MIDDLE_PX:
         return failed
-    middle = np.ascontiguousarray(pixels[y0 : height - y0, x0 : width - x0])
-    inner = _detect_binned(middle, options).xy
-    step, why = None, "too few stars detected"
     searched = options.fov_range_deg
     if searched is not None:  # the middle's part of each field given, at the same focal length
         lo = fov_limits_deg("pinhole", size)[0]
@@ -244,8 +249,10 @@ def _solve_middle(
             for v in searched
         )
         if searched[0] >= searched[1]:
-            why = "its fields are narrower than the narrowest searched"
-            inner = inner[:0]
+            return unsolved("its fields are narrower than the narrowest searched")
+    middle = np.ascontiguousarray(pixels[y0 : height - y0, x0 : width - x0])
+    inner = _detect_binned(middle, options).xy
+    step, why = None, "too few stars detected"
     if len(inner) >= MIN_DETECTIONS:
         # a second search: the false-match probability each may claim is halved, so that
         # the two together keep the one asked for
@@ -272,9 +279,7 @@ def _solve_middle(
     if step is not None and step.solution is not None:  # named for how it was found
         named = replace(step.solution, algorithm=f"{found.solution.algorithm} (middle)")
         return replace(step, solution=named, time_ms=spent_ms)
-    return replace(
-        failed, reason=f"{failed.reason}; the middle of the frame alone: {why}", time_ms=spent_ms
-    )
+    return unsolved(why)
 
 
 def _budget_left(budget_s: float, budget_from, on_budget) -> tuple[float, str | None]:
