@@ -101,6 +101,40 @@ def test_a_hinted_narrow_field_is_solved_from_the_sky_near_the_hint_alone(
     assert len(ids) >= 15 and ids <= set(gaia.ids.tolist())
 
 
+def test_a_narrow_frame_is_tracked_on_the_gaia_stars_near_its_prior(narrow_frame, monkeypatch):
+    """A sequence's next frame (camera and prior attitude known) of a field cut from Gaia: the
+    stars near the prior are paired for that frame alone (the whole-sky pair database would
+    be ~0.5 GB), none written to the cache, and the frame tracked; a prior 1° off still
+    finds it."""
+    frame, R = narrow_frame
+    camera = Camera.from_fov(1.5, 1200, 800)
+
+    def no_cache(*args, **kwargs):
+        raise AssertionError("a pair database was cached")
+
+    monkeypatch.setattr(fov, "Solver", _no_cached_pairs(fov.Solver, no_cache))
+    off = attitude_from_radec_roll(305.0, 41.5, 65.3)
+    for prior, sigma in ((R, 0.05), (off, 1.0)):
+        res = solve_image(frame.image, camera=camera, prior=prior, prior_sigma_deg=sigma)
+        s = res.solution
+        assert s is not None, res.reason
+        bore, roll = attitude_difference_deg(s.R_cam_from_icrs, R)
+        assert bore * 3600 < 2.0 and roll < 0.02, (bore, roll)
+        assert "of the prior" in res.catalog.name and res.catalog.name.startswith("Gaia DR3")
+        assert s.n_matched >= 15
+
+
+def _no_cached_pairs(solver_class, fail):
+    """``Solver`` whose construction fails when it would load or build a cached database."""
+
+    def make(*args, database=None, **kwargs):
+        if database is None:
+            fail()
+        return solver_class(*args, database=database, **kwargs)
+
+    return make
+
+
 @pytest.mark.slow
 def test_starnav_solve_field_solves_a_narrow_fits_frame_with_a_position_hint(
     narrow_frame, tmp_path

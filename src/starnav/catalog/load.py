@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import datetime as _dt
 import hashlib
+import math
 import warnings
 from dataclasses import dataclass
 from functools import cache, cached_property
@@ -73,6 +74,12 @@ class Catalog:
             return np.array([row_of[int(i)] for i in ids], dtype=np.intp)
         except KeyError as exc:
             raise CatalogError(f"catalog {self.name!r} has no star with id {exc.args[0]}") from None
+
+    def within(self, direction: np.ndarray, radius_rad: float, name: str) -> Catalog:
+        """The stars within ``radius_rad`` of the unit vector ``direction`` (ICRS), the
+        subset called ``name``."""
+        keep = np.flatnonzero(self.vectors @ direction >= math.cos(min(radius_rad, math.pi)))
+        return Catalog(self.ids[keep], self.ra_deg[keep], self.dec_deg[keep], self.mag[keep], name)
 
     def brighter_than(self, mag_limit: float) -> Catalog:
         """The stars with ``mag <= mag_limit``."""

@@ -33,7 +33,7 @@ from starnav.catalog.sky import sky_at
 from starnav.errors import CatalogError, StarnavError, shown
 from starnav.geometry import radec_to_unit
 from starnav.identify.base import SEARCH_SIGMA_PX, MatchSettings
-from starnav.identify.database import catalog_only
+from starnav.identify.database import build_database, catalog_only
 from starnav.identify.pattern4 import FIELD_RADIUS_FRACTION, build_pattern_table
 from starnav.pipeline.conclude import elapsed_ms
 from starnav.pipeline.deep import DEEP_CHANCE, DEEP_MAG_LIMIT, MATCH_SIGMAS
@@ -204,7 +204,7 @@ def load_band(table_diagonal_deg: float, lo: float, hi: float, catalog: Catalog)
     catalog, KD-tree (in memory) and pattern table (in memory and on disk) of its grid band,
     built for a square field whose diagonal is ``table_diagonal_deg``; None when the catalog
     holds no 4-star pattern for it."""
-    cat = catalog.brighter_than(band_mag_limit(table_diagonal_deg, np.sort(catalog.mag)))
+    cat = catalog.brighter_than(band_mag_limit(table_diagonal_deg, _sorted_mags(catalog)))
     if len(cat) < 4:
         return None
     key = (cat.fingerprint, round(table_diagonal_deg, 6))
@@ -245,9 +245,18 @@ def band_source(
 ) -> Catalog:
     """The catalog a band is cut from: ``full`` (``search_catalog``'s), except for the
     embedded catalog's bands under ``GAIA_BELOW_DEG``, which take the embedded Gaia DR3."""
-    if is_embedded(catalog) and table_diagonal_deg < GAIA_BELOW_DEG:
-        return load_catalog(GAIA)
-    return full
+    return load_catalog(GAIA) if from_gaia(table_diagonal_deg, catalog) else full
+
+
+def from_gaia(diagonal_deg: float, catalog: Catalog | str | Path | None) -> bool:
+    """Whether a field of this diagonal (degrees) is cut from the embedded Gaia DR3: the
+    embedded catalog's, under ``GAIA_BELOW_DEG``."""
+    return is_embedded(catalog) and diagonal_deg < GAIA_BELOW_DEG
+
+
+@functools.lru_cache(maxsize=8)
+def _sorted_mags(catalog: Catalog) -> np.ndarray:
+    return np.sort(catalog.mag)
 
 
 def load_bands(
@@ -304,29 +313,23 @@ def near_bands(
     brightest (saturated stars, colour), and the whole-sky tables (a minute each to build)
     are not needed when it does. The range's wider bands are loaded as ``load_bands`` does."""
     grid = range_grid(lo, hi, width, height)
-    if not is_embedded(catalog) or all(top >= GAIA_BELOW_DEG for _, _, top in grid):
+    if not any(from_gaia(top, catalog) for _, _, top in grid):
         return None
     full = search_catalog(catalog, epoch_year)
     gaia = load_catalog(GAIA)
-    cos_from_hint = gaia.vectors @ near[0]  # once for every band
     out = []
     for a, b, top in grid:
-        if top >= GAIA_BELOW_DEG:
-            band = load_band(top, a, b, band_source(top, catalog, full))
+        if not from_gaia(top, catalog):
+            band = load_band(top, a, b, full)
             out += [] if band is None else [band]
             continue
         top_rad = math.radians(top)
-        reach = min(near[1] + top_rad, math.pi)
-        rows = np.flatnonzero(cos_from_hint >= math.cos(reach))
-        if len(rows) < 4:
-            continue
-        local = Catalog(
-            gaia.ids[rows],
-            gaia.ra_deg[rows],
-            gaia.dec_deg[rows],
-            gaia.mag[rows],
-            f"{gaia.name}, within {math.degrees(reach):.3g}° of the position hint",
+        reach = near[1] + top_rad
+        local = gaia.within(
+            near[0], reach, f"{gaia.name}, within {math.degrees(reach):.3g}° of the position hint"
         )
+        if len(local) < 4:
+            continue
         database = catalog_only(local, top_rad)
         table = build_pattern_table(
             database,
@@ -486,7 +489,9 @@ def solve_unknown_field(
     if prior is not None:
         if camera is None:
             raise StarnavError("tracking (a prior) needs the camera, e.g. the previous frame's")
-        solver = tracking_solver(camera, catalog, epoch_year, mag_limit, settings)
+        reach = math.radians(camera.diagonal_deg / 2.0 + 5.0 * options.prior_sigma_deg)
+        near_prior = (np.asarray(prior)[2], reach)  # the boresight, in ICRS
+        solver = tracking_solver(camera, catalog, epoch_year, mag_limit, settings, near_prior)
         deadline = Deadline.after(budget_s)
         return solver.solve(
             stars, prior=prior, prior_sigma_deg=options.prior_sigma_deg, deadline=deadline
@@ -549,10 +554,9 @@ def _sparse_near(near: tuple[np.ndarray, float], base: Camera, lo: float, hi: fl
     """Why an unsolved field near a position hint may be beyond the embedded catalogs, or ""
     when they hold ``FIELD_STARS`` stars in such a field there: the Gaia DR3 stars within the
     hint's radius, scaled to the image's solid angle at the middle of the FOV range."""
-    if diagonal_fov_deg(lo, base.width, base.height) >= GAIA_BELOW_DEG:
+    if not from_gaia(diagonal_fov_deg(lo, base.width, base.height), None):
         return ""
-    gaia = load_catalog(GAIA)
-    n = int(np.count_nonzero(gaia.vectors @ near[0] >= math.cos(near[1])))
+    n = len(load_catalog(GAIA).within(*near, "near the hint"))
     fov = 0.5 * (lo + hi)
     height = fov * base.height / base.width
     image_sr = math.radians(fov) * math.radians(height)
@@ -603,16 +607,28 @@ def tracking_solver(
     epoch_year: float | None,
     mag_limit: float | None,
     settings: SolveSettings,
+    near: tuple[np.ndarray, float] | None = None,
 ) -> Solver:
     """The solver of a sequence's frames once a frame is solved: ``camera`` known, the catalog
-    as deep as the FOV search's band of that field (a pinhole; a fisheye's: ``mag_limit``,
-    default Hp <= 6), its pair database built on first use. Kept per process."""
+    as deep as the FOV search's band of that field, from the same source (``band_source``)
+    (a pinhole; a fisheye's: ``mag_limit``, default Hp <= 6), its pair database built on
+    first use, kept per process. A pinhole field cut from the embedded Gaia DR3 (a diagonal
+    under ``GAIA_BELOW_DEG``, whose whole-sky pair database would take ~0.5 GB) is tracked
+    on the Gaia stars ``near`` the prior only (unit vector, radius in rad), their pairs
+    built for that frame (milliseconds, never cached)."""
+    searched = not camera.scans_focal and mag_limit is None
+    if searched and near is not None and from_gaia(camera.diagonal_deg, catalog):
+        gaia = load_catalog(GAIA)
+        local = gaia.within(*near, f"{gaia.name}, within {math.degrees(near[1]):.3g}° of the prior")
+        local = local.brighter_than(band_mag_limit(camera.diagonal_deg, _sorted_mags(gaia)))
+        pairs = build_database(local, camera.diagonal_deg, use_cache=False)
+        return Solver(camera, local, settings=settings, database=pairs)
     cat_key = catalog.fingerprint if isinstance(catalog, Catalog) else str(catalog)
     key = (camera, cat_key, epoch_year, mag_limit, settings)
     if key not in _TRACKING:
-        if not camera.scans_focal and mag_limit is None:
+        if searched:
             full = search_catalog(catalog, epoch_year)
-            cat = full.brighter_than(band_mag_limit(camera.diagonal_deg, np.sort(full.mag)))
+            cat = full.brighter_than(band_mag_limit(camera.diagonal_deg, _sorted_mags(full)))
         else:
             cat = load_catalog(catalog, mag_limit=mag_limit, epoch_year=epoch_year)
         _TRACKING[key] = Solver(camera, cat, settings=settings)

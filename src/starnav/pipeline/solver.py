@@ -205,7 +205,8 @@ class Solver:
 
     ``camera``: the camera model; ``catalog``: the stars to identify against; ``identifier``:
     an identification algorithm (default Pyramid) or its name; ``settings``: ``SolveSettings``.
-    The pair database is loaded (or built) here, once.
+    The pair database is loaded (or built) here, once, unless ``database`` (built for this
+    ``catalog`` and field) is given.
     """
 
     def __init__(
@@ -216,6 +217,7 @@ class Solver:
         settings: SolveSettings | None = None,
         *,
         algorithm_options: dict | None = None,
+        database: PairDatabase | None = None,
     ) -> None:
         if isinstance(identifier, str):
             try:
@@ -227,7 +229,7 @@ class Solver:
         self.catalog = catalog
         self.identifier = identifier
         self.settings = settings or SolveSettings()
-        self.database = get_database(catalog, camera)
+        self.database = get_database(catalog, camera) if database is None else database
         self.match_settings = self.settings.match_settings(camera)
 
     def with_camera(self, camera: CameraModel, max_hypotheses: int | None = None) -> Solver:
