@@ -114,7 +114,11 @@ class Solution:
     about the camera axes (x right, y down, z boresight; radians squared), the matrix the
     1-sigmas come from (None when not known); ``time_ms``: identification and fit, without
     loading the catalog or database; ``star_table``: every input point with its id and
-    residual, as arrays (``stars``: the same as ``StarMatch`` records, made on first use).
+    residual, as arrays (``stars``: the same as ``StarMatch`` records, made on first use);
+    ``pixel_aspect``: a pixel's height over its width (an image whose header says its pixels
+    are not square, ``detect.header``): the ``star_table`` is in the image's pixels, the
+    ``camera`` (and ``focal_px``, ``rms_px``) in square pixels of the pixel's width, whose y is
+    the image's times ``pixel_aspect``.
     """
 
     ra_deg: float
@@ -141,6 +145,7 @@ class Solution:
     k4: float = 0.0
     camera: CameraModel | None = None
     rotation_cov_rad2: np.ndarray | None = field(default=None, repr=False)
+    pixel_aspect: float = 1.0
 
     def __repr__(self) -> str:
         n = len(self.star_table.labels)

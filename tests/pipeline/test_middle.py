@@ -9,7 +9,7 @@ import starnav.pipeline.image as image
 from starnav.camera import Camera
 from starnav.catalog import load_catalog
 from starnav.geometry import attitude_difference_deg, attitude_from_radec_roll
-from starnav.pipeline.image import MIDDLE_FRACTION, solve_image
+from starnav.pipeline.image import MIDDLE_FRACTIONS, solve_image
 from starnav.pipeline.options import SolveOptions
 from starnav.pipeline.stars import solve_stars
 from starnav.simulate import simulate_frame
@@ -26,7 +26,7 @@ def _frame_with_bright_junk_round_the_edge(n_junk: int = 40, seed: int = 1) -> n
     img = np.array(frame.image, dtype=np.float64)
     rng = np.random.default_rng(seed)
     yy, xx = np.mgrid[0:768, 0:1024]
-    edge = (1.0 - MIDDLE_FRACTION) / 2.0
+    edge = (1.0 - MIDDLE_FRACTIONS[0]) / 2.0
     placed = 0
     while placed < n_junk:
         x, y = rng.uniform(5, 1019), rng.uniform(5, 763)
@@ -54,7 +54,7 @@ def test_a_frame_whose_brightest_points_are_junk_round_the_edge_is_solved_from_i
     assert s.algorithm == "fov-search (middle)"
     # without the second look the junk takes the pattern stars' places: not solved
     monkeypatch.setattr(
-        image, "_solve_middle", lambda pixels, xy, options, budget_s, failed: failed
+        image, "_solve_middle", lambda pixels, xy, options, budget_s, failed, fraction: failed
     )
     again = solve_image(img, fov_range_deg=(15.0, 25.0), time_budget_s=5.0)
     assert again.solution is None

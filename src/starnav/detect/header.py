@@ -19,7 +19,11 @@ unless its own options say otherwise:
 - field of view (horizontal, degrees): from a WCS's pixel scale (``CD1_1``.. or ``CDELT1``),
   else ``PIXSCALE``/``SCALE``/``SECPIX`` (arcsec per px), else ``FOCALLEN`` (mm) with
   ``XPIXSZ`` (µm, per binned pixel as N.I.N.A. and SharpCap write it), times ``NAXIS1``;
-- epoch (decimal year, for the catalog's proper motion): from the time above.
+- epoch (decimal year, for the catalog's proper motion): from the time above;
+- pixel aspect (a pixel's height over its width): ``YPIXSZ``/``XPIXSZ``, else
+  ``PIXSIZE2``/``PIXSIZE1`` (µm), when they differ by more than ``SQUARE_TOLERANCE``: a CCD
+  such as the SX Lodestar's (8.6 x 8.3 µm) is solved in square pixels, its answers given in
+  the file's (``pipeline.image``).
 
 A keyword that is present but unreadable is ignored (a hint only narrows the search: a bad
 one costs time, never a wrong answer, since the search then runs without it).
@@ -43,6 +47,10 @@ _EXIF_IFD = 0x8769
 _DATE_TIME_ORIGINAL = 36867
 _SUBSEC_TIME_ORIGINAL = 37521
 _TIME_SCALES = ("utc", "tt", "tai", "tcg", "tcb", "tdb", "ut1")
+# pixels whose sides differ by less than this share are square: 0.1 px at 500 px from the
+# centre; the Lodestar's 3.5 % is 17 px there
+SQUARE_TOLERANCE = 2e-4
+_PIXEL_SIZE_KEYS = (("XPIXSZ", "YPIXSZ"), ("PIXSIZE1", "PIXSIZE2"))
 
 
 def is_fits(path: str | Path) -> bool:
@@ -83,6 +91,7 @@ class ImageHints:
     sources: tuple[str, ...] = ()
     utc: str | None = None
     site: tuple[float, float, float] | None = None
+    pixel_aspect: float = 1.0
 
     def to_dict(self) -> dict:
         """The JSON form (``sources`` as a list)."""
@@ -93,6 +102,7 @@ class ImageHints:
             "epoch_year": self.epoch_year,
             "utc": self.utc,
             "site": None if self.site is None else list(self.site),
+            "pixel_aspect": self.pixel_aspect,
             "sources": list(self.sources),
         }
 
@@ -116,7 +126,22 @@ def fits_hints(path: str | Path) -> ImageHints:
         utc = found.time.utc.isot
         sources.append(found.source)
     site = _site(headers, sources)
-    return ImageHints(ra, dec, fov, epoch, tuple(sources), utc, site)
+    aspect = _pixel_aspect(headers, sources)
+    return ImageHints(ra, dec, fov, epoch, tuple(sources), utc, site, aspect)
+
+
+def _pixel_aspect(headers, sources: list[str]) -> float:
+    """A pixel's height over its width, from the first header giving both sizes (1 when
+    none does, or they agree within ``SQUARE_TOLERANCE``)."""
+    for h in headers:
+        for x_key, y_key in _PIXEL_SIZE_KEYS:
+            width, height = _number(h, x_key), _number(h, y_key)
+            if width and height and width > 0 and height > 0:
+                if abs(height / width - 1.0) <= SQUARE_TOLERANCE:
+                    return 1.0
+                sources.append(f"{x_key}/{y_key}")
+                return height / width
+    return 1.0
 
 
 # the keywords of a site: latitude, longitude (east positive), height (m)

@@ -132,7 +132,7 @@ def _undistorted(camera: CameraModel) -> CameraModel:
     return camera.undistorted()
 
 
-def _fit_points(camera: CameraModel) -> np.ndarray:
+def fit_points(camera: CameraModel) -> np.ndarray:
     """Pixels (n, 2) the SIP polynomials are fitted and checked on: a grid of
     ``SIP_GRID_POINTS`` x ``SIP_GRID_POINTS`` spanning the image (corners included), and for a
     lens with an image circle only its points inside the circle, with points on its rim."""
@@ -161,13 +161,13 @@ def fit_sip(camera: CameraModel, *, order: int = DEFAULT_SIP_ORDER) -> SipFit:
     They map the camera's pixel offsets from the principal point to those of the same camera
     without distortion (``camera.undistorted()``, its coefficients at zero; pinhole:
     ``r = f tan θ``, Kannala-Brandt: ``r = f θ``). Fitted on the
-    pixels of ``_fit_points`` (a grid over the image, within its image circle). A radial model
+    pixels of ``fit_points`` (a grid over the image, within its image circle). A radial model
     has odd terms only, so an even order fits as well as the odd order below it; the pinhole's
     inverse AP/BP is exact once order >= 3 (k1 only) or 5 (with k2).
     """
     order = _check_order(order)
     ideal = _undistorted(camera)
-    grid = _fit_points(camera)
+    grid = fit_points(camera)
     bearings = camera.pixels_to_bearings(grid)
     distorted = camera.bearings_to_pixels(bearings)
     gap = float(np.max(np.linalg.norm(distorted - grid, axis=1)))

@@ -52,8 +52,10 @@ DEEPER_THRESHOLDS_SIGMA = (4.0, 3.0)  # the thresholds of those detections, in t
 # a searched pinhole image that is not solved is searched again in its middle, this share of
 # its width and height, detected anew there (``_solve_middle``): a wide-angle lens's middle
 # is nearly a pinhole's, and a stretched photograph's brightest points (nebula knots,
-# spiked star glows) often lie elsewhere in it
-MIDDLE_FRACTION = 0.6
+# spiked star glows) often lie elsewhere in it; then, unsolved and with budget left, a wider
+# middle: a telescope frame of 0.625-1.04° has a 60 % middle under the narrowest field
+# searched (0.625°), and stacking edges are narrower than a tenth of it
+MIDDLE_FRACTIONS = (0.6, 0.8)
 MIN_MIDDLE_PX = 96  # and not when that middle is smaller than this
 
 
@@ -84,8 +86,10 @@ class ImageSolveResult:
     def to_dict(self, file: str | None = None) -> dict:
         """The JSON of the solve (``starnav.results.solve_dict``; the stars are the detections,
         brightest first) with the image ``file``, its size, the fitted principal point and
-        distortion (null when unsolved), ``n_detected``, ``failure`` (the class of an unsolved
-        image's failure, ``pipeline.diagnose``; null when solved) and the times (ms)."""
+        distortion (null when unsolved; the principal point in the image's pixels, the
+        distortion in square ones when they are not square: ``pixel_aspect``), ``n_detected``,
+        ``failure`` (the class of an unsolved image's failure, ``pipeline.diagnose``; null when
+        solved) and the times (ms)."""
         from starnav.results import solve_dict
 
         det, cam = self.detections, self.camera
@@ -95,9 +99,10 @@ class ImageSolveResult:
             width=det.width,
             height=det.height,
             cx=cam.cx if cam else None,
-            cy=cam.cy if cam else None,
+            cy=cam.cy / self.solution.pixel_aspect if cam else None,
             **{k: getattr(self.solution, k) if cam else None for k in ("k1", "k2", "k3", "k4")},
             n_detected=len(det.xy),
+            pixel_aspect=self.solution.pixel_aspect if cam else self.hints.pixel_aspect,
             failure=self.failure,
             hints=self.hints.to_dict() if self.hints.sources else None,
             read_ms=self.read_ms,
@@ -141,7 +146,8 @@ def solve_image(
     ``camera`` or other range is given and it is within the pinhole's limits, its epoch used
     when ``epoch_year`` is not (for the embedded Hipparcos: a Gaia, CSV or FITS catalog is
     used at its own epoch), its position searched first; a solve that fails with the hinted
-    FOV is tried again without it. ``position_hint_deg``: the boresight's (RA, Dec), roughly
+    FOV is tried again without it, its pixels' aspect (``square_pixels``: solved in square
+    pixels, answered in the image's). ``position_hint_deg``: the boresight's (RA, Dec), roughly
     (wins over the header's). ``prior``: the previous frame's ``R_cam_from_icrs``, with its
     fitted ``camera``: tracking. The time budget is the solve's (``runtime.budget``)."""
     options = SolveOptions.make(options, **option_fields)
@@ -151,23 +157,17 @@ def solve_image(
     )
     if not exact_field(options, images=True):  # bad options fail before any work
         check_searched(options, prior=prior is not None)
-    t0 = time.perf_counter()
-    if isinstance(image, np.ndarray):
-        pixels, read_ms = image, 0.0
-        if pixels.ndim != 2 or pixels.size == 0:
-            raise ImageError(f"an image array must be 2-D and not empty, got shape {image.shape}")
-    else:
-        pixels = read_image(image)
-        read_ms = (time.perf_counter() - t0) * 1e3
-        if hints is None:
-            hints = fits_hints(image)
-    hints = hints or NO_HINTS
+    pixels, read_ms, hints = _read(image, hints)
     height, width = pixels.shape
     if camera is not None and (camera.width, camera.height) != (width, height):
         raise CameraError(
             f"the camera file is for {camera.width} x {camera.height} px images, this image is "
             f"{width} x {height} px"
         )
+    aspect, file_height = 1.0, height
+    if hints.pixel_aspect != 1.0 and camera is None:  # a camera file is in the file's pixels
+        pixels, aspect = square_pixels(pixels, hints.pixel_aspect)
+        height = pixels.shape[0]
     if _unsaid_fisheye(options, pixels):
         options = replace(options, lens=FISHEYE)  # each common model, from the circle
     budget_s = check_budget(options.time_budget_s, _default_budget_s(options, pixels))
@@ -193,13 +193,16 @@ def solve_image(
         found.xy, (width, height), options, hints if searched else NO_HINTS, budget_s,
         position_hint_deg, prior, found.circle,
     )  # fmt: skip
-    if result.solution is None and searched and prior is None:
-        result = _solve_middle(pixels, found.xy, options, budget_s, result)
+    for fraction in MIDDLE_FRACTIONS if searched and prior is None else ():
+        if result.solution is None:
+            result = _solve_middle(pixels, found.xy, options, budget_s, result, fraction)
     sol = result.solution
     reason, failure = result.reason, None
     if sol is None:
         why = _diagnose(found, reason, options)
         reason, failure = why.explain(reason), why.kind
+    if aspect != 1.0:
+        sol, found = _in_file_pixels(sol, found, aspect, file_height)
     return ImageSolveResult(
         sol,
         reason,
@@ -214,30 +217,80 @@ def solve_image(
     )
 
 
+def _read(
+    image: str | Path | np.ndarray, hints: ImageHints | None
+) -> tuple[np.ndarray, float, ImageHints]:
+    """The pixels of an image file or 2-D array, the time (ms) reading took, and the
+    ``hints`` (None: a FITS file's header's, none for another file or an array)."""
+    if isinstance(image, np.ndarray):
+        if image.ndim != 2 or image.size == 0:
+            raise ImageError(f"an image array must be 2-D and not empty, got shape {image.shape}")
+        return image, 0.0, hints or NO_HINTS
+    t0 = time.perf_counter()
+    pixels = read_image(image)
+    read_ms = (time.perf_counter() - t0) * 1e3
+    return pixels, read_ms, (fits_hints(image) if hints is None else hints) or NO_HINTS
+
+
+def _in_file_pixels(
+    solution: Solution | None, found: Detections, aspect: float, height: int
+) -> tuple[Solution | None, Detections]:
+    """A solution and detections made in square pixels (``square_pixels``) given in the
+    image's, ``aspect`` times as tall as wide and ``height`` rows: their y divided by it."""
+    found = replace(found, xy=found.xy / (1.0, aspect), height=height)
+    if solution is None:
+        return None, found
+    table = solution.star_table
+    moved = replace(table, xy=table.xy / (1.0, aspect))
+    return replace(solution, star_table=moved, pixel_aspect=aspect), found
+
+
+def square_pixels(pixels: np.ndarray, aspect: float) -> tuple[np.ndarray, float]:
+    """An image of pixels ``aspect`` times as tall as wide resampled to square ones
+    (linearly, its rows only: a pixel's width stays the unit), and the aspect kept (its new
+    height over its old: the rows are whole). Edges map to edges: y square = y image x
+    aspect, in pixels from the top edge."""
+    from scipy.ndimage import zoom
+
+    height = pixels.shape[0]
+    rows = max(round(height * aspect), 1)
+    scale = rows / height
+    out = zoom(np.asarray(pixels, dtype=np.float32), (scale, 1.0), order=1, grid_mode=True,
+               mode="nearest")  # fmt: skip
+    return out, scale
+
+
 def _solve_middle(
-    pixels: np.ndarray, xy: np.ndarray, options: SolveOptions, budget_s: float, failed
+    pixels: np.ndarray,
+    xy: np.ndarray,
+    options: SolveOptions,
+    budget_s: float,
+    failed,
+    fraction: float,
 ) -> SolveResult:
     """An unsolved searched pinhole image (``failed``: its result; ``xy``: its detections)
-    solved again from its middle (``MIDDLE_FRACTION`` of each side, the same principal point)
+    solved again from its middle (``fraction`` of each side, the same principal point)
     on what is left of ``budget_s``: detected anew there and searched (the default ranges, or
     the middle's part of the range given). From that attitude and focal length (``prior``)
     the whole frame's detections are fitted with the radial distortion freed (a wide-angle
     lens bends the rest), or, when that is refused, the middle's detections in the whole
-    frame's pixels: either answer passes the same verification as any, at half the
-    false-match probability asked for (the two searches share it). The budget counts the
-    searches and fits (``time_ms``), as every solve's does, not the detection or the tables
-    loaded. ``failed`` when nothing is found, its reason telling the middle's."""
+    frame's pixels: either answer passes the same verification as any, at a quarter of the
+    false-match probability asked for (``MIDDLE_FRACTIONS``' two middles share half of it:
+    a false answer from any of the three searches is at most 1.5 times as likely as the
+    probability asked for). The budget counts the searches and fits (``time_ms``), as every
+    solve's does, not the detection or the tables loaded. ``failed`` when nothing is found,
+    its reason telling the middle's."""
     spent_ms = failed.time_ms
 
     def unsolved(why: str) -> SolveResult:
         return replace(
             failed,
-            reason=f"{failed.reason}; the middle of the frame alone: {why}",
+            reason=f"{failed.reason}; the middle {fraction:.0%} of the frame alone: {why}",
             time_ms=spent_ms,
         )
 
     height, width = pixels.shape
-    y0, x0 = (round(n * (1.0 - MIDDLE_FRACTION) / 2.0) for n in pixels.shape)
+    y0, x0 = (round(n * (1.0 - fraction) / 2.0) for n in pixels.shape)
     size = (width - 2 * x0, height - 2 * y0)
     if options.lens_model != "pinhole" or spent_ms >= budget_s * 1e3 or min(size) < MIN_MIDDLE_PX:
         return failed
@@ -254,10 +307,9 @@ def _solve_middle(
     inner = _detect_binned(middle, options).xy
     step, why = None, "too few stars detected"
     if len(inner) >= MIN_DETECTIONS:
-        # a second search: the false-match probability each may claim is halved, so that
-        # the two together keep the one asked for
-        half = options.max_false_match_probability / 2
-        options = replace(options, max_false_match_probability=half)
+        # the middles share half the false-match probability asked for
+        share = options.max_false_match_probability / (2 * len(MIDDLE_FRACTIONS))
+        options = replace(options, max_false_match_probability=share)
         left_s = budget_s - spent_ms / 1e3
         within = replace(options, fov_range_deg=searched, time_budget_s=left_s)
         found = solve_stars(inner, within, width=size[0], height=size[1], images=True)
@@ -489,8 +541,9 @@ def _outside_sky_masked(pixels: np.ndarray) -> tuple[np.ndarray, float, ImageCir
 
 def annotate_result(path_out: str | Path, image: np.ndarray, result: ImageSolveResult) -> None:
     """Draw an image into a PNG. Solved: detections, catalog stars, ids, names of bright stars
-    and the residuals (``starnav.output.annotate``); not solved: the detections by rank and the
-    reason (``starnav.output.annotate.unsolved_figure``)."""
+    and the residuals (``starnav.output.annotate``), in square pixels when the image's are
+    not (``square_pixels``); not solved: the detections by rank and the reason
+    (``starnav.output.annotate.unsolved_figure``)."""
     from starnav.output.annotate import save_figure, unsolved_figure
 
     s, cam, cat = result.solution, result.camera, result.catalog
@@ -506,7 +559,12 @@ def annotate_result(path_out: str | Path, image: np.ndarray, result: ImageSolveR
         used = min(len(det.xy), DEFAULT_PATTERN_STARS)
         save_figure(unsolved_figure(image, detected_xy=det.xy, used=used, lines=lines), path_out)
         return
-    annotate_solution(path_out, image, result.detections.xy, s, cam, cat)
+    xy, aspect = result.detections.xy, s.pixel_aspect
+    if aspect != 1.0:  # drawn in the square pixels it was solved in
+        image = square_pixels(image, aspect)[0]
+        xy, table = xy * (1.0, aspect), s.star_table
+        s = replace(s, star_table=replace(table, xy=table.xy * (1.0, aspect)))
+    annotate_solution(path_out, image, xy, s, cam, cat)
 
 
 def annotate_solution(
@@ -587,33 +645,41 @@ def fitted_wcs(solution: Solution, catalog: Catalog | None, *, crpix_px=None):
     """The WCS (astropy) written for a solved image: TAN-SIP fitted to the matched stars
     (``starnav.output.wcs.fit_wcs_to_stars``: the order its F-tests find measurable) when the
     camera is a pinhole without distortion terms of its own and either SIP terms are
-    measurable or ``crpix_px`` (starnav px) asks for a reference pixel away from the principal
-    point; else the camera's own (``solution_wcs``: the attitude's TAN, or the lens model's
-    projection and SIP). The matched stars are looked up in ``catalog`` (those it lacks are
-    left out of the fit)."""
-    from starnav.output.wcs import fit_wcs_to_stars
+    measurable, ``crpix_px`` (starnav px) asks for a reference pixel away from the principal
+    point or the pixels are not square (``Solution.pixel_aspect``); else the camera's own
+    (``solution_wcs``: the attitude's TAN, or the lens model's projection and SIP), through
+    a grid of its pixels when they are not square. The matched stars are looked up in
+    ``catalog`` (those it lacks are left out of the fit)."""
+    from starnav.output.wcs import STAR_FIT_MAX_ORDER, fit_points, fit_wcs_to_stars
 
-    camera = solution.camera
-    at_principal = crpix_px is None or np.allclose(crpix_px, (camera.cx, camera.cy))
+    camera, aspect = solution.camera, solution.pixel_aspect
+    principal = (camera.cx, camera.cy / aspect)  # in the image's pixels
+    crpix = principal if crpix_px is None else crpix_px
     own = getattr(camera, "fits_projection", "") != "TAN" or camera.distorted
-    if catalog is None or own:
-        return solution_wcs(solution.R_cam_from_icrs, camera)
     table = solution.star_table
     matched = table.catalog_id >= 0
-    rows = catalog.rows(table.catalog_id[matched], missing=-1)
+    rows = np.full(0, -1)
+    if catalog is not None and not own:
+        rows = catalog.rows(table.catalog_id[matched], missing=-1)
     found = rows >= 0
-    if found.sum() < 3:
+    if found.sum() >= 3:
+        try:
+            fit = fit_wcs_to_stars(table.xy[matched][found], catalog.vectors[rows[found]],
+                                   camera.width, round(camera.height / aspect), crpix_px=crpix,
+                                   start=solution.R_cam_from_icrs[2])  # fmt: skip
+        except StarnavError:  # stars on a line: the attitude's own WCS still holds
+            fit = None
+        away = not np.allclose(crpix, principal)
+        if fit is not None and (fit.order > 1 or aspect != 1.0 or away):
+            return fit.wcs
+    if aspect == 1.0:
         return solution_wcs(solution.R_cam_from_icrs, camera)
-    crpix = (camera.cx, camera.cy) if crpix_px is None else crpix_px
-    try:
-        fit = fit_wcs_to_stars(table.xy[matched][found], catalog.vectors[rows[found]],
-                               camera.width, camera.height, crpix_px=crpix,
-                               start=solution.R_cam_from_icrs[2])  # fmt: skip
-    except StarnavError:  # stars on a line: the attitude's own WCS still holds
-        return solution_wcs(solution.R_cam_from_icrs, camera)
-    if fit.order == 1 and at_principal:
-        return solution_wcs(solution.R_cam_from_icrs, camera)
-    return fit.wcs
+    grid = fit_points(camera)  # the camera's own projection, through its pixels
+    vectors = camera.pixels_to_bearings(grid) @ solution.R_cam_from_icrs  # in ICRS
+    order = STAR_FIT_MAX_ORDER if camera.distorted else 1
+    return fit_wcs_to_stars(grid / (1.0, aspect), vectors, camera.width,
+                            round(camera.height / aspect), crpix_px=crpix,
+                            start=solution.R_cam_from_icrs[2], max_order=order).wcs  # fmt: skip
 
 
 def _source_fits(source: str | Path | None, pixels: np.ndarray):

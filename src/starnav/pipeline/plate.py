@@ -26,7 +26,7 @@ import numpy as np
 from astropy.wcs import WCS
 
 from starnav.catalog import Catalog
-from starnav.detect.header import ImageHints, fits_hints, is_fits
+from starnav.detect.header import fits_hints, is_fits
 from starnav.detect.read import MAX_PIXELS, primary_fits_header
 from starnav.errors import StarnavError, shown
 from starnav.pipeline.fov import FOV_LIMITS_DEG, fov_limits_deg
@@ -481,8 +481,8 @@ def _solve_plate(source, pixels, hints, time_budget_s, clock=(None, None)) -> Pl
     path = source
     header = fits_hints(path)
     if hints.ra_deg is not None:
-        header = ImageHints(float(hints.ra_deg) % 360.0, float(hints.dec_deg), header.fov_deg,
-                            header.epoch_year, (*header.sources, "client"))  # fmt: skip
+        header = replace(header, ra_deg=float(hints.ra_deg) % 360.0, dec_deg=float(hints.dec_deg),
+                         sources=(*header.sources, "client"))  # fmt: skip
     res = solve_image(pixels, hints=header, downsample=hints.downsample,
                       budget_from=clock[0], on_budget=clock[1], **options)  # fmt: skip
     height, width = pixels.shape
