@@ -12,10 +12,11 @@ Solvers, each in a process of its own, pinned to one core with OMP/OPENBLAS/MKL/
 1, reading the file names as JSON lines and timing every step itself with ``perf_counter``:
 
 * starnav (this script in ``--starnav-worker`` mode): ``starnav.detect.read.read_image`` (file
-  to array, "decode") then ``starnav.solve_image(array, fov_deg=...)`` ("array to attitude":
-  detection, identification, fit), FOV unknown (``fov_deg=None``: searched in its default range)
-  and FOV given (20°). A first solve of the first file, not counted, loads the catalog and
-  pair database (the peers load their databases before the first file too).
+  to array, "decode", with a FITS file's header hints) then ``starnav.solve_image(array,
+  fov_deg=...)`` ("array to attitude": detection, identification, fit), FOV unknown
+  (``fov_deg=None``: searched in its default range) and FOV given (20°). A first solve of the
+  first file, not counted, loads the catalog and pair database (the peers load their databases
+  before the first file too).
 * cedar-solve (``benchmarks/peers/peer_cedar_image.py`` in its own environment): ``Image.open`` +
   ``load`` (decode), then ``solve_from_image`` (its conversion to a float array, its own
   centroiding with its defaults, and the solve) with ``fov_estimate`` None and 20.
@@ -148,6 +149,7 @@ def render_files(catalog, n: int, seed: int, folder: Path) -> list[Truth]:
 
 def starnav_worker(mode: str) -> None:
     """Solve (or centroid) the files named as JSON lines on stdin; one JSON line each."""
+    from starnav.detect.header import fits_hints
     from starnav.detect.read import read_image
     from starnav.detect.stars import detect_stars
 
@@ -159,22 +161,23 @@ def starnav_worker(mode: str) -> None:
     for item in items:
         t0 = time.perf_counter()
         image = read_image(item["path"])
+        hints = fits_hints(item["path"])  # a FITS header's, as ``starnav solve FILE`` reads them
         t1 = time.perf_counter()
         read_ms = (t1 - t0) * 1e3
         if mode == "centroids":
             xy = detect_stars(image).xy
             out = {"xy": xy.tolist(), "time_ms": (time.perf_counter() - t1) * 1e3}
         else:
-            out = starnav_solve(image, item["fov_deg"], read_ms)
+            out = starnav_solve(image, item["fov_deg"], read_ms, hints)
         print(json.dumps(out), flush=True)
     summary = {"done": True, "peak_rss_mb": peak_rss_mb(), "load_s": load_s}
     print(json.dumps({**summary, "version": starnav.__version__}), flush=True)
 
 
-def starnav_solve(image: np.ndarray, fov_deg: float | None, read_ms: float) -> dict:
+def starnav_solve(image: np.ndarray, fov_deg: float | None, read_ms: float, hints) -> dict:
     t0 = time.perf_counter()
     try:
-        res = starnav.solve_image(image, fov_deg=fov_deg)
+        res = starnav.solve_image(image, fov_deg=fov_deg, hints=hints)
     except StarnavError as exc:
         return {"read_ms": read_ms, "time_ms": None, "error": str(exc)}
     out = {
@@ -183,6 +186,7 @@ def starnav_solve(image: np.ndarray, fov_deg: float | None, read_ms: float) -> d
         "extract_ms": res.detect_ms,
         "peer_ms": res.solve_ms,
         "n_centroids": len(res.detections.xy),
+        "hints": list(hints.sources),
     }
     s = res.solution
     if s is None:

@@ -24,8 +24,10 @@ the reference's horizontal field of view, or "not solved by astrometry.net" when
 Solvers, each in a process of its own with thread pools of 1, reading the file names as JSON
 lines and timing each step with ``perf_counter`` (the adapters of ``benchmarks/peers/images.py``):
 
-* starnav (``images.py --starnav-worker solve``): ``read_image`` then ``solve_image(array)``
-  with default options, as ``starnav solve IMG`` runs it;
+* starnav (``images.py --starnav-worker solve``): ``read_image`` and a FITS file's header
+  hints (``fits_hints``: position, scale, pixel sizes, date) then ``solve_image(array,
+  hints=...)`` with default options, as ``starnav solve IMG`` runs it (the rows name the
+  hints; astrometry.net's references were made without them);
 * cedar-solve 0.5.1 (``peer_cedar_image.py``): ``solve_from_image``, its own centroiding and
   shipped database, the FOV unknown;
 * tetra3rs 0.14.0 (``peer_tetra3rs_image.py``): its ``extract_centroids`` and
@@ -362,6 +364,30 @@ def failure_table(entries, references, rows) -> list[str]:
     return lines
 
 
+POSITION_HINTS = ("RA/DEC", "OBJCTRA/OBJCTDEC", "CRVAL1/CRVAL2")  # ``detect.header``'s names
+
+
+def hint_lines(entries, rows) -> list[str]:
+    """The files whose FITS header gave starnav a position (as ``starnav solve`` reads it;
+    astrometry.net's references were made without it), and starnav's outcome on each."""
+    mine = {r["name"]: r for r in rows if r["solver"] == STARNAV_LABEL}
+    told = [
+        (e["name"], mine[e["name"]]["outcome"])
+        for e in entries
+        if e["name"] in mine and set(mine[e["name"]].get("hints") or ()) & set(POSITION_HINTS)
+    ]
+    if not told:
+        return []
+    outcomes = Counter(outcome for _, outcome in told)
+    said = ", ".join(f"{n} {outcome}" for outcome, n in outcomes.most_common())
+    return [
+        f"{len(told)} of these files give a position in their FITS header, which starnav "
+        f"searches first as `starnav solve` does ({said}): "
+        + ", ".join(f"`{name}`" for name, _ in told),
+        "",
+    ]
+
+
 def image_table(entries, references, rows, labels) -> list[str]:
     by = {(r["name"], r["solver"]): r for r in rows}
     lines = table_head("image", "source", "kind", "band", "astrometry.net s",
@@ -432,6 +458,7 @@ def write_doc(args, entries, references, rows, labels, installs, before, t_start
             "",
             *failure_table(chosen, references, rows),
             "",
+            *hint_lines(chosen, rows),
         ]
     disputed = dispute_lines(rows)
     if disputed:
