@@ -1,19 +1,20 @@
 """starnav, cedar-solve, tetra3rs and astrometry.net on the real-image corpus, by field width:
 docs/corpus.md.
 
-    python benchmarks/peers/real_images.py [--set development|held_back|held_back_2|all]
+    python benchmarks/peers/real_images.py [--set development|held_back|held_back_2|held_back_3|all]
         [--solvers starnav,cedar-solve,tetra3rs] [--rows rows.jsonl] [--before rows.jsonl]
         [--out docs/corpus.md | -] [FILE ...]
 
-The corpus is ``tests/data/real`` (its README: 228 photographs from 54 public repositories,
+The corpus is ``tests/data/real`` (its README: 250 photographs from 62 public repositories,
 each with its repository, commit, path, SHA-256 and licence in sources.json; the files
 themselves in ``$STARNAV_REAL_CORPUS``, else ``../shared/data/real``, absent ones listed as
-such). Its sources are split in three sets (``set`` in sources.json): ``development``, the
+such). Its sources are split in four sets (``set`` in sources.json): ``development``, the
 photos starnav was measured and changed on; ``held_back``, 12 sources drawn at random (by
 source) before any of their photos was solved, run once at the end to measure whether the
-changes generalize (it has since been looked at); and ``held_back_2``, a fresh set from sources
-named nowhere else in tests/data/real, that starnav has not run on before its one run at the
-end.
+changes generalize (it has since been looked at); ``held_back_2``, a fresh set from sources
+named nowhere else in tests/data/real (run once since, so looked at too); and
+``held_back_3``, another such set drawn after that run, that starnav has not run on before its
+one run at the end.
 
 The reference is astrometry.net's answer (``reference.json``, made offline by
 ``tests/data/real/make_reference.py`` with the Tycho-2 index files 4107-4119, no hint beyond a
@@ -92,7 +93,7 @@ from starnav.identify import cache_dir
 DATA = ROOT / "tests" / "data" / "real"
 DOC = DOCS / "corpus.md"
 GIVEN_FOV_DEG = 20.0  # tetra3rs's FOV estimate for an image without a reference
-SETS = ("development", "held_back", "held_back_2")
+SETS = ("development", "held_back", "held_back_2", "held_back_3")
 BANDS = ((0.0, 3.0), (3.0, 10.0), (10.0, 20.0), (20.0, 40.0), (40.0, 60.0), (60.0, 400.0))
 NO_REFERENCE = "not solved by astrometry.net"
 STARNAV_LABEL = "starnav"
@@ -448,6 +449,7 @@ def write_doc(args, entries, references, rows, labels, installs, before, t_start
             "development": "Development set",
             "held_back": "Held-back set",
             "held_back_2": "Second held-back set",
+            "held_back_3": "Third held-back set",
         }[name]
         parts += [
             f"## {title}: {len(chosen)} photographs from {sources} sources",
