@@ -32,6 +32,8 @@ def test_the_pixel_aspect_is_read_from_the_pixel_sizes(tmp_path):
         ({"PIXSIZE1": 9.0, "PIXSIZE2": 8.1}, 0.9, "PIXSIZE1/PIXSIZE2"),
         ({"XPIXSZ": 3.76, "YPIXSZ": 3.76}, 1.0, None),  # square
         ({"XPIXSZ": 3.76}, 1.0, None),  # one size alone says nothing
+        ({"XPIXSZ": 3.76, "YPIXSZ": 376.0}, 1.0, None),  # a typo, not a 100x taller image
+        ({"XPIXSZ": 8.6, "YPIXSZ": -8.3}, 1.0, None),
     ]
     for n, (cards, aspect, source) in enumerate(cases):
         path = tmp_path / f"{n}.fits"

@@ -50,6 +50,7 @@ _TIME_SCALES = ("utc", "tt", "tai", "tcg", "tcb", "tdb", "ut1")
 # pixels whose sides differ by less than this share are square: 0.1 px at 500 px from the
 # centre; the Lodestar's 3.5 % is 17 px there
 SQUARE_TOLERANCE = 2e-4
+PIXEL_ASPECT_RANGE = (0.5, 2.0)  # sizes further apart are taken as unreadable (CCDs: 0.51-1)
 _PIXEL_SIZE_KEYS = (("XPIXSZ", "YPIXSZ"), ("PIXSIZE1", "PIXSIZE2"))
 
 
@@ -132,15 +133,18 @@ def fits_hints(path: str | Path) -> ImageHints:
 
 def _pixel_aspect(headers, sources: list[str]) -> float:
     """A pixel's height over its width, from the first header giving both sizes (1 when
-    none does, or they agree within ``SQUARE_TOLERANCE``)."""
+    none does, or they agree within ``SQUARE_TOLERANCE``; sizes whose ratio is outside
+    ``PIXEL_ASPECT_RANGE`` are passed over as unreadable)."""
     for h in headers:
         for x_key, y_key in _PIXEL_SIZE_KEYS:
             width, height = _number(h, x_key), _number(h, y_key)
             if width and height and width > 0 and height > 0:
-                if abs(height / width - 1.0) <= SQUARE_TOLERANCE:
+                aspect = height / width
+                if abs(aspect - 1.0) <= SQUARE_TOLERANCE:
                     return 1.0
-                sources.append(f"{x_key}/{y_key}")
-                return height / width
+                if PIXEL_ASPECT_RANGE[0] <= aspect <= PIXEL_ASPECT_RANGE[1]:
+                    sources.append(f"{x_key}/{y_key}")
+                    return aspect
     return 1.0
 
 
