@@ -317,6 +317,8 @@ def near_bands(
         return None
     full = search_catalog(catalog, epoch_year)
     gaia = load_catalog(GAIA)
+    widest = max(top for _, _, top in grid)
+    cone = gaia.within(near[0], near[1] + math.radians(widest), gaia.name)  # once for every band
     out = []
     for a, b, top in grid:
         if not from_gaia(top, catalog):
@@ -325,7 +327,7 @@ def near_bands(
             continue
         top_rad = math.radians(top)
         reach = near[1] + top_rad
-        local = gaia.within(
+        local = cone.within(
             near[0], reach, f"{gaia.name}, within {math.degrees(reach):.3g}° of the position hint"
         )
         if len(local) < 4:

@@ -237,12 +237,20 @@ def _in_file_pixels(
 ) -> tuple[Solution | None, Detections]:
     """A solution and detections made in square pixels (``square_pixels``) given in the
     image's, ``aspect`` times as tall as wide and ``height`` rows: their y divided by it."""
-    found = replace(found, xy=found.xy / (1.0, aspect), height=height)
+    solution, found = _rows_scaled(solution, found, 1.0 / aspect)
+    found = replace(found, height=height)
+    return (None if solution is None else replace(solution, pixel_aspect=aspect)), found
+
+
+def _rows_scaled(
+    solution: Solution | None, found: Detections, factor: float
+) -> tuple[Solution | None, Detections]:
+    """The solution's stars and the detections with their y times ``factor``."""
+    found = replace(found, xy=found.xy * (1.0, factor))
     if solution is None:
         return None, found
     table = solution.star_table
-    moved = replace(table, xy=table.xy / (1.0, aspect))
-    return replace(solution, star_table=moved, pixel_aspect=aspect), found
+    return replace(solution, star_table=replace(table, xy=table.xy * (1.0, factor))), found
 
 
 def square_pixels(pixels: np.ndarray, aspect: float) -> tuple[np.ndarray, float]:
@@ -559,12 +567,11 @@ def annotate_result(path_out: str | Path, image: np.ndarray, result: ImageSolveR
         used = min(len(det.xy), DEFAULT_PATTERN_STARS)
         save_figure(unsolved_figure(image, detected_xy=det.xy, used=used, lines=lines), path_out)
         return
-    xy, aspect = result.detections.xy, s.pixel_aspect
-    if aspect != 1.0:  # drawn in the square pixels it was solved in
-        image = square_pixels(image, aspect)[0]
-        xy, table = xy * (1.0, aspect), s.star_table
-        s = replace(s, star_table=replace(table, xy=table.xy * (1.0, aspect)))
-    annotate_solution(path_out, image, xy, s, cam, cat)
+    det = result.detections
+    if s.pixel_aspect != 1.0:  # drawn in the square pixels it was solved in
+        image = square_pixels(image, s.pixel_aspect)[0]
+        s, det = _rows_scaled(s, det, s.pixel_aspect)
+    annotate_solution(path_out, image, det.xy, s, cam, cat)
 
 
 def annotate_solution(
