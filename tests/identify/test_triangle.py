@@ -83,7 +83,9 @@ def test_max_triangles_limits_the_brightest_search(hip_1991):
     """A false star as the brightest point spoils the first 10 triangles (0-1-2 ... 0-4-5) of
     the brightest order: 10 tries find nothing, 11 reach 1-2-3 and solve."""
     cam = Camera.from_fov(12.0, 512)
-    f = simulate_frame(hip_1991, cam, ra_deg=120.0, dec_deg=30.0, roll_deg=40.0, noise_px=0.2)
+    f = simulate_frame(
+        hip_1991, cam, ra_deg=120.0, dec_deg=30.0, roll_deg=40.0, noise_px=0.2, seed=7
+    )  # seeded: unseeded noise made 1-2-3 miss the verification now and then
     assert len(f.xy) >= 8
     xy = np.vstack([[[317.0, 211.0]], f.xy])  # the false star, listed first = brightest
     camera = make_camera(width=512, height=None, fov_deg=12.0)
