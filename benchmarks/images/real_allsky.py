@@ -77,6 +77,9 @@ DESCRIPTION_OPTIONS = {
     "focal_mm": ("--focal-mm", "--focal-length-mm", "--focal-length"),
     "pixel_um": ("--pixel-um", "--pixel-size-um", "--pixel-size"),
     "site": ("--site", "--location"),
+    "lat": ("--lat", "--latitude"),
+    "lon": ("--lon", "--longitude"),
+    "height_m": ("--height-m", "--height"),
     "utc": ("--utc", "--time", "--date-obs"),
 }
 
@@ -161,6 +164,10 @@ def description(entry: dict, lens: str, help_text: str) -> list[str]:
     site = entry.get("site")
     if site and option("site"):
         args += [option("site"), f"{site['lat_deg']},{site['lon_deg']},{site.get('height_m') or 0}"]
+    elif site and option("lat"):  # starnav solve's own: --lat --lon [--height-m]
+        args += [option("lat"), f"{site['lat_deg']:g}", option("lon"), f"{site['lon_deg']:g}"]
+        if site.get("height_m") and option("height_m"):
+            args += [option("height_m"), f"{site['height_m']:g}"]
     if entry.get("utc") and option("utc"):
         args += [option("utc"), entry["utc"]]
     return args

@@ -81,6 +81,7 @@ def solvable_cases(frames: int, seed: int):
                 width=1024,
                 brightness=f.brightness,
                 lens="equidistant",
+                fov_range_deg=(120.0, 200.0),  # as measured in docs/performance.md
                 time_budget_s=b,
             )
         )

@@ -61,7 +61,7 @@ def test_make_overrides_fields_and_names_an_unknown_option():
 
 def test_the_lens_decides_its_own_search_range():
     assert SolveOptions().search_range_deg == (5.0, 40.0)
-    assert SolveOptions(lens="equidistant").search_range_deg == (120.0, 200.0)
+    assert SolveOptions(lens="equidistant").search_range_deg == (100.0, 200.0)
     assert SolveOptions(lens="equidistant", fov_range_deg=[100, 180]).search_range_deg == (
         100,
         180,
@@ -138,7 +138,7 @@ def test_batch_errors_are_data_not_strings():
 
 def test_fisheye_lens_alone_is_not_refused_for_the_pinhole_range(tmp_path, capsys):
     """`starnav identify --lens equidistant` used to get the pinhole's 5-40° range and exit 2;
-    the lens model's own range (120-200°) is searched now."""
+    the lens model's own range (100-200°) is searched now."""
     stars = tmp_path / "stars.csv"
     rng = np.random.default_rng(3)
     rows = "\n".join(f"{x:.2f},{y:.2f}" for x, y in rng.uniform(100, 900, (12, 2)))

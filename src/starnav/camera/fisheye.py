@@ -41,7 +41,7 @@ class Fisheye(Lens):
 
     kind = "fisheye"
     scans_focal = True  # an unknown focal length: the focal scan
-    default_fov_range_deg = (120.0, 200.0)
+    default_fov_range_deg = (100.0, 200.0)
     fov_limits_deg = (10.0, 360.0)
     # a fisheye's distortion over up to 95° from the axis needs more terms than a pinhole's
     # over its narrower field: choose_sip_order may go to the highest order for it

@@ -94,6 +94,12 @@ def offline_iers():
 
 def altitudes_deg(catalog: Catalog, site: Site, utc) -> np.ndarray:
     """The altitude (degrees, no refraction) of each catalog star at ``site`` and ``utc``."""
+    return np.degrees(np.arcsin(np.clip(enu_vectors(catalog, site, utc)[:, 2], -1.0, 1.0)))
+
+
+def enu_vectors(catalog: Catalog, site: Site, utc) -> np.ndarray:
+    """Each catalog star's direction (n, 3 unit vectors: East, North, Up; no refraction) at
+    ``site`` and ``utc`` (astropy's ICRS to AltAz)."""
     import astropy.units as u
     from astropy.coordinates import AltAz, SkyCoord
 
@@ -101,7 +107,9 @@ def altitudes_deg(catalog: Catalog, site: Site, utc) -> np.ndarray:
     frame = AltAz(obstime=parse_utc(utc), location=site.location())
     with offline_iers(), warnings.catch_warnings():
         warnings.simplefilter("ignore")  # "tried to get polar motions for times after IERS data"
-        return np.asarray(stars.transform_to(frame).alt.deg)
+        seen = stars.transform_to(frame)
+        alt, az = np.asarray(seen.alt.rad), np.asarray(seen.az.rad)
+    return np.column_stack([np.cos(alt) * np.sin(az), np.cos(alt) * np.cos(az), np.sin(alt)])
 
 
 def planets(site: Site, utc) -> Catalog:

@@ -8,7 +8,12 @@ largest connected region; its holes are filled (trees, buildings and stars do no
 a circle is fitted by least squares (Kasa's algebraic fit) to the region's boundary pixels
 that do not lie on the image border, so a disc cut by the frame is still found. Boundary
 pixels farther than 3 reduced pixels from the circle (a tree line, a lit horizon) are dropped
-and the circle refitted once. No disc (a full-frame fisheye, a daylight frame) gives None.
+and the circle refitted once; when they are most of the edge (all but ``_MIN_ROUND_SHARE``),
+the bright region is sky between trees or roofs, not a disc. No disc (a full-frame fisheye, a
+daylight frame) gives None, and so does a circle whose edge is soft (``contrast`` under
+``LENS_EDGE_CONTRAST``): a photograph's vignetting, or a wide-angle lens's, is not an image
+circle, and taken for one it would hide sky (three quarters of a meteor camera's frame) and
+set a fisheye scan's focal lengths from a radius that is no horizon.
 """
 
 from __future__ import annotations
@@ -24,6 +29,10 @@ _OUTLIER_REDUCED_PX = 3.0
 _MIN_RADIUS_FRACTION = 0.25  # of the shorter side
 _MIN_DARK_FRACTION = 0.05  # of the reduced image outside the disc
 _EDGE_BAND = 0.04  # of the radius: the rings either side of the edge whose levels are compared
+_MIN_ROUND_SHARE = 0.15  # of the disc's edge on its circle (all-sky frames 0.23-1.0; the sky
+# between a phone photograph's trees 0.07)
+LENS_EDGE_CONTRAST = 0.5  # a lens's image circle from this edge contrast on (all-sky frames
+# measured 0.65-1.5; vignetted photographs and wide-angle meteor cameras -0.2-0.35)
 
 
 @dataclass(frozen=True)
@@ -76,7 +85,7 @@ def dark_corners(image: np.ndarray) -> bool:
 def find_image_circle(image: np.ndarray) -> ImageCircle | None:
     """The bright disc of a circular fisheye in a 2-D image (row 0 at the top), or None when
     the image has no dark frame around a disc of radius at least a quarter of its shorter
-    side."""
+    side, or the disc's edge is too soft for a lens's image circle (``LENS_EDGE_CONTRAST``)."""
     from scipy import ndimage  # here: a pinhole image's solve does not import scipy.ndimage
 
     data = np.asarray(image, dtype=np.float32)
@@ -104,6 +113,8 @@ def find_image_circle(image: np.ndarray) -> ImageCircle | None:
         return None
     cx, cy, r = _fit_circle(xs + 0.5, ys + 0.5)
     near = np.abs(np.hypot(xs + 0.5 - cx, ys + 0.5 - cy) - r) <= _OUTLIER_REDUCED_PX
+    if near.mean() < _MIN_ROUND_SHARE:  # sky between trees or roofs, not a lens's disc
+        return None
     if near.sum() >= 10:
         cx, cy, r = _fit_circle(xs[near] + 0.5, ys[near] + 0.5)
     if not (np.isfinite(r) and r * step >= _MIN_RADIUS_FRACTION * min(height, width)):
@@ -116,6 +127,8 @@ def find_image_circle(image: np.ndarray) -> ImageCircle | None:
     contrast = 0.0
     if inner.size and outer.size:
         contrast = float((np.median(inner) - np.median(outer)) / (sky - dark))
+    if contrast < LENS_EDGE_CONTRAST:
+        return None
     return ImageCircle(float(cx * step), float(cy * step), float(r * step), contrast)
 
 

@@ -111,6 +111,8 @@ _UPPER_WIDTH_SHARE = 0.8  # the rms is kept above this share of that upper half-
 _NOISE_SAMPLE = 250_000  # pixels sampled (a regular grid) for those quantiles
 _LOCAL_NOISE_MARGIN = 1.25  # the annulus noise counts when this much above the noise map
 _MIN_SNR_FRACTION = 0.5  # of threshold_sigma: a source fainter than that here is dropped
+_CROWD = 5  # a saturated source with this many saturated others
+_CROWD_RADIUS = 0.015  # within this share of the image's diagonal is a piece of glare
 _CANDIDATES_PER_STAR, _CANDIDATES_EXTRA = 4, 30  # most sources measured for max_stars
 _FIRST_PER_STAR, _FIRST_EXTRA = 2, 20  # sources measured first
 _UNIFORM_NOISE = 1.25
@@ -392,6 +394,7 @@ def _measured(
     shaped = ~misshapen(objects, sigma, peak_snr)
     foreground = phot.in_foreground(correlation)
     star = _taken(shaped, ~phot.extended(noise) & ~foreground, snr, saturated, threshold_sigma)
+    star &= ~_saturated_crowd(x, y, saturated & star, math.hypot(*data.shape))
     # a star whose disc and halo are wider than the PSF, as the brightest are in a long
     # exposure or a stretched photograph (their cores near the image's maximum: a patch of
     # cloud or glow as wide has no such core): judged and measured whole, in its own zones
@@ -409,6 +412,24 @@ def _measured(
         flux[wide], snr[wide] = whole.flux[ok], whole_snr[ok]
         star[wide] = True
     return _ranked(objects, x, y, flux, snr, saturated, star, max_stars)
+
+
+def _saturated_crowd(x: np.ndarray, y: np.ndarray, saturated: np.ndarray, diagonal_px: float):
+    """Whether each source is a saturated one with ``_CROWD`` or more other saturated ones
+    within ``_CROWD_RADIUS`` of the image's diagonal: the pieces of one saturated patch (a
+    lamp's glare, the Moon's rim, a lit window, sep's deblending cut into 10-30 round
+    pieces), not stars: saturated stars lie apart (the Pleiades' brightest keep 2-3 in that
+    reach even in a 60° field)."""
+    from scipy.spatial import cKDTree
+
+    crowd = np.zeros(len(x), dtype=bool)
+    rows = np.flatnonzero(saturated)
+    if len(rows) <= _CROWD:
+        return crowd
+    xy = np.column_stack([x[rows], y[rows]])
+    counts = cKDTree(xy).query_ball_point(xy, _CROWD_RADIUS * diagonal_px, return_length=True)
+    crowd[rows] = counts - 1 >= _CROWD
+    return crowd
 
 
 def _taken(

@@ -40,6 +40,7 @@ from starnav.pipeline.deep import DEEP_CHANCE, DEEP_MAG_LIMIT, MATCH_SIGMAS
 from starnav.pipeline.fov_search import BAND_FACTOR, Band, FovMatch, search_fov
 from starnav.pipeline.options import SolveOptions
 from starnav.pipeline.solver import Candidate, Solver, SolveSettings, first_use, fit_first
+from starnav.pipeline.upward import enu_from_icrs, zenith_guesses
 from starnav.results import SolveResult
 from starnav.runtime.budget import (
     SEARCH_BUDGET_S,
@@ -90,6 +91,8 @@ CIRCLE_FOV_RANGE_DEG = (140.0, 230.0)
 MODEL_MATCH_DEG = 45.0  # models compared at the focal lengths that agree this far out
 SCAN_INNER_DEG = 60.0  # a fisheye scan's trial identifies stars this close to the axis
 SCAN_PRIOR_SIGMA_DEG = 1.0  # the whole list is matched near a trial's attitude, good to this
+GUESS_CHECK_S = 0.3  # an upward camera's zenith guess is tracked (then searched) this long,
+GUESS_SIGMA_DEG = 3.0  # good to this (its principal point is the image circle's centre)
 CENTRE_FIT_STARS = 8  # a trial's principal point is fitted from this many matched stars on
 CIRCLE_CENTRE_PX = 5.0  # an image circle's centre this far from the image's: both are tried
 HINT_BUDGET_SHARE = 0.25  # of the time budget, for the search near a position hint
@@ -665,13 +668,17 @@ def _scan(
 ) -> SolveResult:
     """The focal scan of ``starts`` on ``options``' catalog (``mag_limit``, default Hp <= 6),
     or, with a site and time, on its stars and the planets above the horizon
-    (``catalog.sky.sky_at``)."""
+    (``catalog.sky.sky_at``), a camera of unknown lens first guessed looking up
+    (``pipeline.upward``)."""
     cat = load_catalog(options.catalog, mag_limit=options.mag_limit, epoch_year=options.epoch_year)
+    upward = None
     if options.site is not None and options.utc is not None:
         cat = sky_at(cat, options.site, options.utc)
+        if options.camera is None:  # a camera of unknown lens: it may look up
+            upward = enu_from_icrs(cat, options.site, options.utc)
     middle = math.sqrt(starts[0].focal_range_px[0] * starts[0].focal_range_px[1])
     solver = Solver(starts[0].base.with_focal(middle), cat, settings=settings)
-    return scan_focal(stars, starts, solver, Deadline.after(budget_s))
+    return scan_focal(stars, starts, solver, Deadline.after(budget_s), upward)
 
 
 def _scan_plan(
@@ -763,6 +770,7 @@ def scan_focal(
     starts: Sequence[ScanStart],
     solver: Solver,
     deadline: Deadline | None = None,
+    upward: np.ndarray | None = None,
 ) -> SolveResult:
     """Lenses of known model but unknown focal length: the ``solver``'s (focal length fitted)
     identification of the brightest ``SCAN_STARS`` (at most ``SCAN_HYPOTHESES`` each) at
@@ -773,52 +781,20 @@ def scan_focal(
     length free). ``deadline``: the scan stops when it passes (looked at in and between
     trials). (Triangles of sides up to 20° would cover 3x the range per trial but take ~10x
     the hypotheses to find, and missed a distorted lens seen as equidistant; 500 hypotheses
-    per trial missed an equisolid sky at a 1 px tolerance.)"""
+    per trial missed an equisolid sky at a 1 px tolerance.) ``upward``: ``R_enu_from_icrs``
+    at the site and time of a camera that may look up, whose ``solver`` holds the sky above
+    the horizon: each start's zenith guess (``pipeline.upward``) is tracked first."""
     t0 = time.perf_counter()
-    f_hi = max(max(s.focal_range_px) for s in starts)
-    tol_px = solver.match_settings.pair_tol_rad * solver.camera.scale_px_per_rad
-    # a trial covers the focal lengths whose error on the longest side takes at most half the
-    # pair tolerance (the centroid noise takes the rest), at the longest focal length
-    step = 2.0 * math.log1p(0.5 * tol_px / (solver.database.max_angle_rad * f_hi))
-    lists = [[(s.base.with_focal(f), s.rough) for f in s.focals(step)] for s in starts]
-    trials = [c for row in itertools.zip_longest(*lists) for c in row if c is not None]
-    tried = 0
-    lenses = ", ".join(sorted({s.base.model for s in starts}))
-    ranges = f"{min(starts[0].focal_range_px):.1f}-{max(starts[0].focal_range_px):.1f} px"
-    for camera, rough in trials:
-        few = _scan_stars(stars, camera, inner=rough)
-        # a trial at a wrong focal length (or model) can draw thousands of catalog triangles
-        # for each of its own: it stops after SCAN_TRIAL_S (one that identifies takes ~0.3 s)
-        trial_deadline = Deadline.after(SCAN_TRIAL_S)
-        if deadline is not None and deadline.end_time < trial_deadline.end_time:
-            trial_deadline = deadline
-        trial = solver.with_camera(camera, SCAN_HYPOTHESES).solve(few, deadline=trial_deadline)
-        tried += 1
-        if trial.solution is not None:
-            fitted = _with_fitted_centre(trial.solution, solver.database.catalog)
-            result = _matched_near(solver, fitted, stars, trial.solution, deadline)
-            reason = (
-                f"the brightest {len(few.xy)} stars identified at a focal length of "
-                f"{trial.solution.focal_px:.1f} px, the whole list refused: {result.reason}"
-            )
-            break
-        if expired(deadline):
-            reason = deadline.reason(
-                f"{tried} of {len(trials)} trial focal lengths over {ranges} tried ({lenses} lens)"
-            )
-            result = trial
-            break
-    else:
-        reason = (
-            f"no identification at {len(trials)} trial focal lengths over {ranges} ({lenses} "
-            f"lens; last: {trial.reason})"
-        )
-        result = trial
+    result = None if upward is None else _upward_first(stars, starts, solver, upward, deadline)
+    reason = ""
+    if result is None:
+        result, reason = _trials(stars, starts, solver, deadline)
     if result.solution is not None:
         result = _best_model(result, stars, starts, solver, deadline)
         if any(s.rough for s in starts):  # the principal point again, from every star matched
             fitted = _with_fitted_centre(result.solution, solver.database.catalog)
-            again = _matched_near(solver, fitted, stars, result.solution, deadline)
+            R = result.solution.R_cam_from_icrs
+            again = _matched_near(solver, fitted, stars, R, deadline)
             if again.solution is not None and again.solution.n_matched >= result.solution.n_matched:
                 result = again
     ms = elapsed_ms(t0)
@@ -827,13 +803,80 @@ def scan_focal(
     return replace(result, reason=reason, time_ms=ms)
 
 
-def _matched_near(solver: Solver, camera: CameraModel, stars: StarList, near, deadline):
-    """The whole list solved through ``camera`` by tracking from the attitude of the solution
-    ``near`` (good to ``SCAN_PRIOR_SIGMA_DEG``), falling back to lost in space."""
+def _trials(
+    stars: StarList, starts: Sequence[ScanStart], solver: Solver, deadline: Deadline | None
+) -> tuple[SolveResult, str]:
+    """``scan_focal``'s trials: the first whole-list solve of a trial that identifies, or
+    the last trial's result, and the reason to give when unsolved."""
+    f_hi = max(max(s.focal_range_px) for s in starts)
+    tol_px = solver.match_settings.pair_tol_rad * solver.camera.scale_px_per_rad
+    # a trial covers the focal lengths whose error on the longest side takes at most half the
+    # pair tolerance (the centroid noise takes the rest), at the longest focal length
+    step = 2.0 * math.log1p(0.5 * tol_px / (solver.database.max_angle_rad * f_hi))
+    lists = [[(s.base.with_focal(f), s.rough) for f in s.focals(step)] for s in starts]
+    trials = [c for row in itertools.zip_longest(*lists) for c in row if c is not None]
+    lenses = ", ".join(sorted({s.base.model for s in starts}))
+    ranges = f"{min(starts[0].focal_range_px):.1f}-{max(starts[0].focal_range_px):.1f} px"
+    for tried, (camera, rough) in enumerate(trials, 1):
+        few = _scan_stars(stars, camera, inner=rough)
+        # a trial at a wrong focal length (or model) can draw thousands of catalog triangles
+        # for each of its own: it stops after SCAN_TRIAL_S (one that identifies takes ~0.3 s)
+        trial_deadline = Deadline.after(SCAN_TRIAL_S)
+        if deadline is not None and deadline.end_time < trial_deadline.end_time:
+            trial_deadline = deadline
+        trial = solver.with_camera(camera, SCAN_HYPOTHESES).solve(few, deadline=trial_deadline)
+        if trial.solution is not None:
+            fitted = _with_fitted_centre(trial.solution, solver.database.catalog)
+            result = _matched_near(solver, fitted, stars, trial.solution.R_cam_from_icrs, deadline)
+            return result, (
+                f"the brightest {len(few.xy)} stars identified at a focal length of "
+                f"{trial.solution.focal_px:.1f} px, the whole list refused: {result.reason}"
+            )
+        if expired(deadline):
+            return trial, deadline.reason(
+                f"{tried} of {len(trials)} trial focal lengths over {ranges} tried ({lenses} lens)"
+            )
+    return trial, (
+        f"no identification at {len(trials)} trial focal lengths over {ranges} ({lenses} "
+        f"lens; last: {trial.reason})"
+    )
+
+
+def _upward_first(
+    stars: StarList, starts: Sequence[ScanStart], solver: Solver, R_enu_from_icrs, deadline
+) -> SolveResult | None:
+    """The whole list tracked from the first zenith guess (``upward.zenith_guesses``) of the
+    ``starts`` that verifies (each given ``GUESS_CHECK_S``), or None."""
+    sky = solver.database.catalog
+    for start in starts:
+        for camera, R in zenith_guesses(
+            stars.xy, stars.order, start.base, start.focal_range_px, sky, R_enu_from_icrs
+        ):
+            check = Deadline.after(GUESS_CHECK_S)
+            if deadline is not None and deadline.end_time < check.end_time:
+                check = deadline
+            result = _matched_near(solver, camera, stars, R, check, GUESS_SIGMA_DEG)
+            if result.solution is not None:
+                return result
+            if expired(deadline):
+                return None
+    return None
+
+
+def _matched_near(
+    solver: Solver,
+    camera: CameraModel,
+    stars: StarList,
+    near,
+    deadline,
+    sigma_deg: float = SCAN_PRIOR_SIGMA_DEG,
+):
+    """The whole list solved through ``camera`` by tracking from the attitude ``near``
+    (``R_cam_from_icrs``, good to ``sigma_deg``), falling back to lost in space."""
     return solver.with_camera(camera).solve(
         stars,
-        prior=near.R_cam_from_icrs,
-        prior_sigma_deg=SCAN_PRIOR_SIGMA_DEG,
+        prior=near,
+        prior_sigma_deg=sigma_deg,
         deadline=deadline,
     )
 
@@ -852,7 +895,7 @@ def _best_model(result, stars: StarList, starts, solver: Solver, deadline) -> So
     for other in {type(s.base): s.base for s in starts if s.base.model != camera.model}.values():
         trial = other.with_centre(camera.cx, camera.cy)
         trial = trial.with_focal(trial.focal_for_radius(radius_px, field_deg))
-        r = _matched_near(solver, trial, stars, found, deadline)
+        r = _matched_near(solver, trial, stars, found.R_cam_from_icrs, deadline)
         s, b = r.solution, best.solution
         if s is not None and (s.n_matched, -s.rms_px) > (b.n_matched, -b.rms_px):
             best = r

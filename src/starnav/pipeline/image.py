@@ -43,8 +43,6 @@ from starnav.runtime.budget import Deadline, check_budget, default_budget_s
 
 NO_HINTS = ImageHints()
 MIN_DETECTIONS = 4  # fewer detected stars than this: not solved, without a search
-FISHEYE_CIRCLE_CONTRAST = 0.5  # an image with nothing said is a fisheye's from this on (all-sky
-# frames measured 0.8-1.5, vignetted photographs and wide-field shots at most 0.3)
 AUTO_BIN_PIXELS = 4.2e6  # an image is detected binned to at most this many pixels
 SPENT_ADVICE = "a longer --time-budget, or a smaller image"  # a budget spent before the solve
 FEW_STARS_DEEPER = 15  # a fisheye sky with fewer stars than this is detected again, deeper
@@ -361,15 +359,14 @@ def _budget_left(budget_s: float, budget_from, on_budget) -> tuple[float, str | 
 
 def _unsaid_fisheye(options: SolveOptions, pixels: np.ndarray) -> bool:
     """Whether an image solved with nothing said of its lens or field is a circular fisheye's:
-    dark corners (``detect.circle.dark_corners``) around an image circle that is found, with
-    a clean edge (``ImageCircle.contrast``)."""
+    dark corners (``detect.circle.dark_corners``) around an image circle that is found (with
+    a lens's sharp edge: ``detect.circle.LENS_EDGE_CONTRAST``)."""
     said = options.camera is not None or options.fov_deg is not None
     if said or options.fov_range_deg is not None or options.lens != "pinhole":
         return False
     if not dark_corners(pixels):
         return False
-    circle = find_image_circle(pixels)
-    return circle is not None and circle.contrast >= FISHEYE_CIRCLE_CONTRAST
+    return find_image_circle(pixels) is not None
 
 
 def _diagnose(found: Detections, reason: str, options: SolveOptions) -> Failure:

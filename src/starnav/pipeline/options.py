@@ -46,7 +46,7 @@ class SolveOptions:
 
     The field: ``fov_deg`` (horizontal field of view, degrees) or ``camera`` (a camera model
     or a camera file), or neither, when ``fov_range_deg`` (horizontal, degrees; None: the
-    lens model's default, 5-40° for the pinhole, 120-200° for a fisheye, or the image circle's
+    lens model's default, 5-40° for the pinhole, 100-200° for a fisheye, or the image circle's
     140-230° when one is found) is searched for a pinhole or a fisheye's focal length is
     scanned. ``fov_exact``: whether a given ``fov_deg``
     / ``camera`` is taken as it is (True) or searched within 5 % / 1 % with the focal length
@@ -267,7 +267,7 @@ def facts_model(lens: str) -> str:
 
 def default_fov_range_deg(lens: str) -> tuple[float, float]:
     """The horizontal FOV range (degrees) searched for the ``lens`` model when none is given:
-    its class's ``default_fov_range_deg`` (5-40° for the pinhole's FOV search, 120-200° for a
+    its class's ``default_fov_range_deg`` (5-40° for the pinhole's FOV search, 100-200° for a
     fisheye model's focal scan)."""
     return tuple(model_class(facts_model(lens)).default_fov_range_deg)
 
