@@ -9,11 +9,14 @@ the same for every star: the roll. ``zenith_guesses`` lets each of the brightest
 with each of the brightest stars above the horizon whose zenith angle agrees with the point's
 angle from the axis (within ``GATE_DEG``: the tilt, the principal point's and the focal
 length's errors), for that sum (``ROLL_BIN_DEG`` bins); the focal length is stepped coarsely
-(``FOCAL_STEP``: a star 60° out moves 2.4° for 4 %). The votes of the winning roll are pairs
-of a point and a star; the camera's attitude and focal length are fitted to them by robust
-least squares (scipy), and that guess, good to about a degree, is then tracked on
-the whole list and verified as any other solve (``pipeline.fov``): a guess that is wrong is
-refused there, and the focal scan goes on as without a site.
+(``FOCAL_STEP``: a star 60° out moves 2.4° for 4 %) and the principal point over a grid
+(``CENTRE_STEPS``) about the start's: the true one gathers the sharpest peak. The votes of a
+winning roll are pairs of a point and a star; the camera's attitude and focal length are
+fitted to them by robust least squares (scipy), then, principal point included, to every
+bright point paired with the nearest bright star that fit predicts (``_refined``). That guess,
+good to a few tenths of a degree, is then tracked on the whole list and verified as any other
+solve (``pipeline.fov``): a guess that is wrong is refused there, and the focal scan goes on
+as without a site.
 """
 
 from __future__ import annotations
@@ -98,9 +101,7 @@ def zenith_guesses(
         guess = _fitted(camera, R0, xy[points[i[near]]], sky.vectors[rows[j[near]]])
         if guess is not None:
             bright = high[np.argsort(sky.mag[high], kind="stable")][:PAIR_STARS]
-            guess = _refined(guess, xy[np.asarray(order)[:PAIR_POINTS]], sky.vectors[bright])
-        if guess is not None:
-            yield guess
+            yield _refined(guess, xy[np.asarray(order)[:PAIR_POINTS]], sky.vectors[bright])
         if len(taken) == GUESSES:
             return
 
@@ -184,7 +185,7 @@ def _refined(guess, xy: np.ndarray, stars_icrs: np.ndarray):
     points ``xy`` paired each with the nearest star of ``stars_icrs`` it predicts within
     ``PAIR_DEG``, then half and a quarter of it (the votes' pairs leave the principal point
     several degrees off, which the fit with every point can tell from a tilt); the last guess
-    that fits, or None."""
+    that fits."""
     from scipy.spatial import cKDTree
 
     for reach_deg in (PAIR_DEG, PAIR_DEG / 2.0, PAIR_DEG / 4.0):
@@ -199,6 +200,6 @@ def _refined(guess, xy: np.ndarray, stars_icrs: np.ndarray):
         stars = stars_icrs[ahead][ok][nearest[paired]]
         better = _fitted(camera, R, xy[paired], stars, centre=True)
         if better is None:
-            return guess if reach_deg < PAIR_DEG else None
+            break
         guess = better
     return guess
