@@ -805,3 +805,22 @@ def test_quiet_8_bit_sky_is_not_foreground():
     peak = flux / (2 * np.pi * 1.3**2)
     clear = peak > 15 * 1.8  # 15 sigmas at the peak
     assert _found(found, xy[clear], 1.0).mean() >= 0.95
+
+
+def test_a_saturated_patch_cut_into_pieces_is_not_stars():
+    """A lamp's glare in a corner cut by the deblender into round saturated pieces (here a
+    5 x 5 grid of saturated spots 6 px apart): the pieces with 5 or more saturated others
+    within 1.5 % of the diagonal are dropped, so that the isolated saturated stars and the
+    faint stars rank first, as on the Crimean meteor camera's frame (its corner lamp was its 20
+    brightest sources)."""
+    settings = RenderSettings(seed=23)
+    stars = np.array([[100.5, 80.5], [300.5, 250.5], [480.5, 120.5], [200.5, 330.5]])
+    grid = np.array([[540.5 + 6 * i, 330.5 + 6 * j] for i in range(5) for j in range(5)])
+    xy = np.vstack([stars, grid])
+    flux = np.concatenate([[3e6, 5e6, 4e6, 2e4], np.full(len(grid), 3e6)])
+    image = render_stars(xy, flux, 600, 400, settings)
+    found = detect_stars(image)
+    which, _ = _match(found.xy, xy)
+    assert which[:3].tolist() == [1, 2, 0] and 3 in which  # the saturated stars first
+    pieces = which[which >= len(stars)]
+    assert len(pieces) <= 4  # of 25: the grid's corners (3 others in reach) at most
