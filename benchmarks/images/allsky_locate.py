@@ -2,8 +2,8 @@
 UTC, against the site its project publishes (issue 37 point 4), into docs/allsky.md (block
 ``allsky-locate``).
 
-    python benchmarks/images/allsky_locate.py [--files DIR] [--set development|heldback|all]
-        [--write-docs] [--json OUT]
+    python benchmarks/images/allsky_locate.py [--files DIR]
+        [--set development|heldback|heldback_2|all] [--write-docs] [--json OUT]
 
 Each frame of tests/data/real/allsky_manifest.json with a site, a UTC and an independent
 reference of its disc centre (``zenith_offset_deg``: astrometry.net's direction at the disc
@@ -42,6 +42,7 @@ from benchmarks.images.real_allsky import (
     DOC,
     ENV,
     MANIFEST,
+    SETS,
     Reference,
     _angle_deg,
     _unit,
@@ -137,7 +138,7 @@ def table(results: list[dict]) -> str:
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--files", default=os.environ.get(ENV), help=f"frames (default ${ENV})")
-    parser.add_argument("--set", default="all", choices=("development", "heldback", "all"))
+    parser.add_argument("--set", default="all", choices=(*SETS, "all"))
     parser.add_argument("--write-docs", action="store_true", help="the table into docs/allsky.md")
     parser.add_argument("--json", help="write the results here")
     args = parser.parse_args(argv)

@@ -9,8 +9,12 @@ pixels::
 
     python benchmarks/images/make_allsky_reference.py solve --files DIR --astrometry WORK
     python benchmarks/images/make_allsky_reference.py build --files DIR --astrometry WORK \
-        [--manifest /work/allsky/manifest.json]
+        [--manifest /work/allsky/manifest.json] [--set SET | --only NAME ...]
     python benchmarks/images/make_allsky_reference.py table   # docs/allsky.md "The frames"
+
+``build --set SET`` (or ``--only NAME ...``) rebuilds the references of those frames only: every
+other frame of the manifest keeps its entry of the committed allsky_manifest.json unchanged
+(a new set is added without the earlier sets' astrometry.net outputs at hand).
 
 ``solve`` reads each frame as starnav reads it (``starnav.detect.read.read_image``; a
 gzip-compressed PGM, which starnav does not read, by ``read_frame`` here: the first image of
@@ -534,7 +538,11 @@ def cmd_build(args) -> None:
     work = Path(args.astrometry)
     status = json.loads((work / "crops.json").read_text()) if (work / "crops.json").exists() else {}
     files = []
+    kept = _committed_entries(args)
     for entry in manifest["files"]:
+        if entry["name"] in kept:
+            files.append(kept[entry["name"]])
+            continue
         entry = dict(entry)
         got = status.get(entry["name"])
         ref = {"method": "none: astrometry.net " + ("did not solve any crop" if got else "not run")}
@@ -594,7 +602,7 @@ def cmd_build(args) -> None:
         entry["reference"] = ref
         files.append(entry)
     for entry in files:  # a frame without stars: a sibling frame's fitted camera, if any
-        if "stars" not in entry["reference"]:
+        if entry["name"] not in kept and "stars" not in entry["reference"]:
             transfer = rotated_reference(entry, files) or transferred_stars(entry, files)
             if transfer:
                 entry["reference"].update(transfer)
@@ -612,6 +620,19 @@ def cmd_build(args) -> None:
     OUT.write_text(json.dumps(doc, indent=1) + "\n")
     with_ref = sum("stars" in f["reference"] for f in files)
     print(f"{OUT.relative_to(ROOT)}: {len(files)} frames, {with_ref} with reference stars")
+
+
+def _committed_entries(args) -> dict[str, dict]:
+    """The committed manifest's entries of the frames ``build`` leaves as they are (those
+    outside ``--set`` / ``--only``; none when neither is given), by name."""
+    if not (args.set or args.only):
+        return {}
+    committed = json.loads(OUT.read_text())["files"]
+    return {
+        f["name"]: f
+        for f in committed
+        if not (args.only and f["name"] in args.only) and not (args.set and f["set"] == args.set)
+    }
 
 
 def _held_by_own_crop(stars: list[list], crops: list[dict]) -> list[list]:
@@ -672,11 +693,19 @@ def cmd_table(args) -> None:
             f"{f['repository']} @ {f['commit'][:8]}: `{f['path']}`", licence,
             f["camera"], f"{site}, {utc}", f["notes"].replace("|", "/"), method,
         ))  # fmt: skip
+    from benchmarks.images.real_allsky import SETS
+
     projects = sorted({f["project"] for f in doc["files"]})
-    held = sorted({f["project"] for f in doc["files"] if f["set"] == "heldback"})
+    counts = {name: sum(f["set"] == name for f in doc["files"]) for name in SETS[1:]}
+    held = [
+        f"{name} ({n} frames): "
+        + ", ".join(sorted({f["project"] for f in doc["files"] if f["set"] == name}))
+        for name, n in counts.items()
+        if n
+    ]
     head = (
         f"{len(doc['files'])} frames from {len(projects)} cameras/projects; held back (whole "
-        f"projects, not tuned on): {', '.join(held)}. Rejected when gathered: "
+        f"projects, not tuned on), {'; '.join(held)}. Rejected when gathered: "
         f"{len(doc.get('rejected', []))} files (listed in the manifest with the reason)."
     )
     replace_block(DOCS / "allsky.md", "allsky-sources", head + "\n\n" + "\n".join(rows))
@@ -684,6 +713,9 @@ def cmd_table(args) -> None:
 
 
 def main(argv: list[str] | None = None) -> None:
+    sys.path.insert(0, str(ROOT))
+    from benchmarks.images.real_allsky import SETS
+
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     sub = parser.add_subparsers(dest="command", required=True)
     sub.add_parser("table", help="the frames table into docs/allsky.md")
@@ -694,9 +726,9 @@ def main(argv: list[str] | None = None) -> None:
             "--astrometry", default="/work/allsky/astrometry", help="solve-field outputs"
         )
         p.add_argument("--manifest", default="/work/allsky/manifest.json", help="metadata source")
+        p.add_argument("--only", nargs="*", help="these file names only")
+        p.add_argument("--set", choices=SETS, help="this set only")
         if name == "solve":
-            p.add_argument("--only", nargs="*", help="these file names only")
-            p.add_argument("--set", choices=("development", "heldback"), help="this set only")
             p.add_argument("--again", action="store_true", help="solve files already tried")
             p.add_argument("--at", nargs="+", type=float, metavar="X Y",
                            help="with --only NAME: add crops centred on these pixels")  # fmt: skip

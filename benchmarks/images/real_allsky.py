@@ -1,14 +1,16 @@
 """Real all-sky and meteor-camera frames solved as a user would, scored against their
 independent references, into docs/allsky.md (blocks ``allsky-frames``, ``allsky-totals``).
 
-    python benchmarks/images/real_allsky.py [--files DIR] [--set development|heldback|all]
-        [--only NAME ...] [--modes a b c] [--write-docs] [--json OUT]
+    python benchmarks/images/real_allsky.py [--files DIR]
+        [--set development|heldback|heldback_2|all] [--only NAME ...] [--modes a b c]
+        [--write-docs] [--json OUT]
 
 The frames: tests/data/real/allsky_manifest.json (metadata and references, no image bytes);
 the files are other projects' (the manifest gives repository, commit, path and SHA-256), looked
 for in ``--files``, default ``$STARNAV_ALLSKY_CORPUS``; a missing file or one whose SHA-256
 differs is reported and skipped. ``--set development`` (the default) runs the frames that may be
-tuned on; ``heldback`` the frames of the projects kept out of development (run at the end).
+tuned on; ``heldback`` and ``heldback_2`` the frames of the projects kept out of development
+(each run once, at the end); ``all`` every set.
 
 Each frame is solved through the command line (``python -m starnav solve FILE ... --json``, a
 subprocess per solve, as a user runs it) three ways:
@@ -65,6 +67,9 @@ KHO_IDS = ROOT / "tests" / "data" / "allsky" / "kho_20201211_star_ids.csv"
 KHO_FRAME = "kho_lyr-sony-111220_200933.jpg"
 DOC = DOCS / "allsky.md"
 ENV = "STARNAV_ALLSKY_CORPUS"
+# the manifest's sets: frames that may be tuned on, then whole projects held back and run once
+# at the end ("heldback", run; "heldback_2", gathered later and not yet run)
+SETS = ("development", "heldback", "heldback_2")
 WRONG_DEG = 0.5
 CROP_EDGE = 0.25  # a crop's WCS is used this far (fraction of its side) inside its edges
 SAME_STAR_DEG = 0.05  # a reference star and a solved star are the same catalog star
@@ -464,8 +469,8 @@ def tables(results: list[dict], modes: list[str]) -> tuple[str, str]:
 
 
 def write_docs(which: str, totals_md: str, frames_md: str) -> None:
-    """The tables into docs/allsky.md (blocks allsky-totals / allsky-frames, "-heldback" for
-    the held-back set)."""
+    """The tables into docs/allsky.md (blocks allsky-totals / allsky-frames, "-heldback" /
+    "-heldback_2" / "-all" for the other choices of ``--set``)."""
     suffix = "" if which == "development" else f"-{which}"
     replace_block(DOC, f"allsky-totals{suffix}", totals_md, missing=f"### Totals ({which})")
     replace_block(DOC, f"allsky-frames{suffix}", frames_md, missing=f"### Per frame ({which})")
@@ -499,7 +504,7 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument(
         "--files", default=os.environ.get(ENV), help=f"folder of the frames (default ${ENV})"
     )
-    parser.add_argument("--set", default="development", choices=("development", "heldback", "all"))
+    parser.add_argument("--set", default="development", choices=(*SETS, "all"))
     parser.add_argument("--only", nargs="*", help="these file names only")
     parser.add_argument("--modes", nargs="*", default=["a", "b", "c"], choices=("a", "b", "c"))
     parser.add_argument(

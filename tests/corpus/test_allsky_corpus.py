@@ -16,6 +16,7 @@ import hashlib
 import importlib.util
 import json
 import os
+import re
 from pathlib import Path
 
 import numpy as np
@@ -52,13 +53,14 @@ def corpus_folder() -> Path:
 
 
 def test_manifest_entries_say_where_each_frame_comes_from():
+    sets = _benchmark().SETS
     names = [f["name"] for f in FILES]
     assert len(names) == len(set(names)) >= 25
     for f in FILES:
         assert len(f["commit"]) == 40 and len(f["sha256"]) == 64 and f["bytes"] > 0
         assert f["repository"].count("/") == 1 and f["path"]
         assert f["licence"] and isinstance(f["redistributable"], bool)
-        assert f["set"] in ("development", "heldback")
+        assert f["set"] in sets, f["name"]
         assert f["lens"] in LENSES
         assert f["kind"] in ("all-sky", "meteor")
         ref = f["reference"]
@@ -67,13 +69,23 @@ def test_manifest_entries_say_where_each_frame_comes_from():
 
 
 def test_whole_projects_are_held_back():
+    """Each held-back set is whole projects (at least two) that no other set has; the second
+    one ("heldback_2", gathered after the first had been run) takes its frames from
+    repositories named nowhere else in tests/data/real, its first set's or the other
+    manifests'."""
     projects: dict[str, set] = {}
     for f in FILES:
         projects.setdefault(f["project"], set()).add(f["set"])
-    held = [p for p, sets in projects.items() if sets == {"heldback"}]
     assert all(len(sets) == 1 for sets in projects.values())  # no project split across sets
-    assert len(held) >= 2
     assert len({p for p, sets in projects.items() if sets == {"development"}}) >= 5
+    for held in _benchmark().SETS[1:]:
+        assert len([p for p, sets in projects.items() if sets == {held}]) >= 2, held
+    fresh = {f["repository"] for f in FILES if f["set"] == "heldback_2"}
+    elsewhere = {f["repository"] for f in FILES if f["set"] != "heldback_2"}
+    for other in ("sources.json", "narrow_heldback.json"):
+        text = (DATA / "real" / other).read_text()
+        elsewhere |= set(re.findall(r'"repo(?:sitory)?": "([^"]+)"', text))
+    assert fresh and not fresh & elsewhere, fresh & elsewhere
 
 
 def test_reference_stars_lie_where_their_crop_wcs_puts_them():
