@@ -77,7 +77,7 @@ from __future__ import annotations
 
 import math
 import threading
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import sep
@@ -111,7 +111,7 @@ _UPPER_WIDTH_SHARE = 0.8  # the rms is kept above this share of that upper half-
 _NOISE_SAMPLE = 250_000  # pixels sampled (a regular grid) for those quantiles
 _LOCAL_NOISE_MARGIN = 1.25  # the annulus noise counts when this much above the noise map
 _MIN_SNR_FRACTION = 0.5  # of threshold_sigma: a source fainter than that here is dropped
-_CROWD = 5  # a saturated source with this many saturated others
+_CROWD = 5  # an all-sky frame's saturated source with this many saturated others
 _CROWD_RADIUS = 0.015  # within this share of the image's diagonal is a piece of glare
 _CANDIDATES_PER_STAR, _CANDIDATES_EXTRA = 4, 30  # most sources measured for max_stars
 _FIRST_PER_STAR, _FIRST_EXTRA = 2, 20  # sources measured first
@@ -394,7 +394,6 @@ def _measured(
     shaped = ~misshapen(objects, sigma, peak_snr)
     foreground = phot.in_foreground(correlation)
     star = _taken(shaped, ~phot.extended(noise) & ~foreground, snr, saturated, threshold_sigma)
-    star &= ~_saturated_crowd(x, y, saturated & star, math.hypot(*data.shape))
     # a star whose disc and halo are wider than the PSF, as the brightest are in a long
     # exposure or a stretched photograph (their cores near the image's maximum: a patch of
     # cloud or glow as wide has no such core): judged and measured whole, in its own zones
@@ -414,22 +413,27 @@ def _measured(
     return _ranked(objects, x, y, flux, snr, saturated, star, max_stars)
 
 
-def _saturated_crowd(x: np.ndarray, y: np.ndarray, saturated: np.ndarray, diagonal_px: float):
-    """Whether each source is a saturated one with ``_CROWD`` or more other saturated ones
-    within ``_CROWD_RADIUS`` of the image's diagonal: the pieces of one saturated patch (a
-    lamp's glare, the Moon's rim, a lit window, sep's deblending cut into 10-30 round
-    pieces), not stars: saturated stars lie apart (the Pleiades' brightest keep 2-3 in that
-    reach even in a 60° field)."""
+def without_glare(found: Detections) -> Detections:
+    """``found`` less its saturated stars that have ``_CROWD`` or more other saturated ones
+    within ``_CROWD_RADIUS`` of the image's diagonal: in an all-sky frame those are the
+    pieces of one saturated patch (a lamp's glare, the Moon's rim, a lit window, which sep's
+    deblending cuts into 10-30 round pieces), not stars, for its saturated stars lie apart.
+    (Not for narrower fields: an open cluster's members saturate side by side there: the
+    Pleiades and M44 in the real-photo corpus.)"""
     from scipy.spatial import cKDTree
 
-    crowd = np.zeros(len(x), dtype=bool)
-    rows = np.flatnonzero(saturated)
+    rows = np.flatnonzero(found.saturated)
     if len(rows) <= _CROWD:
-        return crowd
-    xy = np.column_stack([x[rows], y[rows]])
-    counts = cKDTree(xy).query_ball_point(xy, _CROWD_RADIUS * diagonal_px, return_length=True)
-    crowd[rows] = counts - 1 >= _CROWD
-    return crowd
+        return found
+    xy = found.xy[rows]
+    reach = _CROWD_RADIUS * math.hypot(found.width, found.height)
+    counts = cKDTree(xy).query_ball_point(xy, reach, return_length=True)
+    keep = np.ones(len(found.xy), dtype=bool)
+    keep[rows[counts - 1 >= _CROWD]] = False
+    if keep.all():
+        return found
+    columns = ("xy", "flux", "peak", "snr", "saturated")
+    return replace(found, **{name: getattr(found, name)[keep] for name in columns})
 
 
 def _taken(

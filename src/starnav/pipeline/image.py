@@ -24,7 +24,7 @@ from starnav.detect.circle import ImageCircle, dark_corners, find_image_circle
 from starnav.detect.header import ImageHints, fits_hints, is_fits
 from starnav.detect.read import read_image
 from starnav.detect.skymask import find_sky_mask
-from starnav.detect.stars import Detections, detect_stars
+from starnav.detect.stars import Detections, detect_stars, without_glare
 from starnav.errors import CameraError, ImageError, StarnavError
 from starnav.pipeline.diagnose import BUDGET, Failure, diagnose
 from starnav.pipeline.fov import UNREAD_SHAPE, diagonal_fov_deg, fov_limits_deg, search_range
@@ -495,7 +495,8 @@ def detect_image(
     ``threshold_sigma`` over the background noise, the brightest ``max_stars`` (default
     ``DEFAULT_MAX_STARS``, ``FISHEYE_MAX_STARS`` for a fisheye). For a fisheye ``lens`` (any
     model but the pinhole) only in its sky (``starnav.detect.skymask``: inside the image
-    circle found in the image, less the horizon's obstacles and glare); and when fewer than
+    circle found in the image, less the horizon's obstacles and glare, and the saturated pieces
+    of glare among the stars: ``detect.stars.without_glare``); and when fewer than
     ``FEW_STARS_DEEPER`` stars are found there, again at each of ``DEEPER_THRESHOLDS_SIGMA``
     in turn while too few are found (a narrow filter, a short exposure, thin cloud: going
     deeper before refusing; those no brighter than the noise's peaks are dropped,
@@ -508,7 +509,9 @@ def detect_image(
         found = detect_stars(pixels, threshold_sigma=threshold_sigma, max_stars=max_stars)
         return replace(found, threshold_sigma=threshold_sigma)
     pixels, sky_fraction, circle = _outside_sky_masked(pixels)
-    found = detect_stars(pixels, threshold_sigma=threshold_sigma, max_stars=max_stars)
+    found = without_glare(
+        detect_stars(pixels, threshold_sigma=threshold_sigma, max_stars=max_stars)
+    )
     for deeper_sigma in DEEPER_THRESHOLDS_SIGMA:
         if len(found) >= FEW_STARS_DEEPER or deeper_sigma >= threshold_sigma:
             continue
@@ -523,7 +526,9 @@ def _deeper(pixels: np.ndarray, threshold_sigma: float, max_stars: int) -> Detec
     found in the negated image, which are noise: noise is symmetric, stars are not (3 sigma
     finds 15-25 noise peaks of SNR up to ~6.6 in a 512 px all-sky frame of pure noise, 4 and
     5 sigma none)."""
-    deeper = detect_stars(pixels, threshold_sigma=threshold_sigma, max_stars=max_stars)
+    deeper = without_glare(
+        detect_stars(pixels, threshold_sigma=threshold_sigma, max_stars=max_stars)
+    )
     noise = detect_stars(-pixels, threshold_sigma=threshold_sigma, max_stars=max_stars)
     keep = deeper.saturated | (deeper.snr > (noise.snr.max() if len(noise) else 0.0))
     columns = ("xy", "flux", "peak", "snr", "saturated")
