@@ -63,7 +63,7 @@ def test_built_in_models_declare_their_facts():
         "kannala-brandt": ("fisheye", True, "ARC", 9),
     }
     assert Camera.default_fov_range_deg == (5.0, 40.0) and Camera.fov_limits_deg == (0.625, 100.0)
-    assert model_class("equisolid").default_fov_range_deg == (120.0, 200.0)
+    assert model_class("equisolid").default_fov_range_deg == (100.0, 200.0)
     assert model_class("kannala-brandt").fov_limits_deg == (10.0, 360.0)
     assert model_class("pinhole") is Camera
     with pytest.raises(CameraError, match="unknown lens model 'gnomonic'; known: pinhole, "):
