@@ -173,6 +173,11 @@ class Detections:
     def __len__(self) -> int:
         return len(self.xy)
 
+    def kept(self, keep: np.ndarray) -> Detections:
+        """These detections with only the stars where ``keep`` (bool per star) is True."""
+        columns = ("xy", "flux", "peak", "snr", "saturated")
+        return replace(self, **{name: getattr(self, name)[keep] for name in columns})
+
 
 def detect_stars(
     image: np.ndarray,
@@ -430,10 +435,7 @@ def without_glare(found: Detections) -> Detections:
     counts = cKDTree(xy).query_ball_point(xy, reach, return_length=True)
     keep = np.ones(len(found.xy), dtype=bool)
     keep[rows[counts - 1 >= _CROWD]] = False
-    if keep.all():
-        return found
-    columns = ("xy", "flux", "peak", "snr", "saturated")
-    return replace(found, **{name: getattr(found, name)[keep] for name in columns})
+    return found if keep.all() else found.kept(keep)
 
 
 def _taken(

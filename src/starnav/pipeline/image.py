@@ -530,9 +530,7 @@ def _deeper(pixels: np.ndarray, threshold_sigma: float, max_stars: int) -> Detec
         detect_stars(pixels, threshold_sigma=threshold_sigma, max_stars=max_stars)
     )
     noise = detect_stars(-pixels, threshold_sigma=threshold_sigma, max_stars=max_stars)
-    keep = deeper.saturated | (deeper.snr > (noise.snr.max() if len(noise) else 0.0))
-    columns = ("xy", "flux", "peak", "snr", "saturated")
-    return replace(deeper, **{name: getattr(deeper, name)[keep] for name in columns})
+    return deeper.kept(deeper.saturated | (deeper.snr > (noise.snr.max() if len(noise) else 0.0)))
 
 
 def _outside_sky_masked(pixels: np.ndarray) -> tuple[np.ndarray, float, ImageCircle | None]:
