@@ -15,7 +15,7 @@ from starnav.camera import Camera
 from starnav.catalog import load_catalog
 from starnav.cli import main
 from starnav.errors import StarnavError
-from starnav.runtime.budget import Deadline, check_budget
+from starnav.runtime.budget import Deadline, check_budget, sooner
 from starnav.simulate import simulate_frame
 
 # a call may run over by one unit of work (a chunk of triangles sized to a twentieth of the
@@ -100,3 +100,11 @@ def test_cli_identify_says_the_budget_is_spent(tmp_path, capsys):
     out = json.loads(capsys.readouterr().out)
     assert code == 1
     assert out["reason"].startswith("time budget spent (0.05 s)")
+
+
+def test_sooner_takes_the_deadline_that_ends_first():
+    solve = Deadline.after(10.0)
+    assert sooner(0.5, solve).budget_s == 0.5  # the part's own budget ends first
+    assert sooner(30.0, solve) is solve  # the solve's ends first
+    assert sooner(0.5, None).budget_s == 0.5  # no limit on the solve
+    assert sooner(math.inf, solve) is solve and sooner(math.inf, None) is None

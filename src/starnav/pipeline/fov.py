@@ -48,6 +48,7 @@ from starnav.runtime.budget import (
     check_budget,
     default_budget_s,
     expired,
+    sooner,
 )
 from starnav.runtime.caches import process_cache
 from starnav.starlist import StarList, check_star_list
@@ -821,9 +822,7 @@ def _trials(
         few = _scan_stars(stars, camera, inner=rough)
         # a trial at a wrong focal length (or model) can draw thousands of catalog triangles
         # for each of its own: it stops after SCAN_TRIAL_S (one that identifies takes ~0.3 s)
-        trial_deadline = Deadline.after(SCAN_TRIAL_S)
-        if deadline is not None and deadline.end_time < trial_deadline.end_time:
-            trial_deadline = deadline
+        trial_deadline = sooner(SCAN_TRIAL_S, deadline)
         trial = solver.with_camera(camera, SCAN_HYPOTHESES).solve(few, deadline=trial_deadline)
         if trial.solution is not None:
             fitted = _with_fitted_centre(trial.solution, solver.database.catalog)
@@ -852,9 +851,7 @@ def _upward_first(
         for camera, R in zenith_guesses(
             stars.xy, stars.order, start.base, start.focal_range_px, sky, R_enu_from_icrs
         ):
-            check = Deadline.after(GUESS_CHECK_S)
-            if deadline is not None and deadline.end_time < check.end_time:
-                check = deadline
+            check = sooner(GUESS_CHECK_S, deadline)
             result = _matched_near(solver, camera, stars, R, check, GUESS_SIGMA_DEG)
             if result.solution is not None:
                 return result

@@ -74,10 +74,12 @@ def zenith_guesses(
     the focal lengths of ``focal_range_px``, each fitted to its votes."""
     enu = sky.vectors @ R_enu_from_icrs.T
     high = np.flatnonzero(enu[:, 2] >= math.sin(math.radians(VOTE_MIN_ALTITUDE_DEG)))
-    rows = high[np.argsort(sky.mag[high], kind="stable")][:VOTE_STARS]
+    high = high[np.argsort(sky.mag[high], kind="stable")]  # brightest first
+    rows = high[:VOTE_STARS]
     zenith = np.arccos(np.clip(enu[rows, 2], -1.0, 1.0))
     azimuth = np.arctan2(enu[rows, 0], enu[rows, 1])
-    points = np.asarray(order)[:VOTE_POINTS]
+    order = np.asarray(order)
+    points = order[:VOTE_POINTS]
     peaks = []
     for focal, dx, dy in itertools.product(_focals(focal_range_px), *2 * [CENTRE_STEPS]):
         camera = base.with_focal(focal)
@@ -100,8 +102,7 @@ def zenith_guesses(
         R0 = _attitude(roll, parity) @ R_enu_from_icrs
         guess = _fitted(camera, R0, xy[points[i[near]]], sky.vectors[rows[j[near]]])
         if guess is not None:
-            bright = high[np.argsort(sky.mag[high], kind="stable")][:PAIR_STARS]
-            yield _refined(guess, xy[np.asarray(order)[:PAIR_POINTS]], sky.vectors[bright])
+            yield _refined(guess, xy[order[:PAIR_POINTS]], sky.vectors[high[:PAIR_STARS]])
         if len(taken) == GUESSES:
             return
 

@@ -168,6 +168,15 @@ def next_chunk(deadline: Deadline, elapsed_s: float, size: int, most: int) -> in
     return int(min(max(wanted, 1.0), CHUNK_GROWTH * size, most))
 
 
+def sooner(budget_s: float, deadline: Deadline | None) -> Deadline | None:
+    """A deadline ``budget_s`` seconds from now, or ``deadline`` (None: no limit) when it
+    ends first: a part of a solve's work capped by its own budget and the solve's."""
+    own = Deadline.after(budget_s)
+    if deadline is not None and (own is None or deadline.end_time < own.end_time):
+        return deadline
+    return own
+
+
 def expired(deadline: Deadline | None) -> bool:
     """Whether ``deadline`` (None: no limit) has passed."""
     return deadline is not None and deadline.expired()
