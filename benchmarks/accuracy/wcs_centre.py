@@ -40,6 +40,7 @@ from benchmarks.harness import machine, replace_block, table_head, table_row
 
 ROOT = Path(__file__).resolve().parents[2]
 REFERENCE = ROOT / "tests" / "data" / "real" / "reference.json"
+SOURCES = REFERENCE.with_name("sources.json")
 DOC = ROOT / "docs" / "wcs.md"
 BANDS_DEG = ((0.0, 3.0), (3.0, 10.0), (10.0, 30.0), (30.0, 180.0))
 
@@ -68,8 +69,52 @@ def _separation_arcsec(ra1, dec1, ra2, dec2) -> float:
     return float(np.degrees(np.arctan2(np.linalg.norm(np.cross(a, b)), a @ b)) * 3600.0)
 
 
-def measure(name: str, ref: dict, folder: Path) -> dict:
-    from starnav.pipeline.image import solution_wcs
+CHECK_STARS = 1000  # detections (full resolution) and Gaia stars the sky check pairs
+CHECK_RADIUS_PX = 3.0  # pairs within this, unambiguous (``output.tweak.unambiguous_pairs``)
+CHECK_MIDDLE = 0.3  # the middle: within this share of the half-diagonal of the centre
+CHECK_MIN_PAIRS = 5
+
+
+def sky_check(wcs, xy: np.ndarray, vectors: np.ndarray, width: int, height: int):
+    """The sky check of a WCS: the Gaia stars (``vectors``) it puts on the image paired with
+    the detections ``xy`` (starnav px), and the mean of (catalog through the WCS - detection)
+    over the pairs in the middle of the image, in px: how far the WCS's middle is from where
+    the stars are (None with fewer than ``CHECK_MIN_PAIRS`` pairs there)."""
+    from starnav.geometry import unit_to_radec
+    from starnav.output.tweak import unambiguous_pairs
+
+    ra, dec = np.degrees(unit_to_radec(vectors))
+    px = wcs.all_world2pix(np.column_stack([ra, dec]), 0, quiet=True) + 0.5
+    inside = np.isfinite(px).all(axis=1)
+    inside[inside] &= (px[inside, 0] >= 0) & (px[inside, 0] <= width)
+    inside[inside] &= (px[inside, 1] >= 0) & (px[inside, 1] <= height)
+    px = px[inside]
+    det, cat = unambiguous_pairs(xy, px, CHECK_RADIUS_PX)
+    middle = np.hypot(xy[det, 0] - width / 2, xy[det, 1] - height / 2)
+    middle = middle <= CHECK_MIDDLE * np.hypot(width, height) / 2
+    if middle.sum() < CHECK_MIN_PAIRS:
+        return None
+    return float(np.linalg.norm(np.mean(px[cat[middle]] - xy[det[middle]], axis=0)))
+
+
+def check_stars(pixels: np.ndarray, wcs, width: int, height: int):
+    """The brightest ``CHECK_STARS`` detections (full resolution) and Gaia stars about the
+    field of ``wcs``."""
+    from starnav.catalog import GAIA, load_catalog
+    from starnav.detect.stars import detect_stars
+    from starnav.geometry import radec_to_unit
+
+    xy = detect_stars(pixels, max_stars=CHECK_STARS).xy
+    corners = np.array([[0, 0], [width, 0], [0, height], [width, height], [width / 2, height / 2]])
+    ra, dec = np.radians(wcs.all_pix2world(corners - 0.5, 0)).T
+    v = radec_to_unit(ra, dec)
+    radius = float(np.max(np.arccos(np.clip(v[:4] @ v[4], -1.0, 1.0))))
+    near = load_catalog(GAIA).within(v[4], radius, "field")
+    return xy, near.vectors[np.argsort(near.mag, kind="stable")[: 2 * CHECK_STARS]]
+
+
+def measure(name: str, ref: dict, folder: Path, an_wcs: Path | None = None) -> dict:
+    from starnav.pipeline.image import fitted_wcs, solution_wcs
     from starnav.pipeline.plate import PlateHints, solve_plate
 
     an = ref["astrometry_net"]["wcs"]
@@ -86,8 +131,9 @@ def measure(name: str, ref: dict, folder: Path) -> dict:
         return {**row, "status": "not solved", "reason": res.reason}
     s = res.solution
     centre = [[(res.width + 1) / 2.0, (res.height + 1) / 2.0]]
-    before = solution_wcs(s.R_cam_from_icrs, s.camera)
-    for label, wcs in (("before", before), ("after", res.plate.wcs)):
+    wcss = {"before": solution_wcs(s.R_cam_from_icrs, s.camera),
+            "matched": fitted_wcs(s, res.catalog), "after": res.plate.wcs}  # fmt: skip
+    for label, wcs in wcss.items():
         ra, dec = wcs.all_pix2world(centre, 1)[0]
         off = _separation_arcsec(ra, dec, an["CRVAL1"], an["CRVAL2"])
         row[f"{label}_arcsec"] = off
@@ -95,6 +141,19 @@ def measure(name: str, ref: dict, folder: Path) -> dict:
     header = res.plate.wcs.to_header(relax=True)
     row.update(status="solved", n_matched=s.n_matched, rms_px=s.rms_px,
                sip_order=int(header.get("A_ORDER", 1)))  # fmt: skip
+    full = None if an_wcs is None else an_wcs / f"{Path(name).stem}.wcs"
+    if full is not None and full.is_file():
+        import warnings
+
+        from astropy.io import fits
+        from astropy.wcs import WCS, FITSFixedWarning
+
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", FITSFixedWarning)
+            theirs = WCS(fits.getheader(full))
+        xy, vectors = check_stars(res.pixels, res.plate.wcs, res.width, res.height)
+        row["check_ours_px"] = sky_check(res.plate.wcs, xy, vectors, res.width, res.height)
+        row["check_an_px"] = sky_check(theirs, xy, vectors, res.width, res.height)
     return row
 
 
@@ -112,11 +171,11 @@ def table(rows: list[dict]) -> str:
         "images",
         "solved by both",
         "SIP order 1/2/3/4",
-        "before: px (median / 90 % / max)",
-        "after: px",
-        "before: arcsec",
-        "after: arcsec",
-        "after within 0.2 px",
+        "attitude's TAN: px (median / 90 % / max)",
+        "fit to the matched stars: px",
+        "written (deep fit): px",
+        "written: arcsec",
+        "written within 0.2 px",
     )
     for lo, hi in (*BANDS_DEG, (0.0, 180.0)):
         band = [r for r in rows if lo <= r["fov_deg"] < hi]
@@ -131,19 +190,41 @@ def table(rows: list[dict]) -> str:
                 len(got),
                 orders,
                 _stats([r["before_px"] for r in got]),
+                _stats([r["matched_px"] for r in got if "matched_px" in r]),
                 _stats([r["after_px"] for r in got]),
-                _stats([r["before_arcsec"] for r in got]),
                 _stats([r["after_arcsec"] for r in got]),
                 f"{within} of {len(got)}",
             )
         )
+    sets = json.loads(SOURCES.read_text())["files"]
+    set_of = {f["name"]: f["set"] for f in sets}
+    lines += ["", "By set of the corpus (held-back sets: not looked at while this was built):", ""]
+    lines += table_head("set", "solved by both", "written within 0.2 px", "written: px (median / "
+                        "90 % / max)", "attitude's TAN within 0.2 px")  # fmt: skip
+    for name in sorted({set_of.get(r["image"], "?") for r in solved}):
+        got = [r for r in solved if set_of.get(r["image"], "?") == name]
+        lines.append(table_row(name, len(got), sum(r["after_px"] <= 0.2 for r in got),
+                               _stats([r["after_px"] for r in got]),
+                               sum(r["before_px"] <= 0.2 for r in got)))  # fmt: skip
+    checked = [r for r in solved if r.get("check_ours_px") is not None
+               and r.get("check_an_px") is not None]  # fmt: skip
+    if checked:
+        lines += ["", "Sky check (each WCS's middle against the Gaia stars there):", ""]
+        lines += table_head("images checked", "starnav written: px (median / 90 % / max)",
+                            "astrometry.net: px", "starnav nearer the stars")  # fmt: skip
+        nearer = sum(r["check_ours_px"] <= r["check_an_px"] for r in checked)
+        lines.append(table_row(len(checked), _stats([r["check_ours_px"] for r in checked]),
+                               _stats([r["check_an_px"] for r in checked]),
+                               f"{nearer} of {len(checked)}"))  # fmt: skip
     worst = sorted(solved, key=lambda r: -r["after_px"])[:8]
-    lines += ["", "Largest offsets after:", ""]
-    lines += table_head("image", "width °", "matched", "solution rms px", "SIP order", "before px",
-                        "after px")  # fmt: skip
+    lines += ["", "Largest offsets of the written WCS:", ""]
+    lines += table_head("image", "width °", "matched", "solution rms px", "SIP order",
+                        "attitude px", "written px", "sky check: starnav px",
+                        "sky check: astrometry.net px")  # fmt: skip
     for r in worst:
         cells = (r["image"], f"{r['fov_deg']:.2f}", r["n_matched"], f"{r['rms_px']:.2f}",
-                 r["sip_order"], f"{r['before_px']:.3f}", f"{r['after_px']:.3f}")  # fmt: skip
+                 r["sip_order"], f"{r['before_px']:.3f}", f"{r['after_px']:.3f}",
+                 _maybe(r.get("check_ours_px")), _maybe(r.get("check_an_px")))  # fmt: skip
         lines.append(table_row(*cells))
     absent = sum(r["status"] == "absent" for r in rows)
     unsolved = sum(r["status"] == "not solved" for r in rows)
@@ -152,12 +233,17 @@ def table(rows: list[dict]) -> str:
     return "\n".join(lines)
 
 
+def _maybe(value) -> str:
+    return "-" if value is None else f"{value:.3f}"
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("files", nargs="*", help="image names of reference.json (default: all)")
     p.add_argument("--rows", help="write one JSON line per image here")
     p.add_argument("--from-rows", help="the table from these rows, nothing solved")
     p.add_argument("--out", default=str(DOC), help="markdown file (its block wcs-centre) or -")
+    p.add_argument("--an-wcs", help="folder of astrometry.net's full .wcs files: the sky check")
     args = p.parse_args(argv)
     if args.from_rows:
         rows = [json.loads(line) for line in Path(args.from_rows).read_text().splitlines()]
@@ -168,7 +254,7 @@ def main(argv: list[str] | None = None) -> int:
         rows = []
         sink = open(args.rows, "w") if args.rows else None
         for i, (name, ref) in enumerate(refs.items(), start=1):
-            row = measure(name, ref, folder)
+            row = measure(name, ref, folder, Path(args.an_wcs) if args.an_wcs else None)
             rows.append(row)
             print(f"{i}/{len(refs)} {name}: {row['status']} "
                   f"{row.get('before_px', float('nan')):.3f} -> "

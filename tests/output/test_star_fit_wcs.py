@@ -110,9 +110,11 @@ GRANASAT = ("granasat_pleyades_05sec.jpg", "granasat_cisne_02sec.jpg")
 @pytest.mark.slow
 @pytest.mark.parametrize("name", GRANASAT)
 def test_real_lens_centre_and_residuals(name, tmp_path):
-    """GranaSAT's lens (27°, 1280 x 960): the plate's WCS is TAN-SIP, its centre within 0.2 px
-    of astrometry.net's (CRVAL of its --crpix-center solve), and the matched stars' residuals
-    through the written file are those of the fit, smaller than the pinhole's."""
+    """GranaSAT's lens (27°, 1280 x 960): the plate's WCS is TAN-SIP fitted on the deep
+    stars (``output.tweak``), its centre within 0.3 px of astrometry.net's (CRVAL of its
+    --crpix-center solve: on cisne, 0.2 px apart, astrometry.net's middle is 0.12 px from the
+    Gaia stars there, starnav's 0.03 px; docs/wcs.md), and the solve's matched stars through
+    the written file are nearer their detections than through the pinhole solution."""
     from starnav.pipeline.plate import PlateHints, solve_plate, write_plate_files
 
     path = shared_file(REAL / name)
@@ -127,17 +129,16 @@ def test_real_lens_centre_and_residuals(name, tmp_path):
 
     sep = np.degrees(angular_separation(*np.radians([*centre, an["CRVAL1"], an["CRVAL2"]])))
     scale = np.sqrt(abs(np.linalg.det([[an["CD1_1"], an["CD1_2"]], [an["CD2_1"], an["CD2_2"]]])))
-    assert sep / scale < 0.2
+    assert sep / scale < 0.3
     written = write_plate_files(res, path, wcs=tmp_path / "a.wcs")
     table = res.solution.star_table
     matched = table.catalog_id >= 0
     vectors = res.catalog.vectors[res.catalog.rows(table.catalog_id[matched])]
-    fit = fit_wcs_to_stars(table.xy[matched], vectors, W, H, start=res.solution.R_cam_from_icrs[2])
     back = WCS(fits.getheader(written["wcs"]))
     ra, dec = np.degrees(unit_to_radec(vectors))
     through = back.all_world2pix(np.column_stack([ra, dec]), 0) + 0.5
-    np.testing.assert_allclose(through - table.xy[matched], fit.residual_px, atol=1e-4)
-    assert fit.rms_px < res.solution.rms_px
+    rms = np.sqrt(np.mean(np.sum((through - table.xy[matched]) ** 2, axis=1)))
+    assert rms < res.solution.rms_px
 
 
 def test_stars_on_a_line_are_refused():

@@ -30,6 +30,7 @@ import datetime as _dt
 import re
 import warnings
 from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
@@ -318,24 +319,77 @@ def _add_sip(header: fits.Header, order: int, a, b, ap, bp, inverse_order: int |
 class StarFitWcs:
     """A TAN or TAN-SIP WCS fitted to matched stars (``fit_wcs_to_stars``).
 
-    ``wcs``: the WCS (astropy; ``pixel_shape`` (width, height)); ``order``: its polynomial
-    order, 1 for a plain TAN (no SIP terms were measurable), 2..4 for TAN-SIP;
-    ``inverse_order``: that of AP/BP; ``n_stars``: the stars fitted; ``residual_px``: (n, 2)
-    each star's catalog position through the WCS (sky to pixel, the forward polynomials
-    inverted by Newton's method) minus its measured one, starnav px; ``rms_px``: their rms
-    length; ``p_values``: the F-test's p-value of each order tried beyond the one before it
-    (order: p), the test that chose ``order``; ``max_inverse_error_px``: the largest error of
-    AP/BP over the image.
+    ``order``: its polynomial order, 1 for a plain TAN (no SIP terms were measurable), 2..4
+    for TAN-SIP; ``n_stars``: the stars fitted; ``residual_px``: (n, 2) each star's catalog
+    position through the WCS (sky to pixel, the forward polynomials inverted by Newton's
+    method) minus its measured one, starnav px; ``rms_px``: their rms length; ``p_values``:
+    the F-test's p-value of each order tried beyond the one before it (order: p), the test
+    that chose ``order``; ``crval_vector``: CRVAL (the sky at CRPIX) as an ICRS unit vector;
+    ``cd``: the CD matrix (deg/px); ``a``, ``b``: SIP's A and B (px); ``crpix_px``: CRPIX,
+    starnav px. Built when first asked for: ``wcs``, the WCS (astropy; ``pixel_shape``
+    (width, height)), with ``inverse_order`` and ``max_inverse_error_px``, the order of AP/BP
+    and their largest error over the image.
     """
 
-    wcs: WCS
     order: int
-    inverse_order: int
     n_stars: int
     residual_px: np.ndarray
     rms_px: float
     p_values: dict
-    max_inverse_error_px: float
+    crval_vector: np.ndarray
+    cd: np.ndarray
+    a: np.ndarray
+    b: np.ndarray
+    crpix_px: np.ndarray
+    shape: tuple[int, int]  # (width, height), px
+    date_obs: str | _dt.datetime | Time | None = None
+
+    @cached_property
+    def _inverse(self) -> tuple[int, np.ndarray, np.ndarray, float]:
+        if self.order < 2:
+            return self.order, np.zeros_like(self.a), np.zeros_like(self.b), 0.0
+        return _fit_inverse(self.a, self.b, self.order, self.crpix_px, *self.shape)
+
+    @property
+    def inverse_order(self) -> int:
+        return self._inverse[0]
+
+    @property
+    def max_inverse_error_px(self) -> float:
+        return self._inverse[3]
+
+    @cached_property
+    def wcs(self) -> WCS:
+        ctype = "TAN-SIP" if self.order >= 2 else "TAN"
+        header = _celestial_header(ctype, tuple(self.crpix_px + 0.5), self.crval_vector, self.cd,
+                                   self.date_obs)  # fmt: skip
+        if self.order >= 2:
+            inverse_order, ap, bp, _ = self._inverse
+            _add_sip(header, self.order, self.a, self.b, ap, bp, inverse_order)
+        wcs = WCS(header)
+        wcs.pixel_shape = tuple(int(n) for n in self.shape)
+        return wcs
+
+    def pixels(self, vectors_icrs: np.ndarray) -> np.ndarray:
+        """Where the WCS puts ICRS unit vectors (n, 3): (n, 2) starnav px (A/B inverted by
+        Newton's method, as the residuals are measured); NaN for a direction 90° or more from
+        CRVAL."""
+        vectors = np.asarray(vectors_icrs, float).reshape(-1, 3)
+        target = (np.linalg.inv(self.cd) @ _gnomonic_deg(vectors, self.crval_vector).T).T
+        out = np.full_like(target, np.nan)
+        ok = np.isfinite(target).all(axis=1)
+        if ok.any():
+            out[ok] = _invert_sip(self.a, self.b, target[ok], target[ok]) + self.crpix_px
+        return out
+
+    def directions(self, xy_px: np.ndarray) -> np.ndarray:
+        """The ICRS unit vectors (n, 3) the WCS gives pixels ``xy_px`` (n, 2), starnav px."""
+        uv = np.asarray(xy_px, float).reshape(-1, 2) - self.crpix_px
+        uv = uv + np.column_stack([_sip_eval(self.a, uv), _sip_eval(self.b, uv)])
+        north, east = north_east(self.crval_vector)
+        xi, eta = np.radians(uv @ self.cd.T).T
+        v = self.crval_vector + xi[:, None] * east + eta[:, None] * north
+        return v / np.linalg.norm(v, axis=1, keepdims=True)
 
 
 STAR_FIT_MAX_ORDER = 4
@@ -504,15 +558,6 @@ def fit_wcs_to_stars(
         raise StarnavError("the stars of a WCS fit lie on a line: no CD matrix follows")
     cd_inv = np.linalg.inv(cd)
     a, b = _sip_arrays(coef, terms, order, scale, cd_inv)
-    inverse_order, ap, bp, inverse_error = order, np.zeros_like(a), np.zeros_like(b), 0.0
-    if order >= 2:
-        inverse_order, ap, bp, inverse_error = _fit_inverse(a, b, order, crpix, width, height)
-    ctype = "TAN-SIP" if order >= 2 else "TAN"
-    header = _celestial_header(ctype, tuple(crpix + 0.5), reference, cd, date_obs)
-    if order >= 2:
-        _add_sip(header, order, a, b, ap, bp, inverse_order)
-    wcs = WCS(header)
-    wcs.pixel_shape = (int(width), int(height))
     # the residuals as a reader of the file sees them: sky -> pixel, A/B inverted exactly
     target = (cd_inv @ _gnomonic_deg(vectors, reference).T).T
     try:
@@ -521,7 +566,8 @@ def fit_wcs_to_stars(
         raise StarnavError("the fitted SIP polynomials cannot be inverted at the stars") from None
     residual = fitted - xy
     rms = float(np.sqrt(np.mean(np.sum(residual**2, axis=1))))
-    return StarFitWcs(wcs, order, inverse_order, n, residual, rms, p_values, inverse_error)
+    return StarFitWcs(order, n, residual, rms, p_values, reference, cd, a, b, crpix,
+                      (int(width), int(height)), date_obs)  # fmt: skip
 
 
 def _fit_inverse(a, b, order: int, crpix: np.ndarray, width: int, height: int):

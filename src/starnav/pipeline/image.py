@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 
 from starnav.camera import Camera, CameraModel, model_class
-from starnav.catalog import Catalog, is_embedded
+from starnav.catalog import GAIA, Catalog, is_embedded, load_catalog
 from starnav.detect.circle import ImageCircle, dark_corners, find_image_circle
 from starnav.detect.header import ImageHints, fits_hints, is_fits
 from starnav.detect.read import read_image
@@ -42,6 +42,7 @@ from starnav.results import Solution, SolveResult
 from starnav.runtime.budget import Deadline, check_budget, default_budget_s
 
 NO_HINTS = ImageHints()
+WCS_MAX_STARS = 500  # detections a written WCS is fitted on (``fitted_wcs``)
 MIN_DETECTIONS = 4  # fewer detected stars than this: not solved, without a search
 AUTO_BIN_PIXELS = 4.2e6  # an image is detected binned to at most this many pixels
 SPENT_ADVICE = "a longer --time-budget, or a smaller image"  # a budget spent before the solve
@@ -624,7 +625,7 @@ def write_outputs(
         from starnav.output.wcs import write_wcs
 
         if wcs is None:
-            wcs = fitted_wcs(s, result.catalog)
+            wcs = fitted_wcs(s, result.catalog, detections_xy=result.detections.xy, pixels=pixels)
         if paths.get("wcs"):
             write_wcs(paths["wcs"], wcs)
             written["wcs"] = str(paths["wcs"])
@@ -648,7 +649,14 @@ def solution_wcs(R_cam_from_icrs: np.ndarray, camera: CameraModel):
     return wcs_from_attitude(R_cam_from_icrs, camera, sip_order=choose_sip_order(camera))
 
 
-def fitted_wcs(solution: Solution, catalog: Catalog | None, *, crpix_px=None):
+def fitted_wcs(
+    solution: Solution,
+    catalog: Catalog | None,
+    *,
+    crpix_px=None,
+    detections_xy: np.ndarray | None = None,
+    pixels: np.ndarray | None = None,
+):
     """The WCS (astropy) written for a solved image: TAN-SIP fitted to the matched stars
     (``starnav.output.wcs.fit_wcs_to_stars``: the order its F-tests find measurable) when the
     camera is a pinhole without distortion terms of its own and either SIP terms are
@@ -656,7 +664,10 @@ def fitted_wcs(solution: Solution, catalog: Catalog | None, *, crpix_px=None):
     point or the pixels are not square (``Solution.pixel_aspect``); else the camera's own
     (``solution_wcs``: the attitude's TAN, or the lens model's projection and SIP), through
     a grid of its pixels when they are not square. The matched stars are looked up in
-    ``catalog`` (those it lacks are left out of the fit)."""
+    ``catalog`` (those it lacks are left out of the fit). Given the image's ``detections_xy``
+    (starnav px; with ``pixels``, the image, detected again to ``WCS_MAX_STARS`` when they are
+    fewer), the TAN-SIP fit is made again on every detection the embedded Gaia catalog (or
+    ``catalog``, where it holds more stars) explains (``starnav.output.tweak.deep_fit``)."""
     from starnav.output.wcs import STAR_FIT_MAX_ORDER, fit_points, fit_wcs_to_stars
 
     camera, aspect = solution.camera, solution.pixel_aspect
@@ -676,6 +687,17 @@ def fitted_wcs(solution: Solution, catalog: Catalog | None, *, crpix_px=None):
                                    start=solution.R_cam_from_icrs[2])  # fmt: skip
         except StarnavError:  # stars on a line: the attitude's own WCS still holds
             fit = None
+        deep = None
+        if fit is not None and detections_xy is not None:
+            from starnav.output.tweak import deep_fit
+
+            if pixels is not None and len(detections_xy) < WCS_MAX_STARS:
+                detections_xy = _detect_binned(pixels, SolveOptions(max_stars=WCS_MAX_STARS)).xy
+            catalogs = (catalog, load_catalog(GAIA))
+            deep = deep_fit(fit, detections_xy, catalogs, camera.width,
+                            round(camera.height / aspect), crpix_px=crpix)  # fmt: skip
+        if deep is not None:
+            return deep.wcs
         away = not np.allclose(crpix, principal)
         if fit is not None and (fit.order > 1 or aspect != 1.0 or away):
             return fit.wcs

@@ -521,7 +521,8 @@ def _result(sol, camera, reason, width, height, time_ms, crpix_fits, **kw) -> Pl
     plate = None
     if sol is not None:
         crpix = None if crpix_fits is None else tuple(float(c) - 0.5 for c in crpix_fits)
-        wcs = fitted_wcs(sol, kw.get("catalog"), crpix_px=crpix)
+        wcs = fitted_wcs(sol, kw.get("catalog"), crpix_px=crpix, detections_xy=kw.get("xy"),
+                         pixels=kw.get("pixels"))  # fmt: skip
         plate = Plate.from_wcs(wcs, width, height)
     return PlateResult(plate, reason, sol, width, height, time_ms, **kw)
 
