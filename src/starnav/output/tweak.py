@@ -98,24 +98,29 @@ def deep_fit(
     xy = xy[np.isfinite(xy).all(axis=1)]
     if len(xy) <= fit.n_stars:
         return None
+    with np.errstate(all="ignore"):
+        try:
+            return _refitted(fit, xy, catalogs, width, height, crpix_px)
+        except (StarnavError, np.linalg.LinAlgError):  # a field too wide, SIP not invertible
+            return None
+
+
+def _refitted(fit, xy, catalogs, width, height, crpix_px) -> StarFitWcs | None:
     vectors, px = _field(fit, catalogs, width, height, len(xy))
     chance_px = math.sqrt(width * height / (math.pi * max(len(px), 1) * CHANCE))
     radius = float(np.clip(3.0 * fit.rms_px, MIN_RADIUS_PX, min(MAX_RADIUS_PX, chance_px)))
     best, used = None, None
-    current = fit
     for _ in range(ROUNDS):
         det, cat = unambiguous_pairs(xy, px, radius)
         if len(det) <= fit.n_stars:
-            return best
+            break
         key = (tuple(det), tuple(cat))
         if key == used:
             break
-        try:
-            current = fit_wcs_to_stars(xy[det], vectors[cat], width, height, crpix_px=crpix_px,
-                                       start=current.crval_vector)  # fmt: skip
-        except StarnavError:
-            return best
-        best, used = current, key
-        px = current.pixels(vectors)
-        radius = float(np.clip(CLIP_RMS * current.rms_px, MIN_RADIUS_PX, radius))
+        start = (best or fit).crval_vector
+        best = fit_wcs_to_stars(xy[det], vectors[cat], width, height, crpix_px=crpix_px,
+                                start=start)  # fmt: skip
+        used = key
+        px = best.pixels(vectors)
+        radius = float(np.clip(CLIP_RMS * best.rms_px, MIN_RADIUS_PX, radius))
     return best
