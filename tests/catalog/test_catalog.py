@@ -108,3 +108,24 @@ def test_hipparcos_columns_read_from_the_table_cache_as_parsed(tmp_path, monkeyp
         table_read_anew()  # parsed again
     finally:
         load._hipparcos_table.cache_clear()
+
+
+def test_a_cone_before_the_vectors_is_the_cone_after_them():
+    """``Catalog.within`` turns only the cone's declination band into vectors until the whole
+    catalog's are needed: the same stars, in the same order, as with them (poles and a
+    cone across RA 0 included)."""
+    from starnav.catalog import Catalog
+    from starnav.geometry import radec_to_unit
+
+    rng = np.random.default_rng(5)
+    ra, dec = rng.uniform(0, 360, 20000), np.degrees(np.arcsin(rng.uniform(-1, 1, 20000)))
+    cones = [(0.5, 30.0, 0.2), (359.9, -10.0, 0.05), (10.0, 89.5, 0.03), (200.0, -90.0, 0.3),
+             (45.0, 0.0, 1.5)]  # fmt: skip
+    fresh = Catalog(np.arange(20000), ra, dec, np.zeros(20000), "random")
+    before = [fresh.within(radec_to_unit(np.radians(a), np.radians(d)), r, "cone").ids
+              for a, d, r in cones]  # fmt: skip
+    assert "vectors" not in fresh.__dict__
+    fresh.vectors  # noqa: B018  (computed whole from here on)
+    for (a, d, r), ids in zip(cones, before, strict=True):
+        after = fresh.within(radec_to_unit(np.radians(a), np.radians(d)), r, "cone").ids
+        assert len(after) > 0 and np.array_equal(after, ids)

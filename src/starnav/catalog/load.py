@@ -77,8 +77,17 @@ class Catalog:
 
     def within(self, direction: np.ndarray, radius_rad: float, name: str) -> Catalog:
         """The stars within ``radius_rad`` of the unit vector ``direction`` (ICRS), the
-        subset called ``name``."""
-        keep = np.flatnonzero(self.vectors @ direction >= math.cos(min(radius_rad, math.pi)))
+        subset called ``name``. Until the catalog's ``vectors`` are needed whole, only the
+        stars in the declination band of the cone are turned into vectors (Gaia's 482 000:
+        ~40 ms whole)."""
+        cos_radius = math.cos(min(radius_rad, math.pi))
+        if "vectors" in self.__dict__ or radius_rad >= math.pi / 2:
+            keep = np.flatnonzero(self.vectors @ direction >= cos_radius)
+        else:
+            dec = math.degrees(math.asin(float(np.clip(direction[2], -1.0, 1.0))))
+            band = np.flatnonzero(np.abs(self.dec_deg - dec) <= math.degrees(radius_rad) + 1e-6)
+            vectors = radec_to_unit(np.radians(self.ra_deg[band]), np.radians(self.dec_deg[band]))
+            keep = band[vectors @ direction >= cos_radius]
         return Catalog(self.ids[keep], self.ra_deg[keep], self.dec_deg[keep], self.mag[keep], name)
 
     def brighter_than(self, mag_limit: float) -> Catalog:
