@@ -667,7 +667,8 @@ def fitted_wcs(
     ``catalog`` (those it lacks are left out of the fit). Given the image's ``detections_xy``
     (starnav px; with ``pixels``, the image, detected again to ``WCS_MAX_STARS`` when they are
     fewer), the TAN-SIP fit is made again on every detection the embedded Gaia catalog (or
-    ``catalog``, where it holds more stars) explains (``starnav.output.tweak.deep_fit``)."""
+    ``catalog``, where it holds more stars) explains (``starnav.output.tweak.deep_fit``):
+    when it pairs more stars than the solve matched, that fit is the WCS, whatever its order."""
     from starnav.output.wcs import STAR_FIT_MAX_ORDER, fit_points, fit_wcs_to_stars
 
     camera, aspect = solution.camera, solution.pixel_aspect
