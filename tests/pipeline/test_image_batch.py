@@ -160,9 +160,14 @@ def test_new_fits_keeps_the_data_and_header_and_adds_the_wcs(tmp_path, capsys):
         assert h["EXPTIME"] == 2.5 and h["OBJECT"] == "Orion"
         wcs = WCS(h)
     # the WCS puts the boresight (our image centre, 0-based astropy (W-1)/2, (H-1)/2 +0.5)
+    # where the solve does, within 3 of the solve's own sigmas: the WCS is fitted on the Gaia
+    # stars the detections hold (output.tweak), the printed boresight on the matched stars
+    # (here the WCS's centre is 0.8" from the truth, the printed one 10.6")
+    from astropy.coordinates import SkyCoord
+
     sky_centre = wcs.pixel_to_world(CAMERA.cx - 0.5, CAMERA.cy - 0.5)
-    assert sky_centre.ra.deg == pytest.approx(out["ra_deg"], abs=1e-6)
-    assert sky_centre.dec.deg == pytest.approx(out["dec_deg"], abs=1e-6)
+    printed = SkyCoord(out["ra_deg"], out["dec_deg"], unit="deg")
+    assert sky_centre.separation(printed).arcsec < 3.0 * out["sigma_boresight_arcsec"]
 
 
 def test_an_unsolved_image_is_annotated_with_its_reason(tmp_path, capsys):
