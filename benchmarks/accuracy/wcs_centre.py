@@ -92,14 +92,11 @@ def sky_check(wcs, xy: np.ndarray, vectors: np.ndarray, width: int, height: int)
     checked on detections it was not fitted on (``measure``: fitted on every other one of the
     ``CHECK_STARS`` brightest, checked on the rest), astrometry.net's on the same."""
     from starnav.geometry import unit_to_radec
-    from starnav.output.tweak import unambiguous_pairs
+    from starnav.output.tweak import in_image, unambiguous_pairs
 
     ra, dec = np.degrees(unit_to_radec(vectors))
     px = wcs.all_world2pix(np.column_stack([ra, dec]), 0, quiet=True) + 0.5
-    inside = np.isfinite(px).all(axis=1)
-    inside[inside] &= (px[inside, 0] >= 0) & (px[inside, 0] <= width)
-    inside[inside] &= (px[inside, 1] >= 0) & (px[inside, 1] <= height)
-    px = px[inside]
+    px = px[in_image(px, width, height)]
     det, cat = unambiguous_pairs(xy, px, CHECK_RADIUS_PX)
     middle = np.hypot(xy[det, 0] - width / 2, xy[det, 1] - height / 2)
     middle = middle <= CHECK_MIDDLE * np.hypot(width, height) / 2

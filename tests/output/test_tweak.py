@@ -8,7 +8,7 @@ import numpy as np
 
 from starnav.camera import Camera
 from starnav.catalog import GAIA, load_catalog
-from starnav.geometry import attitude_from_radec_roll
+from starnav.geometry import attitude_from_radec_roll, radec_to_unit
 from starnav.output.tweak import deep_fit
 from starnav.output.wcs import fit_wcs_to_stars
 
@@ -16,8 +16,6 @@ W, H = 1600, 1200
 
 
 def _sky_at(fit, xy) -> np.ndarray:
-    from starnav.geometry import radec_to_unit
-
     ra, dec = fit.wcs.all_pix2world(np.asarray(xy, float) - 0.5, 0).T
     return radec_to_unit(np.radians(ra), np.radians(dec))
 

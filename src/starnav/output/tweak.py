@@ -33,7 +33,9 @@ ROUNDS = 4
 CLIP_RMS = 3.0
 
 
-def _in_image(xy: np.ndarray, width: int, height: int) -> np.ndarray:
+def in_image(xy: np.ndarray, width: int, height: int) -> np.ndarray:
+    """Whether each of ``xy`` (n, 2), starnav px, is finite and on a ``width`` x ``height``
+    image, edges included."""
     ok = np.isfinite(xy).all(axis=1)
     ok[ok] &= (xy[ok, 0] >= 0) & (xy[ok, 0] <= width) & (xy[ok, 1] >= 0) & (xy[ok, 1] <= height)
     return ok
@@ -59,7 +61,7 @@ def _field(fit: StarFitWcs, catalogs, width: int, height: int, n_detections: int
     while start < len(vectors) and inside.sum() < keep:  # project in slices, brightest first
         part = slice(start, start + 2 * keep)
         px[part] = fit.pixels(vectors[part])
-        inside[part] = _in_image(px[part], width, height)
+        inside[part] = in_image(px[part], width, height)
         start += 2 * keep
     rows = np.flatnonzero(inside)[:keep]
     return vectors[rows], px[rows]

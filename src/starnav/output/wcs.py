@@ -375,12 +375,7 @@ class StarFitWcs:
         Newton's method, as the residuals are measured); NaN for a direction 90° or more from
         CRVAL."""
         vectors = np.asarray(vectors_icrs, float).reshape(-1, 3)
-        target = (np.linalg.inv(self.cd) @ _gnomonic_deg(vectors, self.crval_vector).T).T
-        out = np.full_like(target, np.nan)
-        ok = np.isfinite(target).all(axis=1)
-        if ok.any():
-            out[ok] = _invert_sip(self.a, self.b, target[ok], target[ok]) + self.crpix_px
-        return out
+        return _sky_to_pixels(self.crval_vector, self.cd, self.a, self.b, self.crpix_px, vectors)
 
     def directions(self, xy_px: np.ndarray) -> np.ndarray:
         """The ICRS unit vectors (n, 3) the WCS gives pixels ``xy_px`` (n, 2), starnav px."""
@@ -475,6 +470,19 @@ def _sip_jacobian(a: np.ndarray, b: np.ndarray, uv: np.ndarray) -> np.ndarray:
     return jac
 
 
+def _sky_to_pixels(reference, cd, a, b, crpix, vectors, start_px=None) -> np.ndarray:
+    """Starnav px (n, 2) of ICRS unit vectors (n, 3) through TAN about ``reference`` with
+    ``cd`` and SIP's ``a``, ``b`` about ``crpix``, A/B inverted by Newton's method from
+    ``start_px`` (None: the plain TAN's pixels); NaN for a direction 90° or more away."""
+    target = (np.linalg.inv(cd) @ _gnomonic_deg(vectors, reference).T).T
+    out = np.full_like(target, np.nan)
+    ok = np.isfinite(target).all(axis=1)
+    if ok.any():
+        start = target[ok] if start_px is None else start_px[ok] - crpix
+        out[ok] = _invert_sip(a, b, target[ok], start) + crpix
+    return out
+
+
 def _invert_sip(a, b, target: np.ndarray, start: np.ndarray) -> np.ndarray:
     """Pixel offsets uv with uv + (A, B)(uv) = ``target`` (Newton from ``start``)."""
     uv = start.astype(float).copy()
@@ -556,12 +564,10 @@ def fit_wcs_to_stars(
     cd = (coef[:2] / scale).T  # rows: world axes; columns: u, v
     if not abs(np.linalg.det(cd)) > 1e-6 * np.sum(cd**2):
         raise StarnavError("the stars of a WCS fit lie on a line: no CD matrix follows")
-    cd_inv = np.linalg.inv(cd)
-    a, b = _sip_arrays(coef, terms, order, scale, cd_inv)
+    a, b = _sip_arrays(coef, terms, order, scale, np.linalg.inv(cd))
     # the residuals as a reader of the file sees them: sky -> pixel, A/B inverted exactly
-    target = (cd_inv @ _gnomonic_deg(vectors, reference).T).T
     try:
-        fitted = _invert_sip(a, b, target, uv) + crpix
+        fitted = _sky_to_pixels(reference, cd, a, b, crpix, vectors, start_px=xy)
     except np.linalg.LinAlgError:
         raise StarnavError("the fitted SIP polynomials cannot be inverted at the stars") from None
     residual = fitted - xy
