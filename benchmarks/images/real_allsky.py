@@ -2,15 +2,15 @@
 independent references, into docs/allsky.md (blocks ``allsky-frames``, ``allsky-totals``).
 
     python benchmarks/images/real_allsky.py [--files DIR]
-        [--set development|heldback|heldback_2|all] [--only NAME ...] [--modes a b c]
+        [--set development|heldback|heldback_2|heldback_3|all] [--only NAME ...] [--modes a b c]
         [--write-docs] [--json OUT]
 
 The frames: tests/data/real/allsky_manifest.json (metadata and references, no image bytes);
 the files are other projects' (the manifest gives repository, commit, path and SHA-256), looked
 for in ``--files``, default ``$STARNAV_ALLSKY_CORPUS``; a missing file or one whose SHA-256
 differs is reported and skipped. ``--set development`` (the default) runs the frames that may be
-tuned on; ``heldback`` and ``heldback_2`` the frames of the projects kept out of development
-(each run once, at the end); ``all`` every set.
+tuned on; ``heldback``, ``heldback_2`` and ``heldback_3`` the frames of the projects kept out of
+development (each run once, at the end); ``all`` every set.
 
 Each frame is solved through the command line (``python -m starnav solve FILE ... --json``, a
 subprocess per solve, as a user runs it) three ways:
@@ -68,8 +68,8 @@ KHO_FRAME = "kho_lyr-sony-111220_200933.jpg"
 DOC = DOCS / "allsky.md"
 ENV = "STARNAV_ALLSKY_CORPUS"
 # the manifest's sets: frames that may be tuned on, then whole projects held back and run once
-# at the end ("heldback", run; "heldback_2", gathered later and not yet run)
-SETS = ("development", "heldback", "heldback_2")
+# at the end ("heldback", run; "heldback_2" and "heldback_3", gathered later and not yet run)
+SETS = ("development", "heldback", "heldback_2", "heldback_3")
 WRONG_DEG = 0.5
 CROP_EDGE = 0.25  # a crop's WCS is used this far (fraction of its side) inside its edges
 SAME_STAR_DEG = 0.05  # a reference star and a solved star are the same catalog star
@@ -470,7 +470,7 @@ def tables(results: list[dict], modes: list[str]) -> tuple[str, str]:
 
 def write_docs(which: str, totals_md: str, frames_md: str) -> None:
     """The tables into docs/allsky.md (blocks allsky-totals / allsky-frames, "-heldback" /
-    "-heldback_2" / "-all" for the other choices of ``--set``)."""
+    "-heldback_2" / "-heldback_3" / "-all" for the other choices of ``--set``)."""
     suffix = "" if which == "development" else f"-{which}"
     replace_block(DOC, f"allsky-totals{suffix}", totals_md, missing=f"### Totals ({which})")
     replace_block(DOC, f"allsky-frames{suffix}", frames_md, missing=f"### Per frame ({which})")
