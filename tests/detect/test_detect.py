@@ -13,7 +13,7 @@ from scipy.stats import spearmanr
 
 from starnav.catalog import load_catalog
 from starnav.detect.read import read_image
-from starnav.detect.stars import detect_stars, without_glare
+from starnav.detect.stars import Detections, detect_stars, without_glare, without_trails
 from starnav.errors import ImageError
 from starnav.geometry import attitude_from_radec_roll
 from starnav.simulate.render import (
@@ -825,3 +825,28 @@ def test_a_saturated_patch_cut_into_pieces_is_not_stars():
     assert which[:3].tolist() == [1, 2, 0] and 3 in which  # the saturated stars first
     pieces = which[which >= len(stars)]
     assert len(pieces) <= 4  # of 25: the grid's corners (3 others in reach) at most
+
+
+def _listed(xy: np.ndarray, width: int = 3000, height: int = 2000) -> Detections:
+    """Detections at ``xy`` (brightest first), nothing else measured."""
+    n = len(xy)
+    ones = np.ones(n)
+    return Detections(np.asarray(xy, float), ones, ones, ones[::-1].cumsum(),
+                      np.zeros(n, bool), 0.0, 1.0, 1.0, 0, 0, width, height)  # fmt: skip
+
+
+def test_a_chopped_trail_is_not_stars_and_stars_are_kept():
+    """A fireball chopped into round dashes by a shutter (the Desert Fireball Network's
+    frames: 14-32 of the 100 brightest sources) lies on a line, evenly: ``without_trails``
+    drops the dashes; random stars, however dense, and three stars in a row stay."""
+    rng = np.random.default_rng(12)
+    stars = rng.uniform([0, 0], [3000, 2000], size=(300, 2))
+    t = np.arange(14.0)
+    trail = np.column_stack([900 + 13.0 * t, 430 - 1.3 * t]) + rng.normal(0, 0.3, (14, 2))
+    row = np.array([[2500.0, 1500.0], [2520.0, 1500.0], [2540.0, 1500.0]])
+    found = without_trails(_listed(np.vstack([trail, stars, row])))
+    assert len(found) == len(stars) + len(row)
+    assert not np.isin(found.xy, trail).all(axis=1).any()
+    for seed in range(20):  # dense fields: nothing taken for a trail
+        dense = np.random.default_rng(seed).uniform([0, 0], [3000, 2000], size=(500, 2))
+        assert len(without_trails(_listed(dense))) == 500

@@ -27,6 +27,15 @@ glow, which widens the ring's spread): a block more than ``LEVEL_SIGMA`` spreads
   image's maximum): the Moon and its halo, a lamp and the cloud it lights. A saturated
   star does not lift its block's median, so it is not glare.
 
+- the unlit surround: connected regions of *flat black* blocks (at the frame's lowest value
+  with no noise at all: the clipped black around a sky disc cut by trees, or past the lens's
+  circle when no sharp circle is found), reaching the rim and less starry than the lit sky
+  (``FLAT_STARLESS_FRACTION``: a caption's letters and the hot pixels, which the black shows
+  as well as the sky, pass for stars there; a sky clipped to black keeps its stars, which the
+  lit parts lack): the captions, logos and lamps burnt or standing in them are no stars.
+  Their noise, nil, is not the sky's: every block's noise is floored at half the lit blocks'
+  typical noise.
+
 Both are widened by one block (their edges are where the false sources sit). A region whose
 share of starry blocks is that of the sky is never taken for an obstacle, however bright or
 dark (the Milky Way, a thin cloud with stars through it, a glow at the horizon): the mask
@@ -53,12 +62,15 @@ MIN_INTERIOR_BLOCKS = 4
 MIN_BLOCKS = 16  # a frame of fewer blocks a side is not judged (only its circle)
 STAR_PEAK_SIGMA = 6.0  # a block's brightest binned pixel this far over its median: a star
 STARLESS_FRACTION = 0.25  # of the sky's share of starry blocks: a starless region
+FLAT_STARLESS_FRACTION = 1.0  # a flat black one (its hot pixels and captions pass for stars)
 LEVEL_SIGMA = 3.0  # ring spreads off the ring's median: a dark or bright block
 GLARE_SIGMA = 10.0  # ring spreads over the ring's median: glare around a saturated core
 RIM_FRACTION = 0.9  # of the circle's radius: the rim, where the horizon lies
 SATURATED_SHARE = 0.1  # of a block's pixels at the image's maximum: a glare core
 RING_BLOCKS = 2.0  # width of the rings of the level model, in blocks
 CIRCLE_MARGIN = 0.01  # of the radius: the circle shrunk by this (its rim is lit horizon)
+LIT_DISC_SHARE = 0.25  # of the frame masked, without a circle: the sky left suggests a disc
+LIT_DISC_QUANTILE = 0.99  # of the sky's distances from its centroid: that disc's radius
 
 
 @dataclass(frozen=True, eq=False)
@@ -79,6 +91,24 @@ class SkyMask:
     def sky(self) -> float:
         """The share of the image's pixels left as sky."""
         return 1.0 - float(self.excluded.mean())
+
+    def lit_disc(self) -> ImageCircle | None:
+        """Without an image circle, the disc the sky left by the mask suggests when the
+        mask took ``LIT_DISC_SHARE`` of the frame or more (a circular fisheye whose rim the
+        trees or a dark housing hide): centred on the sky's centroid, as far out as its
+        farthest part (``LIT_DISC_QUANTILE`` of its pixels' distances: a gap between trees
+        lies near the horizon), ``contrast`` 0 (no edge was seen). A start for the focal
+        scan, not a circle to mask by. None otherwise."""
+        if self.circle is not None or 1.0 - self.sky < LIT_DISC_SHARE:
+            return None
+        step = max(1, self.block_px // 4)
+        rows, cols = np.nonzero(~self.excluded[::step, ::step])
+        if len(rows) == 0:
+            return None
+        x, y = (cols + 0.5) * step, (rows + 0.5) * step
+        cx, cy = float(x.mean()), float(y.mean())
+        radius = float(np.quantile(np.hypot(x - cx, y - cy), LIT_DISC_QUANTILE))
+        return ImageCircle(cx, cy, radius, contrast=0.0)
 
     def to_dict(self) -> dict:
         """The shares (of the image's pixels) and the circle, for JSON."""
@@ -122,15 +152,17 @@ def find_sky_mask(image: np.ndarray, *, circle: ImageCircle | bool | None = True
     rows, cols = height // block, width // block
     if min(rows, cols) < MIN_BLOCKS:  # too small to judge: only the circle
         return _mask(outside, outside, None, None, circle, block)
-    level, noise, peak, saturated, valid = _blocks(data, outside, block)
+    level, noise, peak, saturated, valid, flat = _blocks(data, outside, block)
     radius, rim = _radii(rows, cols, block, circle)
     starry = valid & (peak > STAR_PEAK_SIGMA * noise)
     inner = valid & ~rim & (radius <= RIM_FRACTION * _disc_radius(circle, height, width))
-    reference = float(starry[inner].mean()) if inner.any() else 0.0
-    deviation = _ring_deviation(level, valid, radius, block, noise)
+    lit = inner & ~flat
+    reference = float(starry[lit].mean()) if lit.any() else 0.0
+    deviation = _ring_deviation(level, valid & ~flat, radius, block, noise)
     seeds = rim & valid
     obstacles = _starless_parts(valid & (deviation < -LEVEL_SIGMA), seeds, starry, reference)
     obstacles |= _starless_parts(valid & (deviation > LEVEL_SIGMA), seeds, starry, reference)
+    obstacles |= _starless_parts(flat, seeds, starry, reference, FLAT_STARLESS_FRACTION)
     glare = _touching(valid & (deviation > GLARE_SIGMA), saturated) & ~obstacles
     obstacles, glare = _grown(obstacles), _grown(glare)
     return _mask(outside, outside, obstacles, glare, circle, block)
@@ -139,7 +171,8 @@ def find_sky_mask(image: np.ndarray, *, circle: ImageCircle | bool | None = True
 def _blocks(data: np.ndarray, outside: np.ndarray, block: int):
     """Per block of ``block`` px: (median, noise, brightest over the upper quartile (each of
     the frame binned 2 x 2), whether it holds a glare core, whether it is sky enough to
-    judge: under half outside)."""
+    judge: under half outside, whether it is flat black: at the frame's lowest value, its
+    noise nil). The noise is floored at half the typical noise of the blocks not flat."""
     height, width = data.shape
     rows, cols = height // block, width // block
     half = block // 2
@@ -155,12 +188,17 @@ def _blocks(data: np.ndarray, outside: np.ndarray, block: int):
     count = cells.shape[2] - masked.sum(axis=2)
     ordered = np.sort(cells, axis=2)  # NaN last
     level, upper, top = (_nth(ordered, count, share) for share in (0.5, 0.75, 1.0))
-    noise = 1.4826 * _nth(np.sort(np.abs(cells - level[..., None]), axis=2), count, 0.5)
+    noise = np.nan_to_num(
+        1.4826 * _nth(np.sort(np.abs(cells - level[..., None]), axis=2), count, 0.5)
+    )
     peak = top - upper
-    floor = 0.5 * float(np.median(noise[valid])) if valid.any() else 0.0
-    noise = np.fmax(np.nan_to_num(noise), max(floor, 0.25))
+    vmin = float(np.nanmin(np.where(outside, np.inf, data)))
+    flat = valid & (noise == 0) & (np.nan_to_num(level, nan=np.inf) <= vmin)
+    judged = valid & ~flat
+    floor = 0.5 * float(np.median(noise[judged])) if judged.any() else 0.0
+    noise = np.fmax(noise, max(floor, 0.25))
     saturated = np.count_nonzero(cells >= vmax, axis=2) >= SATURATED_SHARE * cells.shape[2]
-    return np.nan_to_num(level), noise, np.nan_to_num(peak), saturated, valid
+    return np.nan_to_num(level), noise, np.nan_to_num(peak), saturated, valid, flat
 
 
 def _nth(ordered: np.ndarray, count: np.ndarray, share: float) -> np.ndarray:
@@ -213,10 +251,14 @@ def _ring_deviation(
 
 
 def _starless_parts(
-    region: np.ndarray, seeds: np.ndarray, starry: np.ndarray, reference: float
+    region: np.ndarray,
+    seeds: np.ndarray,
+    starry: np.ndarray,
+    reference: float,
+    fraction: float = STARLESS_FRACTION,
 ) -> np.ndarray:
     """The connected parts (8-connected) of ``region`` that hold a ``seeds`` block and whose
-    share of ``starry`` blocks is under ``STARLESS_FRACTION`` of the sky's (``reference``),
+    share of ``starry`` blocks is under ``fraction`` of the sky's (``reference``),
     counted over their interior (the part one block from their edge) when that has
     ``MIN_INTERIOR_BLOCKS`` or more."""
     from scipy import ndimage
@@ -234,7 +276,7 @@ def _starless_parts(
     stars = ndimage.sum_labels(starry, judged, index)
     seeded = ndimage.maximum(seeds, labels, index).astype(bool)
     keep = np.zeros(n + 1, dtype=bool)
-    keep[1:] = seeded & (stars < STARLESS_FRACTION * reference * size)
+    keep[1:] = seeded & (stars < fraction * reference * size)
     return keep[labels]
 
 

@@ -113,6 +113,10 @@ _LOCAL_NOISE_MARGIN = 1.25  # the annulus noise counts when this much above the 
 _MIN_SNR_FRACTION = 0.5  # of threshold_sigma: a source fainter than that here is dropped
 _CROWD = 5  # an all-sky frame's saturated source with this many saturated others
 _CROWD_RADIUS = 0.015  # within this share of the image's diagonal is a piece of glare
+_TRAIL_PIECES = 5  # sources this many or more in a straight chain are a trail's pieces
+_TRAIL_COS = math.cos(math.radians(10.0))  # a source between two neighbours this near in line
+_TRAIL_STRAIGHTNESS = 0.15  # of the pieces' spacing: their rms off one straight line
+_TRAIL_EVEN = 0.25  # a source's two neighbours in line lie this evenly (of the longer step)
 _CANDIDATES_PER_STAR, _CANDIDATES_EXTRA = 4, 30  # most sources measured for max_stars
 _FIRST_PER_STAR, _FIRST_EXTRA = 2, 20  # sources measured first
 _UNIFORM_NOISE = 1.25
@@ -435,6 +439,53 @@ def without_glare(found: Detections) -> Detections:
     counts = cKDTree(xy).query_ball_point(xy, reach, return_length=True)
     keep = np.ones(len(found.xy), dtype=bool)
     keep[rows[counts - 1 >= _CROWD]] = False
+    return found if keep.all() else found.kept(keep)
+
+
+def without_trails(found: Detections) -> Detections:
+    """``found`` less the pieces of trails: ``_TRAIL_PIECES`` or more sources in a chain of
+    close neighbours (each within ``_CROWD_RADIUS`` of the image's diagonal of the next,
+    each link a source midway between two in line: within 10° and ``_TRAIL_EVEN``) lying on
+    one straight line, within ``_TRAIL_STRAIGHTNESS`` of their spacing. A fireball
+    or meteor cut into dashes by a chopping shutter (the Desert Fireball Network's), a
+    satellite or aircraft with blinking lights, a streak that deblending cuts into pieces:
+    each piece is round, so the shape test keeps it, and a bright trail fills the brightest
+    places meant for stars. Five stars evenly on a line that straight do not happen by chance.
+    (All-sky frames only, as ``without_glare``.)"""
+    n = len(found.xy)
+    if n < _TRAIL_PIECES:
+        return found
+    xy = found.xy
+    offsets = xy[None, :, :] - xy[:, None, :]
+    distance = np.hypot(offsets[..., 0], offsets[..., 1])
+    near = (distance > 0) & (distance <= _CROWD_RADIUS * math.hypot(found.width, found.height))
+    unit = offsets / np.where(distance > 0, distance, 1.0)[..., None]
+    linked = np.zeros((n, n), dtype=bool)
+    for i in np.flatnonzero(near.sum(axis=1) >= 2):
+        rows = np.flatnonzero(near[i])
+        cosines = unit[i, rows] @ unit[i, rows].T
+        steps = distance[i, rows]
+        even = np.abs(steps[:, None] - steps[None, :]) <= _TRAIL_EVEN * np.fmax.outer(steps, steps)
+        # i midway between j and k, in line with them
+        j, k = np.nonzero(np.triu((cosines < -_TRAIL_COS) & even, 1))
+        ends = np.unique(np.concatenate([rows[j], rows[k]]))
+        linked[i, ends] = linked[ends, i] = True
+    if not linked.any():
+        return found
+    from scipy.sparse.csgraph import connected_components
+
+    count, labels = connected_components(linked, directed=False)
+    keep = np.ones(n, dtype=bool)
+    for label in range(count):
+        members = np.flatnonzero(labels == label)
+        if len(members) < _TRAIL_PIECES:
+            continue
+        points = xy[members] - xy[members].mean(axis=0)
+        across = np.linalg.svd(points, compute_uv=False)[-1] / math.sqrt(len(members))
+        spacing = np.median(np.where(near[members][:, members], distance[members][:, members],
+                                     np.inf).min(axis=1))  # fmt: skip
+        if across <= _TRAIL_STRAIGHTNESS * spacing:
+            keep[members] = False
     return found if keep.all() else found.kept(keep)
 
 

@@ -89,6 +89,8 @@ MAX_DIAGONAL_FOV_DEG = 150.0
 # the fields an all-sky camera's image circle spans (degrees): a 180° lens's, a wider one's
 # (to 230°), and a horizon of trees or domes found as a smaller disc (to 140°)
 CIRCLE_FOV_RANGE_DEG = (140.0, 230.0)
+NO_CIRCLE_DISC_DEG = 190.0  # a frame without image circle: its disc may be this wide across
+LIT_DISC_FIELD_DEG = 100.0  # the narrowest field a lit disc (the sky inside trees) spans
 MODEL_MATCH_DEG = 45.0  # models compared at the focal lengths that agree this far out
 SCAN_INNER_DEG = 60.0  # a fisheye scan's trial identifies stars this close to the axis
 SCAN_PRIOR_SIGMA_DEG = 1.0  # the whole list is matched near a trial's attitude, good to this
@@ -709,17 +711,35 @@ def scan_starts(
 ) -> list[ScanStart]:
     """The lenses a fisheye's focal scan tries: ``base`` over the focal lengths of the
     horizontal ``fov_range_deg`` (``lens_focal_range``; a calibrated ``camera``'s within 1 %);
-    with an image ``circle`` and no camera, first the circle's centre as principal point,
+    without a camera its principal point is a guess (``rough``), and without an image circle
+    the default range reaches a ``NO_CIRCLE_DISC_DEG`` sky disc as wide as the image's
+    shorter side (a circular fisheye whose rim the trees hide: 235° across a 4:3 frame's
+    width); with an image ``circle`` and no camera, first the circle's centre as principal point,
     the focal lengths that make the circle span ``CIRCLE_FOV_RANGE_DEG`` (those of the field
     when ``options`` give one; ±5 % of ``options.circle_fov_deg`` or ``options.focal_px``)
     from a 180° circle (or the one given) outward, then the image centre's, when the
     two lie more than ``CIRCLE_CENTRE_PX`` apart (a disc cut by the frame or by trees is
-    found off its centre)."""
+    found off its centre). A lit disc (``SkyMask.lit_disc``: sky inside a black surround,
+    no edge seen, ``contrast`` 0) is a centre, and a radius short of the horizon's: its
+    lens's 180° circle is scanned from as wide as the shorter side (``NO_CIRCLE_DISC_DEG``)
+    to as narrow as makes the lit disc span ``LIT_DISC_FIELD_DEG``."""
     focal_range = lens_focal_range(base, camera, fov_range_deg)
     if camera is None and options.focal_px is not None:
         focal_range = _given_focal_range(options.focal_px)
-    if camera is not None or circle is None:
+    if camera is not None:
         return [ScanStart(base, focal_range)]
+    unsaid = options.focal_px is None and options.fov_deg is None and options.fov_range_deg is None
+    f_disc = base.focal_for_radius(0.5 * min(base.width, base.height), NO_CIRCLE_DISC_DEG)
+    if circle is not None and circle.contrast <= 0.0:  # a lit disc, no lens's circle
+        if unsaid and options.circle_fov_deg is None:
+            at_lit = base.with_centre(circle.cx, circle.cy)
+            f_far = at_lit.focal_for_radius(circle.radius_px, LIT_DISC_FIELD_DEG)
+            return _at_and_centre(at_lit, base, (f_disc, max(f_disc, f_far)), f_disc)
+        circle = None
+    if circle is None:  # the principal point a guess; the disc perhaps cut by trees
+        if unsaid:
+            focal_range = (min(focal_range[0], f_disc), focal_range[1])
+        return [ScanStart(base, focal_range, rough=True)]
     at_circle = base.with_centre(circle.cx, circle.cy)
     field = 180.0 if options.circle_fov_deg is None else options.circle_fov_deg
     if options.fov_deg is None and options.fov_range_deg is None:
@@ -734,8 +754,16 @@ def scan_starts(
     first = options.focal_px
     if field is not None:
         first = min(max(at_circle.focal_for_radius(circle.radius_px, field), lo), hi)
-    starts = [ScanStart(at_circle, focal_range, first, rough=True)]
-    if math.hypot(circle.cx - base.cx, circle.cy - base.cy) > CIRCLE_CENTRE_PX:
+    return _at_and_centre(at_circle, base, focal_range, first)
+
+
+def _at_and_centre(
+    at: CameraModel, base: CameraModel, focal_range: tuple[float, float], first: float | None
+) -> list[ScanStart]:
+    """A rough start at ``at``'s principal point, then at the image centre's (``base``'s)
+    when the two lie more than ``CIRCLE_CENTRE_PX`` apart."""
+    starts = [ScanStart(at, focal_range, first, rough=True)]
+    if math.hypot(at.cx - base.cx, at.cy - base.cy) > CIRCLE_CENTRE_PX:
         starts.append(ScanStart(base, focal_range, first, rough=True))
     return starts
 

@@ -24,7 +24,7 @@ from starnav.detect.circle import ImageCircle, dark_corners, find_image_circle
 from starnav.detect.header import ImageHints, fits_hints, is_fits
 from starnav.detect.read import read_image
 from starnav.detect.skymask import find_sky_mask
-from starnav.detect.stars import Detections, detect_stars, without_glare
+from starnav.detect.stars import Detections, detect_stars, without_glare, without_trails
 from starnav.errors import CameraError, ImageError, StarnavError
 from starnav.pipeline.diagnose import BUDGET, Failure, diagnose
 from starnav.pipeline.fov import UNREAD_SHAPE, diagonal_fov_deg, fov_limits_deg, search_range
@@ -497,7 +497,8 @@ def detect_image(
     ``DEFAULT_MAX_STARS``, ``FISHEYE_MAX_STARS`` for a fisheye). For a fisheye ``lens`` (any
     model but the pinhole) only in its sky (``starnav.detect.skymask``: inside the image
     circle found in the image, less the horizon's obstacles and glare, and the saturated pieces
-    of glare among the stars: ``detect.stars.without_glare``); and when fewer than
+    of glare and the pieces of trails among the stars: ``detect.stars.without_glare``,
+    ``without_trails``); and when fewer than
     ``FEW_STARS_DEEPER`` stars are found there, again at each of ``DEEPER_THRESHOLDS_SIGMA``
     in turn while too few are found (a narrow filter, a short exposure, thin cloud: going
     deeper before refusing; those no brighter than the noise's peaks are dropped,
@@ -510,8 +511,8 @@ def detect_image(
         found = detect_stars(pixels, threshold_sigma=threshold_sigma, max_stars=max_stars)
         return replace(found, threshold_sigma=threshold_sigma)
     pixels, sky_fraction, circle = _outside_sky_masked(pixels)
-    found = without_glare(
-        detect_stars(pixels, threshold_sigma=threshold_sigma, max_stars=max_stars)
+    found = without_trails(
+        without_glare(detect_stars(pixels, threshold_sigma=threshold_sigma, max_stars=max_stars))
     )
     for deeper_sigma in DEEPER_THRESHOLDS_SIGMA:
         if len(found) >= FEW_STARS_DEEPER or deeper_sigma >= threshold_sigma:
@@ -527,8 +528,8 @@ def _deeper(pixels: np.ndarray, threshold_sigma: float, max_stars: int) -> Detec
     found in the negated image, which are noise: noise is symmetric, stars are not (3 sigma
     finds 15-25 noise peaks of SNR up to ~6.6 in a 512 px all-sky frame of pure noise, 4 and
     5 sigma none)."""
-    deeper = without_glare(
-        detect_stars(pixels, threshold_sigma=threshold_sigma, max_stars=max_stars)
+    deeper = without_trails(
+        without_glare(detect_stars(pixels, threshold_sigma=threshold_sigma, max_stars=max_stars))
     )
     noise = detect_stars(-pixels, threshold_sigma=threshold_sigma, max_stars=max_stars)
     return deeper.kept(deeper.saturated | (deeper.snr > (noise.snr.max() if len(noise) else 0.0)))
@@ -538,14 +539,15 @@ def _outside_sky_masked(pixels: np.ndarray) -> tuple[np.ndarray, float, ImageCir
     """A fisheye's pixels with those outside its sky (``starnav.detect.skymask``: outside the
     image circle shrunk by 1 % of its radius, the rim being lit horizon; the horizon's
     obstacles; glare) set to NaN, which detection masks, the share of the pixels left and
-    the image circle (None: none found); the pixels unchanged when nothing is masked (a
-    full-frame fisheye of a clear sky)."""
+    the image circle (without one, the disc the sky left suggests, ``SkyMask.lit_disc``;
+    None: neither); the pixels unchanged when nothing is masked (a full-frame fisheye of a
+    clear sky)."""
     sky = find_sky_mask(pixels)
     if not sky.excluded.any():
         return pixels, 1.0, sky.circle
     masked = np.array(pixels, dtype=np.float32)
     masked[sky.excluded] = np.nan
-    return masked, sky.sky, sky.circle
+    return masked, sky.sky, sky.circle or sky.lit_disc()
 
 
 def annotate_result(path_out: str | Path, image: np.ndarray, result: ImageSolveResult) -> None:
