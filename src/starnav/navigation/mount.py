@@ -133,9 +133,11 @@ def fit_mount(
 
 
 def _angle_deg(A: np.ndarray, B: np.ndarray) -> float:
-    """The angle (degrees) of the rotation between two orientations of the same parity."""
-    c = (np.trace(A @ B.T) - 1.0) / 2.0
-    return math.degrees(math.acos(max(-1.0, min(1.0, c))))
+    """The angle (degrees) of the rotation between two orientations of the same parity, from
+    the chord ``|A - B|_F = 2 sqrt(2) sin(angle / 2)`` (the trace's acos loses small angles:
+    its floor is ~1e-6°, which numpy and BLAS builds cross)."""
+    chord = float(np.linalg.norm(A - B)) / (2.0 * math.sqrt(2.0))
+    return math.degrees(2.0 * math.asin(min(1.0, chord)))
 
 
 def predict_attitude(mount: Mount, time) -> np.ndarray:

@@ -711,10 +711,10 @@ def scan_starts(
 ) -> list[ScanStart]:
     """The lenses a fisheye's focal scan tries: ``base`` over the focal lengths of the
     horizontal ``fov_range_deg`` (``lens_focal_range``; a calibrated ``camera``'s within 1 %);
-    without a camera its principal point is a guess (``rough``), and without an image circle
-    the default range reaches a ``NO_CIRCLE_DISC_DEG`` sky disc as wide as the image's
-    shorter side (a circular fisheye whose rim the trees hide: 235° across a 4:3 frame's
-    width); with an image ``circle`` and no camera, first the circle's centre as principal point,
+    without an image circle the default range reaches a ``NO_CIRCLE_DISC_DEG`` sky disc as
+    wide as the image's shorter side (a circular fisheye whose rim the trees hide: 235°
+    across a 4:3 frame's width); with an image ``circle`` and no camera, first the circle's
+    centre as principal point,
     the focal lengths that make the circle span ``CIRCLE_FOV_RANGE_DEG`` (those of the field
     when ``options`` give one; ±5 % of ``options.circle_fov_deg`` or ``options.focal_px``)
     from a 180° circle (or the one given) outward, then the image centre's, when the
@@ -736,10 +736,10 @@ def scan_starts(
             f_far = at_lit.focal_for_radius(circle.radius_px, LIT_DISC_FIELD_DEG)
             return _at_and_centre(at_lit, base, (f_disc, max(f_disc, f_far)), f_disc)
         circle = None
-    if circle is None:  # the principal point a guess; the disc perhaps cut by trees
+    if circle is None:  # the disc perhaps cut by trees
         if unsaid:
             focal_range = (min(focal_range[0], f_disc), focal_range[1])
-        return [ScanStart(base, focal_range, rough=True)]
+        return [ScanStart(base, focal_range)]
     at_circle = base.with_centre(circle.cx, circle.cy)
     field = 180.0 if options.circle_fov_deg is None else options.circle_fov_deg
     if options.fov_deg is None and options.fov_range_deg is None:
