@@ -153,7 +153,9 @@ class Detections:
     found at (None: not recorded); ``sky_fraction``: the share of the image's pixels detection
     looked at (a fisheye's sky mask, ``starnav.detect.skymask``, leaves out the rest);
     ``circle``: a circular fisheye's image circle, when it was looked for and found
-    (``detect.circle``), outside which nothing was detected.
+    (``detect.circle``), outside which nothing was detected; without one, the disc that the
+    sky left by the mask suggests (``contrast`` 0: ``detect.skymask.SkyMask.lit_disc``), a
+    start for the focal scan.
     """
 
     xy: np.ndarray
