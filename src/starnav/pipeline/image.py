@@ -511,9 +511,7 @@ def detect_image(
         found = detect_stars(pixels, threshold_sigma=threshold_sigma, max_stars=max_stars)
         return replace(found, threshold_sigma=threshold_sigma)
     pixels, sky_fraction, circle = _outside_sky_masked(pixels)
-    found = without_trails(
-        without_glare(detect_stars(pixels, threshold_sigma=threshold_sigma, max_stars=max_stars))
-    )
+    found = _sky_stars(pixels, threshold_sigma, max_stars)
     for deeper_sigma in DEEPER_THRESHOLDS_SIGMA:
         if len(found) >= FEW_STARS_DEEPER or deeper_sigma >= threshold_sigma:
             continue
@@ -528,11 +526,16 @@ def _deeper(pixels: np.ndarray, threshold_sigma: float, max_stars: int) -> Detec
     found in the negated image, which are noise: noise is symmetric, stars are not (3 sigma
     finds 15-25 noise peaks of SNR up to ~6.6 in a 512 px all-sky frame of pure noise, 4 and
     5 sigma none)."""
-    deeper = without_trails(
-        without_glare(detect_stars(pixels, threshold_sigma=threshold_sigma, max_stars=max_stars))
-    )
+    deeper = _sky_stars(pixels, threshold_sigma, max_stars)
     noise = detect_stars(-pixels, threshold_sigma=threshold_sigma, max_stars=max_stars)
     return deeper.kept(deeper.saturated | (deeper.snr > (noise.snr.max() if len(noise) else 0.0)))
+
+
+def _sky_stars(pixels: np.ndarray, threshold_sigma: float, max_stars: int) -> Detections:
+    """An all-sky frame's stars at ``threshold_sigma``: ``detect_stars`` less the pieces of
+    glare and of trails (``detect.stars.without_glare``, ``without_trails``)."""
+    found = detect_stars(pixels, threshold_sigma=threshold_sigma, max_stars=max_stars)
+    return without_trails(without_glare(found))
 
 
 def _outside_sky_masked(pixels: np.ndarray) -> tuple[np.ndarray, float, ImageCircle | None]:
